@@ -1,0 +1,3 @@
+"""pianobot: experiment runner and data pipeline for robotic piano keystroke research."""
+
+__version__ = "0.1.0"
