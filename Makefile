@@ -1,0 +1,51 @@
+# One command per job. `make test` is what CI runs; `make demo` runs the main job on the sim rig.
+PYTHON ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+DATA ?= data
+PYTEST_WORKERS ?= 2
+
+.PHONY: install test test-fast demo bench check lint types imports schema clean
+
+install: $(STAMP)
+
+$(STAMP): pyproject.toml
+	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	touch $(STAMP)
+
+test: $(STAMP)
+	$(BIN)/python -m pytest -n $(PYTEST_WORKERS) -p no:cacheprovider
+
+test-fast: $(STAMP)
+	$(BIN)/python -m pytest -n $(PYTEST_WORKERS) -p no:cacheprovider -m "not slow and not hardware"
+
+demo: $(STAMP)
+	$(BIN)/pianobot sweep experiments/quickstart.yaml --data $(DATA)
+	$(BIN)/pianobot runs --data $(DATA)
+
+bench: $(STAMP)
+	mkdir -p benchmarks/results
+	@for script in benchmarks/bench_*.py; do \
+		echo "== $$script"; \
+		$(BIN)/python $$script || exit 1; \
+	done
+
+lint: $(STAMP)
+	$(BIN)/ruff check pianobot tests benchmarks
+
+types: $(STAMP)
+	$(BIN)/mypy pianobot
+
+imports: $(STAMP)
+	$(BIN)/lint-imports
+
+check: lint types imports test
+
+schema: $(STAMP)
+	$(BIN)/python -m pianobot.spec --write-schemas experiments
+
+clean:
+	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache .import_linter_cache

@@ -1,0 +1,5 @@
+"""`python -m pianobot` runs the command line."""
+
+from pianobot.cli import main
+
+main()
