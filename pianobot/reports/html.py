@@ -1,0 +1,155 @@
+"""Self-contained HTML pages: figures as embedded base64 PNG, tables from DataFrames, no network.
+
+Generic helpers shared by every report (run report, discovery report): nothing here knows about
+keystrokes. A page is a list of sections; each section is a heading, optional text, figures and
+tables. The output has no external links, scripts, stylesheets or fonts, so it opens offline and
+can be mailed as one file.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")  # no display: reports are built on servers and in CI
+
+import matplotlib.pyplot as plt  # noqa: E402
+import pandas as pd  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
+
+_STYLE = """
+body { font-family: sans-serif; margin: 2em auto; max-width: 1100px; color: #222; }
+h1 { border-bottom: 2px solid #444; padding-bottom: .2em; }
+h2 { margin-top: 2em; border-bottom: 1px solid #aaa; }
+table.data { border-collapse: collapse; margin: 1em 0; font-size: 0.9em; }
+table.data th, table.data td { border: 1px solid #bbb; padding: .25em .6em; text-align: right; }
+table.data th { background: #eee; }
+table.data td.text { text-align: left; }
+figure { margin: 1em 0; }
+figcaption { font-size: 0.9em; color: #555; }
+p.note { color: #555; font-style: italic; }
+"""
+
+
+def figure_to_data_uri(fig: Figure, *, dpi: int = 100) -> str:
+    """Render a matplotlib figure to a `data:image/png;base64,...` URI and close it."""
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=dpi, bbox_inches="tight")
+    plt.close(fig)
+    encoded = base64.b64encode(buffer.getvalue()).decode("ascii")
+    return f"data:image/png;base64,{encoded}"
+
+
+def figure_html(fig: Figure, caption: str = "", *, dpi: int = 100) -> str:
+    """An `<figure>` element with the figure embedded as a PNG."""
+    uri = figure_to_data_uri(fig, dpi=dpi)
+    alt = html.escape(caption or "figure", quote=True)
+    cap = f"<figcaption>{html.escape(caption)}</figcaption>" if caption else ""
+    return f'<figure><img src="{uri}" alt="{alt}">{cap}</figure>'
+
+
+def _cell(value: Any, float_format: str) -> tuple[str, bool]:
+    """Format one cell; returns (text, is_text) so text columns can be left-aligned."""
+    if value is None:
+        return "", False
+    if isinstance(value, float):
+        if value != value:  # NaN
+            return "–", False
+        return format(value, float_format), False
+    if hasattr(value, "item") and callable(value.item):  # numpy scalar
+        return _cell(value.item(), float_format)
+    if isinstance(value, bool | int):
+        return str(value), False
+    return html.escape(str(value)), True
+
+
+def table_html(
+    frame: pd.DataFrame,
+    *,
+    caption: str = "",
+    float_format: str = ".4g",
+    index: bool = False,
+    table_id: str | None = None,
+) -> str:
+    """A DataFrame as a plain HTML table (class `data`); NaN shown as an en dash."""
+    columns = [str(c) for c in frame.columns]
+    head_cells = ([html.escape(str(frame.index.name or ""))] if index else []) + [
+        html.escape(c) for c in columns
+    ]
+    rows = []
+    for label, row in frame.iterrows():
+        cells = []
+        if index:
+            cells.append(f'<td class="text">{html.escape(str(label))}</td>')
+        for value in row.tolist():
+            text, is_text = _cell(value, float_format)
+            cells.append(f'<td class="text">{text}</td>' if is_text else f"<td>{text}</td>")
+        rows.append("<tr>" + "".join(cells) + "</tr>")
+    ident = f' id="{html.escape(table_id, quote=True)}"' if table_id else ""
+    cap = f"<caption>{html.escape(caption)}</caption>" if caption else ""
+    head = "<tr>" + "".join(f"<th>{c}</th>" for c in head_cells) + "</tr>"
+    return (
+        f'<table class="data"{ident}>{cap}<thead>{head}</thead>'
+        f"<tbody>{''.join(rows)}</tbody></table>"
+    )
+
+
+def mapping_table_html(items: Iterable[tuple[str, Any]], *, caption: str = "") -> str:
+    """A two-column key/value table (provenance, settings)."""
+    frame = pd.DataFrame([(k, "" if v is None else str(v)) for k, v in items], columns=["key", "value"])
+    return table_html(frame, caption=caption)
+
+
+def paragraph(text: str, *, note: bool = False) -> str:
+    """Escaped paragraph; `note=True` renders it as a muted remark."""
+    cls = ' class="note"' if note else ""
+    return f"<p{cls}>{html.escape(text)}</p>"
+
+
+@dataclass
+class Section:
+    """One titled part of a page: its body is a list of HTML fragments made by the helpers above."""
+
+    title: str
+    parts: list[str] = field(default_factory=list)
+
+    def add(self, fragment: str) -> Section:
+        """Append a fragment (figure, table, paragraph) and return self for chaining."""
+        self.parts.append(fragment)
+        return self
+
+    def render(self) -> str:
+        anchor = html.escape(_slug(self.title), quote=True)
+        return f'<section id="{anchor}"><h2>{html.escape(self.title)}</h2>{"".join(self.parts)}</section>'
+
+
+def _slug(title: str) -> str:
+    return "".join(ch if ch.isalnum() else "-" for ch in title.lower()).strip("-") or "section"
+
+
+def page_html(title: str, sections: Sequence[Section], *, subtitle: str = "") -> str:
+    """Assemble a complete, self-contained HTML document (inline CSS only, no external resources)."""
+    sub = paragraph(subtitle, note=True) if subtitle else ""
+    body = "".join(s.render() for s in sections)
+    return (
+        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+        f"<title>{html.escape(title)}</title><style>{_STYLE}</style></head>"
+        f"<body><h1>{html.escape(title)}</h1>{sub}{body}</body></html>\n"
+    )
+
+
+def write_page(path: Path, title: str, sections: Sequence[Section], *, subtitle: str = "") -> Path:
+    """Write the page atomically (temp file + rename) so a half-written report never exists."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(page_html(title, sections, subtitle=subtitle), encoding="utf-8")
+    tmp.replace(path)
+    return path
