@@ -96,7 +96,9 @@ class MoveProfile:
         if self.distance_m == 0.0:
             return 0.0
         a = self.acceleration_mps2
-        return min(self.peak_velocity_mps, math.sqrt(2 * a * s), math.sqrt(2 * a * (self.distance_m - s)))
+        return min(
+            self.peak_velocity_mps, math.sqrt(2 * a * s), math.sqrt(2 * a * (self.distance_m - s))
+        )
 
 
 def move_profile(distance_m: float, velocity_mps: float, acceleration_mps2: float) -> MoveProfile:
