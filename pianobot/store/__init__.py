@@ -1,0 +1,31 @@
+"""The dataset on disk: run folders with a plan, a journal, Parquet parts and compacted tables.
+
+    from pianobot.store import RunWriter, load_run, list_runs, Run
+
+Layout and columns are fixed in docs/architecture.md; `pianobot.store.schema` holds them.
+"""
+
+from __future__ import annotations
+
+from pianobot.store.journal import read_journal
+from pianobot.store.layout import RunPaths, resolve_run, runs_dir
+from pianobot.store.reader import Run, RunSummary, list_runs, load_run, summarize_run
+from pianobot.store.schema import SCHEMA_VERSION, TABLE_SCHEMAS, empty_frame
+from pianobot.store.writer import RunLocked, RunWriter
+
+__all__ = [
+    "SCHEMA_VERSION",
+    "TABLE_SCHEMAS",
+    "Run",
+    "RunLocked",
+    "RunPaths",
+    "RunSummary",
+    "RunWriter",
+    "empty_frame",
+    "list_runs",
+    "load_run",
+    "read_journal",
+    "resolve_run",
+    "runs_dir",
+    "summarize_run",
+]

@@ -1,0 +1,87 @@
+"""The run journal: one JSON object per line, appended and fsync'd, never rewritten.
+
+Each line is `{"t_utc": ..., "event": ..., **fields}`. The runner journals `started` before a
+trial and `done` only after the trial's part is on disk, so after a crash the journal never
+claims more than the data holds. A line cut short by a kill is ignored by the reader.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+from pianobot.store.layout import utc_now
+
+
+class Journal:
+    """An append-only JSON-lines file.
+
+    Each event is one `os.write` on an O_APPEND descriptor, so concurrent readers see whole
+    lines; `fsync=True` also survives a power cut, at the cost of one disk flush per event.
+    """
+
+    def __init__(self, path: Path, *, fsync: bool = True) -> None:
+        self.path = path
+        self.fsync = fsync
+        self._fd: int | None = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+        self._repair_tail()
+
+    def _repair_tail(self) -> None:
+        # A kill in the middle of a write could leave a line without its newline; start the
+        # next event on a fresh line so that only the torn line is lost.
+        size = self.path.stat().st_size
+        if size == 0:
+            return
+        with open(self.path, "rb") as handle:
+            handle.seek(size - 1)
+            last = handle.read(1)
+        if last != b"\n":
+            self._write(b"\n")
+
+    def write(self, event: str, **fields: Any) -> None:
+        """Append one event (JSON-serialisable fields; NaN is written as null)."""
+        record = {"t_utc": utc_now(), "event": event, **fields}
+        line = json.dumps(_nan_to_none(record), default=str, separators=(",", ":")) + "\n"
+        self._write(line.encode())
+
+    def _write(self, data: bytes) -> None:
+        if self._fd is None:
+            raise ValueError(f"journal {self.path} is closed")
+        os.write(self._fd, data)
+        if self.fsync:
+            os.fsync(self._fd)
+
+    def close(self) -> None:
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
+
+
+def read_journal(path: Path) -> list[dict[str, Any]]:
+    """Every complete event of a journal, in order (a torn or garbled line is skipped)."""
+    if not path.is_file():
+        return []
+    events: list[dict[str, Any]] = []
+    with open(path, encoding="utf-8", errors="replace") as handle:
+        for line in handle:
+            if not line.endswith("\n"):
+                break  # the writer is mid-line or was killed mid-line
+            try:
+                record = json.loads(line)
+            except json.JSONDecodeError:
+                continue
+            if isinstance(record, dict) and "event" in record:
+                events.append(record)
+    return events
+
+
+def _nan_to_none(value: Any) -> Any:
+    if isinstance(value, float) and value != value:
+        return None
+    if isinstance(value, dict):
+        return {k: _nan_to_none(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_nan_to_none(v) for v in value]
+    return value

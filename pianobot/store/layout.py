@@ -1,0 +1,204 @@
+"""Where a run's files live, how run ids are made and found, and atomic file writes.
+
+    <data>/runs/<run_id>/
+      run.json  plan.parquet  journal.jsonl  parts/{trials,samples,midi}-NNNNNN.parquet
+      trials.parquet  samples.parquet  midi.parquet          (after compaction)
+
+A part batch `NNNNNN` is committed by its trials part: the samples and midi parts of a batch are
+written first, so a reader (or a resume) ignores samples/midi parts whose trials part is missing.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import secrets
+import subprocess
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from pianobot.errors import InputError
+
+RUNS_FOLDER = "runs"
+TABLE_NAMES = ("trials", "samples", "midi")
+_PART_RE = re.compile(r"^(trials|samples|midi)-(\d{6})\.parquet$")
+
+
+@dataclass(frozen=True)
+class RunPaths:
+    """The files of one run folder."""
+
+    root: Path
+
+    @property
+    def run_id(self) -> str:
+        return self.root.name
+
+    @property
+    def run_json(self) -> Path:
+        return self.root / "run.json"
+
+    @property
+    def plan(self) -> Path:
+        return self.root / "plan.parquet"
+
+    @property
+    def journal(self) -> Path:
+        return self.root / "journal.jsonl"
+
+    @property
+    def parts(self) -> Path:
+        return self.root / "parts"
+
+    @property
+    def lock(self) -> Path:
+        return self.root / "run.lock"
+
+    def table(self, name: str) -> Path:
+        """The compacted file of table `name`."""
+        return self.root / f"{name}.parquet"
+
+    def part(self, name: str, batch: int) -> Path:
+        return self.parts / f"{name}-{batch:06d}.parquet"
+
+    def part_batches(self) -> dict[str, dict[int, Path]]:
+        """Every finished part file, by table and batch number (temporary files are skipped)."""
+        found: dict[str, dict[int, Path]] = {name: {} for name in TABLE_NAMES}
+        if self.parts.is_dir():
+            for entry in os.scandir(self.parts):
+                match = _PART_RE.match(entry.name)
+                if match:
+                    found[match.group(1)][int(match.group(2))] = Path(entry.path)
+        return found
+
+
+def runs_dir(data_dir: Path) -> Path:
+    return Path(data_dir) / RUNS_FOLDER
+
+
+def slugify(name: str, max_len: int = 40) -> str:
+    """A file-name-safe lowercase slug of a run name ("Soft grid #2" -> "soft-grid-2")."""
+    slug = re.sub(r"[^a-z0-9]+", "-", name.lower()).strip("-")
+    return slug[:max_len].strip("-") or "run"
+
+
+def new_run_id(name: str) -> str:
+    """UTC timestamp + name slug + 4 random hex digits, e.g. `20261121-083012-quickstart-3f9a`.
+
+    The timestamp makes `ls` sort runs by start time; the random suffix keeps two runs started
+    in the same second apart.
+    """
+    stamp = time.strftime("%Y%m%d-%H%M%S", time.gmtime())
+    return f"{stamp}-{slugify(name)}-{secrets.token_hex(2)}"
+
+
+def resolve_run(data_dir: Path, run_id: str) -> RunPaths:
+    """Find a run folder by exact id or unique id prefix.
+
+    Raises:
+        InputError: no run, or a prefix that matches several runs.
+    """
+    base = runs_dir(data_dir)
+    hint = f"list the runs with `pianobot runs --data {data_dir}`"
+    if not run_id or "/" in run_id or run_id in (".", ".."):
+        raise InputError(f"{run_id!r} is not a run id; {hint}", "run_id")
+    exact = base / run_id
+    if (exact / "run.json").is_file():
+        return RunPaths(exact)
+    candidates = sorted(p.name for p in base.glob(f"{glob_escape(run_id)}*") if (p / "run.json").is_file()) if base.is_dir() else []
+    if len(candidates) == 1:
+        return RunPaths(base / candidates[0])
+    if not candidates:
+        raise InputError(f"no run {run_id!r} in {base}; {hint}", "run_id")
+    shown = ", ".join(candidates[:5]) + (", ..." if len(candidates) > 5 else "")
+    raise InputError(f"{run_id!r} matches {len(candidates)} runs ({shown}); give more of the id", "run_id")
+
+
+def glob_escape(text: str) -> str:
+    """Escape glob metacharacters so a run id prefix matches literally."""
+    return re.sub(r"([\[\]*?])", r"[\1]", text)
+
+
+def fsync_dir(path: Path) -> None:
+    """Make a rename or a new file in `path` durable (POSIX; a no-op where unsupported)."""
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def _temp_name(path: Path) -> Path:
+    # A dot-prefixed name in the same folder: same file system (so os.replace is atomic) and
+    # invisible to readers, which only match finished names.
+    return path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(3)}.tmp")
+
+
+def write_parquet_atomic(path: Path, table: pa.Table) -> None:
+    """Write a Parquet file so readers see either nothing or the whole file, never a torn one."""
+    temp = _temp_name(path)
+    try:
+        with open(temp, "wb") as handle:
+            pq.write_table(table, handle, compression="zstd")
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(temp, path)
+    finally:
+        temp.unlink(missing_ok=True)
+    fsync_dir(path.parent)
+
+
+def write_json_atomic(path: Path, payload: dict[str, Any]) -> None:
+    """Write a JSON file atomically (temp file, fsync, rename)."""
+    temp = _temp_name(path)
+    try:
+        with open(temp, "w", encoding="utf-8") as handle:
+            json.dump(payload, handle, indent=2, default=str, allow_nan=True)
+            handle.write("\n")
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(temp, path)
+    finally:
+        temp.unlink(missing_ok=True)
+    fsync_dir(path.parent)
+
+
+def read_json(path: Path) -> dict[str, Any]:
+    with open(path, encoding="utf-8") as handle:
+        payload: dict[str, Any] = json.load(handle)
+    return payload
+
+
+def git_commit(start: Path | None = None) -> str | None:
+    """The commit of the git checkout holding pianobot's own code, or None without git."""
+    where = start or Path(__file__).resolve().parent
+    try:
+        done = subprocess.run(
+            ["git", "rev-parse", "HEAD"],
+            cwd=where,
+            capture_output=True,
+            text=True,
+            timeout=5,
+            check=False,
+        )
+    except (OSError, subprocess.SubprocessError):
+        return None
+    commit = done.stdout.strip()
+    return commit if done.returncode == 0 and commit else None
+
+
+def utc_now() -> str:
+    """The current UTC time in ISO 8601 with a Z suffix, to the millisecond."""
+    now = time.time()
+    return time.strftime("%Y-%m-%dT%H:%M:%S", time.gmtime(now)) + f".{int(now % 1 * 1000):03d}Z"

@@ -1,0 +1,136 @@
+"""Read API: `load_run(run_id, data_dir) -> Run` and `list_runs(data_dir)`."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+import pyarrow.parquet as pq
+
+from pianobot.store.journal import read_journal
+from pianobot.store.layout import RunPaths, read_json, resolve_run, runs_dir
+from pianobot.store.tables import read_run_table, trial_status_counts
+
+
+@dataclass(frozen=True)
+class Run:
+    """One run folder. Tables are read from disk on each access, so a live run shows progress."""
+
+    run_id: str
+    path: Path
+
+    @property
+    def paths(self) -> RunPaths:
+        return RunPaths(self.path)
+
+    @property
+    def meta(self) -> dict[str, Any]:
+        """run.json: spec, versions, rig, seed, times, status, reason, interruptions."""
+        return read_json(self.paths.run_json)
+
+    @property
+    def status(self) -> str:
+        return str(self.meta.get("status", "unknown"))
+
+    @property
+    def plan(self) -> pd.DataFrame:
+        """Every planned trial (empty for a run without a plan, e.g. an import)."""
+        if not self.paths.plan.is_file():
+            return pd.DataFrame()
+        frame: pd.DataFrame = pq.read_table(self.paths.plan).to_pandas()
+        return frame
+
+    @property
+    def trials(self) -> pd.DataFrame:
+        """One row per executed keystroke (the latest row of a trial that was redone)."""
+        return self.table("trials")
+
+    @property
+    def samples(self) -> pd.DataFrame:
+        """Time series, long across sources (arm | mocap | sim-truth), t_s from motion start."""
+        return self.table("samples")
+
+    @property
+    def midi(self) -> pd.DataFrame:
+        """Raw MIDI events on the run clock."""
+        return self.table("midi")
+
+    @property
+    def journal(self) -> list[dict[str, Any]]:
+        """Every journal event, in order."""
+        return read_journal(self.paths.journal)
+
+    def table(self, name: str, columns: list[str] | None = None) -> pd.DataFrame:
+        """Table `name` ("trials" | "samples" | "midi"), optionally only some columns."""
+        frame: pd.DataFrame = read_run_table(self.paths, name, columns).to_pandas()
+        return frame
+
+
+@dataclass(frozen=True)
+class RunSummary:
+    """One line of `pianobot runs`."""
+
+    run_id: str
+    name: str
+    kind: str
+    status: str
+    trials_done: int
+    trials_planned: int | None
+    silent_pct: float
+    failed: int
+    lab_time_s: float
+    start_utc: str | None
+    reason: str | None
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def load_run(run_id: str, data_dir: Path) -> Run:
+    """Open a run by id or unique id prefix.
+
+    Raises:
+        InputError: no such run (the message says how to list runs) or an ambiguous prefix.
+    """
+    paths = resolve_run(Path(data_dir), run_id)
+    return Run(run_id=paths.run_id, path=paths.root)
+
+
+def summarize_run(run: Run) -> RunSummary:
+    """The `pianobot runs` line of one run, from run.json and the trials' status column."""
+    meta = run.meta
+    counts = trial_status_counts(run.paths)
+    done = counts["ok"] + counts["silent"]
+    lab_time = meta.get("lab_time_s")
+    planned = meta.get("trials_planned")
+    return RunSummary(
+        run_id=run.run_id,
+        name=str(meta.get("name", "")),
+        kind=str(meta.get("kind", "")),
+        status=str(meta.get("status", "unknown")),
+        trials_done=done,
+        trials_planned=None if planned is None else int(planned),
+        silent_pct=100.0 * counts["silent"] / done if done else math.nan,
+        failed=counts["failed"],
+        lab_time_s=math.nan if lab_time is None else float(lab_time),
+        start_utc=meta.get("start_utc"),
+        reason=meta.get("reason"),
+    )
+
+
+def list_runs(data_dir: Path) -> list[RunSummary]:
+    """Every run under `data_dir/runs`, oldest first (run ids start with their UTC time)."""
+    base = runs_dir(Path(data_dir))
+    if not base.is_dir():
+        return []
+    summaries = []
+    for folder in sorted(base.iterdir()):
+        if (folder / "run.json").is_file():
+            try:
+                summaries.append(summarize_run(Run(run_id=folder.name, path=folder)))
+            except (OSError, ValueError):
+                continue  # a folder being created right now, or not a pianobot run
+    return summaries

@@ -1,0 +1,182 @@
+"""The fixed columns of a run's tables and their Parquet types (docs/architecture.md).
+
+Every table carries the key-value metadata `pianobot.schema_version` so a reader can tell which
+layout it holds. Parameter and outcome columns carry their units in their names. MIDI velocities
+are stored as float64 so a silent keystroke's missing velocity is NaN in every reader (pandas,
+polars, DuckDB) instead of a type that changes with the data.
+"""
+
+from __future__ import annotations
+
+import pandas as pd
+import pyarrow as pa
+
+SCHEMA_VERSION = "1"
+METADATA_VERSION_KEY = b"pianobot.schema_version"
+METADATA_TABLE_KEY = b"pianobot.table"
+METADATA_BATCHES_KEY = b"pianobot.batches"
+
+TRIAL_STATUSES = ("ok", "silent", "failed")
+RUN_STATUSES = ("running", "completed", "stopped", "interrupted", "failed")
+RUN_KINDS = ("sweep", "import", "play")
+SAMPLE_SOURCES = ("arm", "mocap", "sim-truth")
+
+PARAMETER_COLUMNS = (
+    "note",
+    "vacuum_kpa",
+    "down_velocity_mps",
+    "up_velocity_mps",
+    "acceleration_mps2",
+    "depth_m",
+    "distance_m",
+    "hold_s",
+    "finger_angle_deg",
+)
+
+TRIALS_SCHEMA = pa.schema(
+    [
+        ("run_id", pa.string()),
+        ("trial_id", pa.string()),
+        ("index", pa.int64()),
+        ("attempt", pa.int64()),
+        ("status", pa.string()),
+        ("note", pa.int64()),
+        ("vacuum_kpa", pa.float64()),
+        ("down_velocity_mps", pa.float64()),
+        ("up_velocity_mps", pa.float64()),
+        ("acceleration_mps2", pa.float64()),
+        ("depth_m", pa.float64()),
+        ("distance_m", pa.float64()),
+        ("hold_s", pa.float64()),
+        ("finger_angle_deg", pa.float64()),
+        ("t_start_s", pa.float64()),
+        ("on_velocity", pa.float64()),
+        ("off_velocity", pa.float64()),
+        ("t_on_s", pa.float64()),
+        ("t_off_s", pa.float64()),
+        ("midi_hold_s", pa.float64()),
+        ("n_note_on", pa.int64()),
+        ("key_speed_at_trigger_mps", pa.float64()),
+        ("max_key_travel_m", pa.float64()),
+        ("error", pa.string()),
+    ]
+)
+
+SAMPLES_SCHEMA = pa.schema(
+    [
+        ("run_id", pa.string()),
+        ("trial_id", pa.string()),
+        ("source", pa.string()),
+        ("t_s", pa.float64()),
+        ("x0_m", pa.float64()),
+        ("x1_m", pa.float64()),
+        ("x2_m", pa.float64()),
+    ]
+)
+
+MIDI_SCHEMA = pa.schema(
+    [
+        ("run_id", pa.string()),
+        ("trial_id", pa.string()),
+        ("t_s", pa.float64()),
+        ("type", pa.string()),
+        ("note", pa.int64()),
+        ("velocity", pa.int64()),
+    ]
+)
+
+TABLE_SCHEMAS: dict[str, pa.Schema] = {
+    "trials": TRIALS_SCHEMA,
+    "samples": SAMPLES_SCHEMA,
+    "midi": MIDI_SCHEMA,
+}
+# Columns a writer may leave out (they are filled with nulls); the rest identify the row.
+_REQUIRED = {
+    "trials": ("trial_id",),
+    "samples": ("trial_id", "source", "t_s"),
+    "midi": ("trial_id", "t_s", "type", "note", "velocity"),
+}
+
+
+def with_metadata(table: pa.Table, name: str, batches: list[int] | None = None) -> pa.Table:
+    """Attach the pianobot key-value metadata (schema version, table name, included batches)."""
+    metadata = dict(table.schema.metadata or {})
+    metadata[METADATA_VERSION_KEY] = SCHEMA_VERSION.encode()
+    metadata[METADATA_TABLE_KEY] = name.encode()
+    if batches is not None:
+        metadata[METADATA_BATCHES_KEY] = ",".join(str(b) for b in batches).encode()
+    return table.replace_schema_metadata(metadata)
+
+
+def to_table(frame: pd.DataFrame | pa.Table, name: str, run_id: str) -> pa.Table:
+    """Coerce a frame to the fixed schema of table `name` (column order, types, run_id).
+
+    Missing optional columns become nulls; `trials` may carry extra columns after the fixed
+    ones (an importer's own fields), `samples` and `midi` may not, so their parts can be streamed
+    into one file at compaction.
+
+    Raises:
+        ValueError: a required column is missing or a value cannot take the column's type.
+    """
+    schema = TABLE_SCHEMAS[name]
+    source = frame if isinstance(frame, pa.Table) else pa.Table.from_pandas(frame, preserve_index=False)
+    n_rows = source.num_rows
+    missing = [c for c in _REQUIRED[name] if c not in source.column_names]
+    if missing:
+        raise ValueError(f"{name} table lacks required column(s) {missing}")
+    extra = [c for c in source.column_names if c not in schema.names]
+    if extra and name != "trials":
+        raise ValueError(f"{name} table has unknown column(s) {extra}; allowed: {schema.names}")
+    arrays: list[pa.Array | pa.ChunkedArray] = []
+    for column in schema:
+        if column.name == "run_id":
+            arrays.append(pa.array([run_id] * n_rows, type=pa.string()))
+        elif column.name in source.column_names:
+            arrays.append(source.column(column.name).cast(column.type))
+        else:
+            arrays.append(pa.nulls(n_rows, type=column.type))
+    fields = list(schema)
+    for column_name in extra:
+        arrays.append(source.column(column_name))
+        fields.append(source.schema.field(column_name))
+    return pa.Table.from_arrays(arrays, schema=pa.schema(fields))
+
+
+def empty_frame(name: str) -> pd.DataFrame:
+    """An empty DataFrame with the columns and dtypes of table `name`."""
+    frame: pd.DataFrame = with_metadata(TABLE_SCHEMAS[name].empty_table(), name).to_pandas()
+    return frame
+
+
+def schema_version_of(metadata: dict[bytes, bytes] | None) -> str | None:
+    """The schema version recorded in a Parquet file's key-value metadata, if any."""
+    if not metadata or METADATA_VERSION_KEY not in metadata:
+        return None
+    return metadata[METADATA_VERSION_KEY].decode()
+
+
+def batches_of(metadata: dict[bytes, bytes] | None) -> set[int]:
+    """The part batches a compacted file already holds (empty for a part or a foreign file)."""
+    if not metadata or METADATA_BATCHES_KEY not in metadata:
+        return set()
+    raw = metadata[METADATA_BATCHES_KEY].decode()
+    return {int(b) for b in raw.split(",") if b}
+
+
+__all__ = [
+    "MIDI_SCHEMA",
+    "PARAMETER_COLUMNS",
+    "RUN_KINDS",
+    "RUN_STATUSES",
+    "SAMPLES_SCHEMA",
+    "SAMPLE_SOURCES",
+    "SCHEMA_VERSION",
+    "TABLE_SCHEMAS",
+    "TRIALS_SCHEMA",
+    "TRIAL_STATUSES",
+    "batches_of",
+    "empty_frame",
+    "schema_version_of",
+    "to_table",
+    "with_metadata",
+]

@@ -1,0 +1,102 @@
+"""Reading a run's tables from its compacted files and its committed parts, live or finished."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pyarrow as pa
+import pyarrow.compute as pc
+import pyarrow.parquet as pq
+
+from pianobot.store.layout import TABLE_NAMES, RunPaths
+from pianobot.store.schema import TABLE_SCHEMAS, batches_of, with_metadata
+
+
+def committed_batches(paths: RunPaths) -> set[int]:
+    """Batches whose trials part (or a compacted trials file holding them) is on disk."""
+    held: set[int] = set()
+    compacted = paths.table("trials")
+    if compacted.is_file():
+        held |= batches_of(pq.read_schema(compacted).metadata)
+    return held | set(paths.part_batches()["trials"])
+
+
+def drop_orphan_parts(paths: RunPaths) -> list[Path]:
+    """Remove samples/midi parts of a batch whose trials part never landed (a killed writer).
+
+    Only the run's writer calls this; readers simply skip such parts.
+    """
+    parts = paths.part_batches()
+    committed = set(parts["trials"])
+    removed: list[Path] = []
+    for name in ("samples", "midi"):
+        for batch, path in parts[name].items():
+            if batch not in committed:
+                path.unlink(missing_ok=True)
+                removed.append(path)
+    return removed
+
+
+def read_run_table(paths: RunPaths, name: str, columns: list[str] | None = None) -> pa.Table:
+    """Table `name` of a run: the compacted file plus every committed part it does not hold.
+
+    Safe while the writer is running or was killed: parts appear by atomic rename, a part batch
+    counts only once its trials part exists, and batches already compacted are not read twice.
+    """
+    if name not in TABLE_NAMES:
+        raise ValueError(f"table must be one of {TABLE_NAMES}, got {name!r}")
+    parts = paths.part_batches()
+    committed = set(parts["trials"])
+    tables: list[pa.Table] = []
+    held: set[int] = set()
+    compacted = paths.table(name)
+    if compacted.is_file():
+        # One open file for both metadata and rows: a concurrent compaction replaces the file
+        # by rename, and this handle keeps reading the version whose batch list we hold.
+        with pq.ParquetFile(compacted) as parquet:
+            held = batches_of(parquet.schema_arrow.metadata)
+            tables.append(parquet.read(columns=columns))
+    for batch in sorted(parts[name]):
+        if batch in committed and batch not in held:
+            try:
+                tables.append(pq.read_table(parts[name][batch], columns=columns))
+            except FileNotFoundError:
+                # Compaction removed the part after we listed it; it is in the compacted file.
+                return read_run_table(paths, name, columns)
+    if not tables:
+        empty = TABLE_SCHEMAS[name].empty_table()
+        if columns is not None:
+            empty = empty.select([c for c in columns if c in empty.column_names])
+        return with_metadata(empty, name)
+    merged = pa.concat_tables(tables, promote_options="default") if len(tables) > 1 else tables[0]
+    if name == "trials":
+        merged = dedupe_trials(merged)
+    return with_metadata(merged, name)
+
+
+def dedupe_trials(table: pa.Table) -> pa.Table:
+    """Keep the last row of each trial_id (a trial that failed and was redone on resume).
+
+    Rows are in batch order, so "last" is the most recent attempt. The earlier failure stays in
+    the journal.
+    """
+    if table.num_rows == 0 or "trial_id" not in table.column_names:
+        return table
+    ids = table.column("trial_id").to_pylist()
+    last: dict[str, int] = {}
+    for row, trial_id in enumerate(ids):
+        last[trial_id] = row
+    if len(last) == len(ids):
+        return table
+    keep = sorted(last.values())
+    return table.take(pa.array(keep, type=pa.int64()))
+
+
+def trial_status_counts(paths: RunPaths) -> dict[str, int]:
+    """How many trials of a run ended ok, silent or failed (reads two columns only)."""
+    table = read_run_table(paths, "trials", columns=["trial_id", "status"])
+    counts: dict[str, int] = {"ok": 0, "silent": 0, "failed": 0}
+    if table.num_rows:
+        for entry in pc.value_counts(table.column("status")).to_pylist():
+            counts[str(entry["values"])] = int(entry["counts"])
+    return counts

@@ -1,0 +1,275 @@
+"""RunWriter: creates a run folder and writes its plan, parts, journal and compacted tables."""
+
+from __future__ import annotations
+
+import errno
+import os
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+import pianobot
+from pianobot.store.journal import Journal
+from pianobot.store.layout import (
+    TABLE_NAMES,
+    RunPaths,
+    git_commit,
+    new_run_id,
+    read_json,
+    resolve_run,
+    runs_dir,
+    utc_now,
+    write_json_atomic,
+    write_parquet_atomic,
+)
+from pianobot.store.schema import (
+    RUN_KINDS,
+    RUN_STATUSES,
+    SCHEMA_VERSION,
+    TABLE_SCHEMAS,
+    batches_of,
+    to_table,
+    with_metadata,
+)
+from pianobot.store.tables import committed_batches, dedupe_trials, drop_orphan_parts
+
+
+class RunLocked(RuntimeError):
+    """Another live process is writing this run."""
+
+
+class RunWriter:
+    """The one writer of a run folder.
+
+    Create with `RunWriter.create(...)` (a new run) or `RunWriter.reopen(...)` (resume). Each
+    `append` writes one batch of parts atomically; `journal` appends an fsync'd line; `finish`
+    compacts the parts into one file per table and records the final status in run.json.
+    """
+
+    def __init__(self, paths: RunPaths, *, fsync: bool = True) -> None:
+        self.paths = paths
+        self._lock_fd: int | None = _acquire_lock(paths.lock)
+        self._journal = Journal(paths.journal, fsync=fsync)
+        self._meta = read_json(paths.run_json)
+        known = committed_batches(paths)
+        self._next_batch = max(known, default=0) + 1
+
+    @property
+    def run_id(self) -> str:
+        return self.paths.run_id
+
+    @property
+    def path(self) -> Path:
+        return self.paths.root
+
+    @property
+    def meta(self) -> dict[str, Any]:
+        """A copy of run.json as last written."""
+        return dict(self._meta)
+
+    @classmethod
+    def create(
+        cls,
+        data_dir: Path,
+        *,
+        name: str,
+        kind: str,
+        meta: dict[str, Any],
+        plan: pd.DataFrame | None,
+        fsync: bool = True,
+    ) -> RunWriter:
+        """Make a new run folder with run.json (status running) and plan.parquet.
+
+        `meta` is merged into run.json (spec, spec_sha256, rig, seed, ...); the writer adds the
+        run id, name, kind, status, pianobot version, git commit and start time.
+        """
+        if kind not in RUN_KINDS:
+            raise ValueError(f"run kind must be one of {RUN_KINDS}, got {kind!r}")
+        base = runs_dir(data_dir)
+        base.mkdir(parents=True, exist_ok=True)
+        for _ in range(20):
+            root = base / new_run_id(name)
+            try:
+                root.mkdir()
+                break
+            except FileExistsError:
+                continue
+        else:
+            raise FileExistsError(f"could not find a free run id in {base}")
+        paths = RunPaths(root)
+        paths.parts.mkdir()
+        now = utc_now()
+        record: dict[str, Any] = {
+            "run_id": paths.run_id,
+            "name": name,
+            "kind": kind,
+            "status": "running",
+            "reason": None,
+            "schema_version": SCHEMA_VERSION,
+            "pianobot_version": pianobot.__version__,
+            "git_commit": git_commit(),
+            "created_utc": now,
+            "start_utc": now,
+            "end_utc": None,
+            "trials_planned": None if plan is None else len(plan),
+            "interruptions": [],
+            **meta,
+        }
+        if plan is not None:
+            table = pa.Table.from_pandas(plan, preserve_index=False)
+            write_parquet_atomic(paths.plan, with_metadata(table, "plan"))
+        write_json_atomic(paths.run_json, record)
+        return cls(paths, fsync=fsync)
+
+    @classmethod
+    def reopen(cls, data_dir: Path, run_id: str, *, fsync: bool = True) -> RunWriter:
+        """Open an existing run to append to it (resume); parts of an unfinished batch are removed.
+
+        Raises:
+            InputError: unknown run id.
+            RunLocked: another live process holds the run.
+        """
+        paths = resolve_run(data_dir, run_id)
+        writer = cls(paths, fsync=fsync)
+        drop_orphan_parts(paths)
+        return writer
+
+    def append(
+        self,
+        trials: pd.DataFrame | pa.Table,
+        samples: pd.DataFrame | pa.Table | None = None,
+        midi: pd.DataFrame | pa.Table | None = None,
+    ) -> int:
+        """Write one batch: a samples part, a midi part, then the trials part that commits it.
+
+        Returns the batch number. Each file is written under a temporary name, fsync'd and
+        renamed, so a reader or a kill sees a whole part or none.
+        """
+        tables = {
+            "samples": None if samples is None else to_table(samples, "samples", self.run_id),
+            "midi": None if midi is None else to_table(midi, "midi", self.run_id),
+            "trials": to_table(trials, "trials", self.run_id),
+        }
+        batch = self._next_batch
+        for name, table in tables.items():  # trials last: it commits the batch
+            if table is not None and (table.num_rows or name == "trials"):
+                write_parquet_atomic(self.paths.part(name, batch), with_metadata(table, name))
+        self._next_batch += 1
+        return batch
+
+    def journal(self, event: str, **fields: Any) -> None:
+        """Append one event to journal.jsonl (fsync'd)."""
+        self._journal.write(event, **fields)
+
+    def update_meta(self, **fields: Any) -> None:
+        """Merge fields into run.json (atomically)."""
+        self._meta.update(fields)
+        write_json_atomic(self.paths.run_json, self._meta)
+
+    def add_interruption(self, kind: str, **fields: Any) -> None:
+        """Record an interruption (crash, signal, safety stop, ...) in run.json."""
+        entry = {"kind": kind, "t_utc": utc_now(), **fields}
+        self.update_meta(interruptions=[*self._meta.get("interruptions", []), entry])
+
+    def finish(self, status: str, reason: str | None = None, **fields: Any) -> None:
+        """Compact the parts into trials/samples/midi.parquet and set the final status."""
+        if status not in RUN_STATUSES or status == "running":
+            raise ValueError(f"final status must be one of {RUN_STATUSES[1:]}, got {status!r}")
+        self.compact()
+        self.update_meta(status=status, reason=reason, end_utc=utc_now(), **fields)
+
+    def compact(self) -> None:
+        """Merge committed parts into one file per table; parts are removed only afterwards.
+
+        A compacted file records in its metadata which batches it holds, so a crash between
+        writing it and removing the parts never makes a reader count a batch twice.
+        """
+        drop_orphan_parts(self.paths)
+        parts = self.paths.part_batches()
+        committed = sorted(parts["trials"])
+        if not committed:
+            return
+        for name in TABLE_NAMES:
+            _compact_table(self.paths, name, committed, parts[name])
+        for name in TABLE_NAMES:
+            for path in parts[name].values():
+                path.unlink(missing_ok=True)
+
+    def close(self) -> None:
+        """Release the journal and the run lock (idempotent)."""
+        self._journal.close()
+        if self._lock_fd is not None:
+            os.close(self._lock_fd)
+            self._lock_fd = None
+            self.paths.lock.unlink(missing_ok=True)
+
+    def __enter__(self) -> RunWriter:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _compact_table(paths: RunPaths, name: str, committed: list[int], parts: dict[int, Path]) -> None:
+    target = paths.table(name)
+    held: set[int] = set()
+    sources: list[Path] = []
+    if target.is_file():
+        held = batches_of(pq.read_schema(target).metadata)
+        sources.append(target)
+    sources += [parts[b] for b in committed if b in parts and b not in held]
+    batches = sorted(held | set(committed))
+    if name == "trials":
+        # Small: one row per keystroke. A trial redone after a failure keeps its last row.
+        tables = [pq.read_table(p) for p in sources]
+        merged = dedupe_trials(pa.concat_tables(tables, promote_options="default")) if tables else (
+            TABLE_SCHEMAS[name].empty_table()
+        )
+        write_parquet_atomic(target, with_metadata(merged, name, batches))
+        return
+    # samples and midi can be large: stream them part by part so memory stays bounded.
+    schema = with_metadata(TABLE_SCHEMAS[name].empty_table(), name, batches).schema
+    temp = target.with_name(f".{target.name}.{os.getpid()}.compact.tmp")
+    try:
+        with pq.ParquetWriter(temp, schema, compression="zstd") as out:
+            for source in sources:
+                parquet = pq.ParquetFile(source)
+                for group in range(parquet.num_row_groups):
+                    out.write_table(parquet.read_row_group(group).cast(schema))
+        with open(temp, "rb+") as handle:
+            os.fsync(handle.fileno())
+        os.replace(temp, target)
+    finally:
+        temp.unlink(missing_ok=True)
+
+
+def _acquire_lock(path: Path) -> int:
+    """Create run.lock holding our pid; a lock left by a dead process is taken over."""
+    for _ in range(2):
+        try:
+            fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+        except FileExistsError:
+            if _lock_is_live(path):
+                raise RunLocked(f"run {path.parent.name} is being written by another process") from None
+            path.unlink(missing_ok=True)
+            continue
+        os.write(fd, f"{os.getpid()}\n".encode())
+        return fd
+    raise RunLocked(f"could not lock run {path.parent.name}")
+
+
+def _lock_is_live(path: Path) -> bool:
+    try:
+        pid = int(path.read_text().strip() or "0")
+    except (OSError, ValueError):
+        return False
+    if pid <= 0 or pid == os.getpid():
+        return False
+    try:
+        os.kill(pid, 0)
+    except OSError as exc:
+        return exc.errno == errno.EPERM
+    return True

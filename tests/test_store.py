@@ -1,0 +1,253 @@
+"""The dataset store: round trip, live reads while parts exist, atomic parts, compaction."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pyarrow.parquet as pq
+import pytest
+
+import pianobot
+from pianobot.errors import InputError
+from pianobot.store import RunLocked, RunWriter, list_runs, load_run, read_journal
+from pianobot.store.layout import RunPaths, slugify
+from pianobot.store.schema import SCHEMA_VERSION, TRIALS_SCHEMA
+
+
+def _trials(ids: list[str], status: str = "ok", attempt: int = 1) -> pd.DataFrame:
+    return pd.DataFrame(
+        {
+            "trial_id": ids,
+            "index": range(len(ids)),
+            "attempt": [attempt] * len(ids),
+            "status": [status] * len(ids),
+            "note": [60] * len(ids),
+            "vacuum_kpa": [-20.0] * len(ids),
+            "down_velocity_mps": np.linspace(0.01, 0.05, len(ids)),
+            "on_velocity": [64.0] * len(ids),
+            "n_note_on": [1] * len(ids),
+        }
+    )
+
+
+def _samples(ids: list[str], n: int = 5) -> pd.DataFrame:
+    rows = [
+        {"trial_id": t, "source": "arm", "t_s": i * 0.002, "x0_m": i * 1e-3}
+        for t in ids
+        for i in range(n)
+    ]
+    return pd.DataFrame(rows)
+
+
+def _midi(ids: list[str]) -> pd.DataFrame:
+    return pd.DataFrame(
+        [{"trial_id": t, "t_s": 1.0 + k, "type": "note_on", "note": 60, "velocity": 70} for k, t in enumerate(ids)]
+    )
+
+
+def _plan(ids: list[str]) -> pd.DataFrame:
+    return pd.DataFrame({"trial_id": ids, "index": range(len(ids))})
+
+
+def _create(data_dir: Path, ids: list[str], name: str = "Store Test") -> RunWriter:
+    return RunWriter.create(
+        data_dir, name=name, kind="sweep", meta={"seed": 7, "spec_sha256": "abc"}, plan=_plan(ids)
+    )
+
+
+def test_round_trip_writes_layout_and_metadata(data_dir: Path) -> None:
+    ids = [f"t{i}" for i in range(6)]
+    with _create(data_dir, ids) as writer:
+        assert "-store-test-" in writer.run_id
+        writer.journal("started", trial_id="t0")
+        writer.append(_trials(ids[:3]), _samples(ids[:3]), _midi(ids[:3]))
+        writer.append(_trials(ids[3:], status="silent"), _samples(ids[3:]), None)
+        writer.finish("completed", lab_time_s=12.5)
+        root = writer.path
+    assert sorted(p.name for p in root.iterdir()) == [
+        "journal.jsonl", "midi.parquet", "parts", "plan.parquet", "run.json", "samples.parquet", "trials.parquet",
+    ]
+    assert list((root / "parts").iterdir()) == []
+    run = load_run(root.name, data_dir)
+    meta = run.meta
+    assert meta["status"] == "completed" and meta["kind"] == "sweep" and meta["seed"] == 7
+    assert meta["pianobot_version"] == pianobot.__version__
+    assert meta["trials_planned"] == 6 and meta["end_utc"] is not None
+    trials = run.trials
+    assert list(trials.columns) == TRIALS_SCHEMA.names
+    assert list(trials["trial_id"]) == ids
+    assert set(trials["run_id"]) == {run.run_id}
+    assert list(trials["status"]) == ["ok"] * 3 + ["silent"] * 3
+    assert trials["off_velocity"].isna().all()
+    assert len(run.samples) == 30 and set(run.samples["source"]) == {"arm"}
+    assert run.samples["x2_m"].isna().all()
+    assert list(run.midi["trial_id"]) == ids[:3]
+    assert list(run.plan["trial_id"]) == ids
+    for name in ("trials", "samples", "midi", "plan"):
+        metadata = pq.read_schema(root / f"{name}.parquet").metadata
+        assert metadata[b"pianobot.schema_version"] == SCHEMA_VERSION.encode()
+    assert [e["event"] for e in run.journal] == ["started"]
+
+
+def test_live_run_is_readable_from_parts(data_dir: Path) -> None:
+    ids = [f"t{i}" for i in range(4)]
+    writer = _create(data_dir, ids)
+    writer.append(_trials(ids[:2]), _samples(ids[:2]), _midi(ids[:2]))
+    writer.append(_trials(ids[2:3]), _samples(ids[2:3]))
+    # Plain pyarrow/pandas on the parts folder works while the run is going.
+    direct = pd.read_parquet(writer.path / "parts" / "trials-000001.parquet")
+    assert list(direct["trial_id"]) == ids[:2]
+    run = load_run(writer.run_id, data_dir)
+    assert run.status == "running"
+    assert list(run.trials["trial_id"]) == ids[:3]
+    assert len(run.samples) == 15
+    summary = list_runs(data_dir)[0]
+    assert (summary.trials_done, summary.trials_planned, summary.status) == (3, 4, "running")
+    writer.close()
+
+
+def test_uncommitted_and_temporary_parts_are_invisible(data_dir: Path) -> None:
+    ids = ["a", "b"]
+    writer = _create(data_dir, ids)
+    writer.append(_trials(ids[:1]), _samples(ids[:1]))
+    parts = writer.path / "parts"
+    # A killed writer: the samples part of batch 2 landed, its trials part did not, and a
+    # half-written temp file lies around.
+    shutil.copy(parts / "samples-000001.parquet", parts / "samples-000002.parquet")
+    (parts / ".trials-000002.parquet.123.abc.tmp").write_bytes(b"PAR1 torn")
+    run = load_run(writer.run_id, data_dir)
+    assert len(run.samples) == 5 and list(run.trials["trial_id"]) == ["a"]
+    writer.close()
+    # Reopening (resume) removes the orphan and continues numbering after the committed batch.
+    writer = RunWriter.reopen(data_dir, writer.run_id)
+    assert not (parts / "samples-000002.parquet").exists()
+    assert writer.append(_trials(["b"]), _samples(["b"])) == 2
+    writer.finish("completed")
+    assert list(load_run(writer.run_id, data_dir).trials["trial_id"]) == ids
+    writer.close()
+
+
+def test_compaction_interrupted_before_parts_removed_counts_once(data_dir: Path) -> None:
+    ids = ["a", "b", "c"]
+    writer = _create(data_dir, ids)
+    writer.append(_trials(ids[:2]), _samples(ids[:2]), _midi(ids[:2]))
+    parts = writer.path / "parts"
+    saved = {p.name: p.read_bytes() for p in parts.iterdir()}
+    writer.compact()
+    for name, data in saved.items():  # as if killed after compacting, before the unlinks
+        (parts / name).write_bytes(data)
+    run = load_run(writer.run_id, data_dir)
+    assert list(run.trials["trial_id"]) == ["a", "b"]
+    assert len(run.samples) == 10 and len(run.midi) == 2
+    writer.append(_trials(ids[2:]), _samples(ids[2:]), _midi(ids[2:]))
+    writer.finish("completed")
+    run = load_run(writer.run_id, data_dir)
+    assert list(run.trials["trial_id"]) == ids and len(run.samples) == 15 and len(run.midi) == 3
+    writer.close()
+
+
+def test_resume_after_finish_appends_and_recompacts(data_dir: Path) -> None:
+    writer = _create(data_dir, ["a", "b"])
+    writer.append(_trials(["a"]))
+    writer.finish("stopped", reason="protective stop")
+    writer.close()
+    assert load_run(writer.run_id, data_dir).meta["reason"] == "protective stop"
+    writer = RunWriter.reopen(data_dir, writer.run_id)
+    writer.update_meta(status="running", reason=None)
+    writer.append(_trials(["b"]))
+    assert list(load_run(writer.run_id, data_dir).trials["trial_id"]) == ["a", "b"]
+    writer.finish("completed")
+    writer.close()
+    assert list(load_run(writer.run_id, data_dir).trials["trial_id"]) == ["a", "b"]
+
+
+def test_redone_trial_keeps_its_last_row(data_dir: Path) -> None:
+    writer = _create(data_dir, ["a", "b"])
+    writer.append(_trials(["a", "b"], status="failed", attempt=3))
+    writer.append(_trials(["b"], status="ok", attempt=1))
+    live = load_run(writer.run_id, data_dir).trials
+    writer.finish("completed")
+    writer.close()
+    final = load_run(writer.run_id, data_dir).trials
+    for frame in (live, final):
+        assert list(frame["trial_id"]) == ["a", "b"]
+        assert list(frame["status"]) == ["failed", "ok"]
+
+
+def test_run_ids_resolve_by_prefix_and_unknown_ids_say_how_to_list(data_dir: Path) -> None:
+    first = _create(data_dir, ["a"], name="alpha")
+    second = _create(data_dir, ["a"], name="beta")
+    for writer in (first, second):
+        writer.close()
+    assert load_run(first.run_id, data_dir).run_id == first.run_id
+    assert load_run(first.run_id[:-2], data_dir).run_id == first.run_id
+    with pytest.raises(InputError, match="pianobot runs"):
+        load_run("no-such-run", data_dir)
+    with pytest.raises(InputError, match="matches 2 runs"):
+        load_run(first.run_id[:8], data_dir)
+    with pytest.raises(InputError):
+        load_run("../x", data_dir)
+
+
+def test_list_runs_summarizes_status_silent_and_lab_time(data_dir: Path) -> None:
+    assert list_runs(data_dir) == []
+    writer = _create(data_dir, ["a", "b", "c", "d"])
+    writer.append(_trials(["a", "b", "c"]))
+    writer.append(_trials(["d"], status="silent"))
+    writer.finish("completed", lab_time_s=42.0)
+    writer.close()
+    (summary,) = list_runs(data_dir)
+    assert summary.status == "completed" and summary.trials_done == 4
+    assert summary.silent_pct == pytest.approx(25.0)
+    assert summary.lab_time_s == pytest.approx(42.0)
+    assert json.loads(json.dumps(summary.to_dict()))["run_id"] == writer.run_id
+
+
+def test_journal_appends_fsynced_lines_and_skips_a_torn_tail(data_dir: Path) -> None:
+    writer = _create(data_dir, ["a"])
+    writer.journal("started", trial_id="a", attempt=1)
+    writer.journal("done", trial_id="a", value=float("nan"))
+    writer.close()
+    path = writer.path / "journal.jsonl"
+    with open(path, "ab") as handle:
+        handle.write(b'{"event": "started", "trial_id": "b"')  # killed mid-line
+    events = read_journal(path)
+    assert [e["event"] for e in events] == ["started", "done"]
+    assert events[1]["value"] is None and "t_utc" in events[0]
+    writer = RunWriter.reopen(data_dir, writer.run_id)
+    writer.journal("resumed")
+    writer.close()
+    assert [e["event"] for e in read_journal(path)] == ["started", "done", "resumed"]
+
+
+def test_a_live_writer_locks_the_run(data_dir: Path) -> None:
+    writer = _create(data_dir, ["a"])
+    paths = RunPaths(writer.path)
+    assert paths.lock.read_text().strip() == str(os.getpid())
+    paths.lock.write_text("1\n")  # pid 1 is alive: another process holds it
+    with pytest.raises(RunLocked):
+        RunWriter.reopen(data_dir, writer.run_id)
+    paths.lock.write_text("999999999\n")  # a dead writer's lock is taken over
+    RunWriter.reopen(data_dir, writer.run_id).close()
+    assert not paths.lock.exists()
+
+
+def test_bad_tables_are_refused(data_dir: Path) -> None:
+    writer = _create(data_dir, ["a"])
+    with pytest.raises(ValueError, match="trial_id"):
+        writer.append(pd.DataFrame({"status": ["ok"]}))
+    with pytest.raises(ValueError, match="unknown column"):
+        writer.append(_trials(["a"]), samples=_samples(["a"]).assign(force_n=1.0))
+    with pytest.raises(ValueError, match="kind"):
+        RunWriter.create(data_dir, name="x", kind="nope", meta={}, plan=None)
+    writer.close()
+
+
+def test_slugify_makes_safe_names() -> None:
+    assert slugify("Soft grid #2 / -80 kPa") == "soft-grid-2-80-kpa"
+    assert slugify("!!!") == "run"
