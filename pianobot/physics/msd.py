@@ -226,14 +226,15 @@ def lsim_uniform(ss: StateSpace, t_s: npt.ArrayLike, u: npt.ArrayLike) -> FloatA
     Ad = E[..., :n, :n]
     Bd1 = E[..., :n, n + m :]
     Bd0 = E[..., :n, n : n + m] - Bd1
+    # Input terms of every step at once; only the state recursion remains sequential.
+    drive = Bd0 @ u_arr[..., :-1] + Bd1 @ u_arr[..., 1:]
     z = np.empty((*batch, n, t.size))
-    z[..., 0] = -np.linalg.solve(A, B @ u_arr[..., 0][..., None])[..., 0]
+    if np.any(u_arr[..., 0] != 0.0):
+        z[..., 0] = -np.linalg.solve(A, B @ u_arr[..., 0][..., None])[..., 0]
+    else:
+        z[..., 0] = 0.0  # at rest (also when A is singular, e.g. a free finger with k0 = 0)
     for k in range(1, t.size):
-        z[..., k] = (
-            (Ad @ z[..., k - 1][..., None])[..., 0]
-            + (Bd0 @ u_arr[..., k - 1][..., None])[..., 0]
-            + (Bd1 @ u_arr[..., k][..., None])[..., 0]
-        )
+        z[..., k] = (Ad @ z[..., k - 1][..., None])[..., 0] + drive[..., k - 1]
     return np.asarray(C @ z + D @ u_arr, dtype=np.float64)
 
 
