@@ -1,0 +1,259 @@
+"""`pianobot fit`: learned maps from press parameters to MIDI outcome, cross-validated and saved.
+
+Targets: the note-on velocity and the MIDI hold time of sounded keystrokes, the lead from motion
+start to note-on (`t_on_s`), and the probability that a keystroke is silent. Cross-validation is
+grouped (`GroupKFold`) by setting, so the repeats of one setting never sit on both sides of a
+split — otherwise a model could score by remembering a setting's repeats.
+
+A fitted `LearnedPredictor` is a `StrokePredictor` (`pianobot.analysis.predictors`): `play` loads
+it with `load_predictor`. Files: `<name>.json` (schema `pianobot.predictor/1`: kind, inputs,
+ranges, CV table, training runs, hash of the estimator file) beside `<name>.joblib`.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import joblib
+import numpy as np
+import numpy.typing as npt
+import pandas as pd
+from sklearn.model_selection import GroupKFold
+
+from pianobot.analysis.learn_models import fit_classifier, make_regressor, p_silent
+from pianobot.analysis.predictors import (
+    INPUT_COLUMNS,
+    OUTPUT_COLUMNS,
+    FloatArray,
+    complete_inputs,
+    grid_inverse,
+    grid_velocity_range,
+)
+from pianobot.errors import InputError
+
+PREDICTOR_SCHEMA = "pianobot.predictor/1"
+REGRESSION_TARGETS = {"on_velocity": "on_velocity", "midi_hold_s": "midi_hold_s", "lead_s": "t_on_s"}
+
+
+@dataclass(frozen=True)
+class TrainingSet:
+    """Trials prepared for learning: inputs that vary, targets, silent flags and CV groups."""
+
+    inputs: tuple[str, ...]
+    X: FloatArray  # (n, len(inputs))
+    silent: npt.NDArray[np.bool_]
+    targets: dict[str, FloatArray]  # NaN where the target is unknown (silent, not recorded)
+    groups: npt.NDArray[np.int64]
+    ranges: dict[str, tuple[float, float]]
+    defaults: dict[str, float]  # value of each non-varying input
+
+    @property
+    def n(self) -> int:
+        return len(self.silent)
+
+
+def training_set(trials: pd.DataFrame) -> TrainingSet:
+    """Select executed trials and the inputs that vary among them.
+
+    Raises:
+        InputError: no usable trials, or no sounded keystroke to learn on-velocity from.
+    """
+    if trials is None or trials.empty:
+        raise InputError("the run has no trials", "fit")
+    frame = trials
+    if "status" in frame:
+        frame = frame[frame["status"].isin(["ok", "silent"])]
+    frame = frame.dropna(subset=["down_velocity_mps"])
+    if frame.empty:
+        raise InputError("the run has no executed trials (all failed or missing parameters)", "fit")
+    full = complete_inputs(frame)
+    on = frame["on_velocity"].astype(float) if "on_velocity" in frame else pd.Series(np.nan, index=frame.index)
+    silent = (frame["status"] == "silent").to_numpy() if "status" in frame else on.isna().to_numpy()
+    silent = silent | on.isna().to_numpy()
+    if silent.all():
+        raise InputError("every keystroke is silent: nothing to learn on-velocity from", "fit")
+    varying = tuple(c for c in INPUT_COLUMNS if full[c].round(9).nunique() > 1)
+    if "down_velocity_mps" not in varying:
+        varying = ("down_velocity_mps", *varying)
+    X = full[list(varying)].to_numpy(float)
+    targets = {}
+    for name, column in REGRESSION_TARGETS.items():
+        values = frame[column].astype(float).to_numpy() if column in frame else np.full(len(frame), np.nan)
+        targets[name] = np.where(silent, np.nan, values)
+    # Repeats share every input value: one group per distinct setting.
+    _, groups = np.unique(np.round(full[list(INPUT_COLUMNS)].to_numpy(float), 9), axis=0, return_inverse=True)
+    ranges = {c: (float(full[c].min()), float(full[c].max())) for c in INPUT_COLUMNS}
+    defaults = {c: float(full[c].median()) for c in INPUT_COLUMNS if c not in varying}
+    return TrainingSet(varying, X, silent, targets, groups.astype(np.int64).ravel(), ranges, defaults)
+
+
+class LearnedPredictor:
+    """Regressors for on-velocity, hold and lead plus a silent classifier (a `StrokePredictor`)."""
+
+    def __init__(self, kind: str, seed: int = 0) -> None:
+        self.kind = kind
+        self.seed = seed
+
+    def fit(self, data: TrainingSet) -> LearnedPredictor:
+        """Fit every target on the sounded keystrokes and the classifier on all keystrokes."""
+        self.inputs_ = data.inputs
+        self.ranges_ = data.ranges
+        self.defaults_ = data.defaults
+        self.regressors_: dict[str, Any] = {}
+        for name, y in data.targets.items():
+            rows = np.isfinite(y)
+            if rows.sum() >= 3:
+                self.regressors_[name] = make_regressor(self.kind, data.inputs, self.seed).fit(data.X[rows], y[rows])
+        if "on_velocity" not in self.regressors_:
+            raise InputError("fewer than 3 sounded keystrokes: cannot fit on-velocity", "fit")
+        self.classifier_ = fit_classifier(self.kind, data.inputs, data.X, data.silent, self.seed)
+        return self
+
+    def _matrix(self, frame: pd.DataFrame) -> FloatArray:
+        full = complete_inputs(frame)
+        return full[list(self.inputs_)].to_numpy(float)
+
+    def predict(self, frame: pd.DataFrame) -> pd.DataFrame:
+        """Outcome per row (see `StrokePredictor.predict`)."""
+        X = self._matrix(frame)
+        out = pd.DataFrame(index=frame.index)
+        out["on_velocity"] = np.clip(self.regressors_["on_velocity"].predict(X), 1.0, 127.0)
+        out["p_silent"] = np.clip(p_silent(self.classifier_, X), 0.0, 1.0)
+        for name in ("lead_s", "midi_hold_s"):
+            model = self.regressors_.get(name)
+            out[name] = model.predict(X) if model is not None else np.nan
+        return out[list(OUTPUT_COLUMNS)]
+
+    def inverse(self, target_on_velocity: npt.ArrayLike, *, vacuum_kpa: float,
+                acceleration_mps2: float, depth_m: float, distance_m: float) -> FloatArray:
+        """Down velocity for each target on-velocity within the trained speed range (NaN outside)."""
+        lo, hi = self.ranges_["down_velocity_mps"]
+        return grid_inverse(self, target_on_velocity, lo, hi, vacuum_kpa=vacuum_kpa,
+                            acceleration_mps2=acceleration_mps2, depth_m=depth_m, distance_m=distance_m)
+
+    def velocity_range(self, *, vacuum_kpa: float, acceleration_mps2: float, depth_m: float,
+                       distance_m: float, max_down_velocity_mps: float) -> tuple[float, float]:
+        """Sounding on-velocities reachable with speeds in the trained range up to the cap."""
+        lo, hi = self.ranges_["down_velocity_mps"]
+        return grid_velocity_range(self, lo, min(hi, max_down_velocity_mps), vacuum_kpa=vacuum_kpa,
+                                   acceleration_mps2=acceleration_mps2, depth_m=depth_m, distance_m=distance_m)
+
+
+def _scores(y: FloatArray, pred: FloatArray) -> dict[str, float]:
+    err = pred - y
+    ss_tot = float(np.sum((y - y.mean()) ** 2))
+    return {
+        "rmse": float(np.sqrt(np.mean(err**2))),
+        "mae": float(np.mean(np.abs(err))),
+        "r2": 1.0 - float(np.sum(err**2)) / ss_tot if ss_tot > 0 else float("nan"),
+    }
+
+
+def cross_validate(data: TrainingSet, kinds: Sequence[str], *, folds: int = 5, seed: int = 0,
+                   physics: Any | None = None) -> pd.DataFrame:
+    """Grouped K-fold CV table: one row per model kind (plus the `mean` baseline).
+
+    Columns: model, rmse, mae, r2 (on-velocity of sounded keystrokes), hold_rmse_s,
+    silent_accuracy, latency_ms (median time to predict one stroke), n_trials, folds.
+    `physics` (a StrokePredictor) is evaluated without refitting: it was identified elsewhere.
+    """
+    n_groups = int(np.unique(data.groups).size)
+    k = max(2, min(folds, n_groups))
+    splits = list(GroupKFold(n_splits=k).split(data.X, groups=data.groups))
+    frame = pd.DataFrame(data.X, columns=list(data.inputs))
+    rows = []
+    for kind in ["mean", *[kk for kk in kinds if kk != "physics"]]:
+        pred_v = np.full(data.n, np.nan)
+        pred_h = np.full(data.n, np.nan)
+        pred_s = np.full(data.n, np.nan)
+        for train, test in splits:
+            sub = _subset(data, train)
+            try:
+                model = LearnedPredictor(kind, seed).fit(sub)
+            except InputError:
+                continue
+            out = model.predict(frame.iloc[test])
+            pred_v[test], pred_h[test], pred_s[test] = out["on_velocity"], out["midi_hold_s"], out["p_silent"]
+        rows.append(_row(kind, data, pred_v, pred_h, pred_s, _latency(LearnedPredictor(kind, seed).fit(data), frame), k))
+    if "physics" in kinds and physics is not None:
+        out = physics.predict(frame.assign(**data.defaults))
+        rows.append(_row("physics", data, out["on_velocity"].to_numpy(float), out["midi_hold_s"].to_numpy(float),
+                         out["p_silent"].to_numpy(float), _latency(physics, frame.assign(**data.defaults)), 0))
+    return pd.DataFrame(rows)
+
+
+def _subset(data: TrainingSet, rows: npt.NDArray[np.intp]) -> TrainingSet:
+    return TrainingSet(data.inputs, data.X[rows], data.silent[rows],
+                       {k: v[rows] for k, v in data.targets.items()}, data.groups[rows],
+                       data.ranges, data.defaults)
+
+
+def _row(kind: str, data: TrainingSet, pv: FloatArray, ph: FloatArray, ps: FloatArray,
+         latency_ms: float, folds: int) -> dict[str, Any]:
+    y = data.targets["on_velocity"]
+    ok = np.isfinite(y) & np.isfinite(pv)
+    scores = _scores(y[ok], pv[ok]) if ok.sum() >= 2 else {"rmse": np.nan, "mae": np.nan, "r2": np.nan}
+    h = data.targets["midi_hold_s"]
+    okh = np.isfinite(h) & np.isfinite(ph)
+    hold = float(np.sqrt(np.mean((ph[okh] - h[okh]) ** 2))) if okh.any() else float("nan")
+    oks = np.isfinite(ps)
+    acc = float(np.mean((ps[oks] >= 0.5) == data.silent[oks])) if oks.any() else float("nan")
+    return {"model": kind, **scores, "hold_rmse_s": hold, "silent_accuracy": acc,
+            "latency_ms": latency_ms, "n_trials": data.n, "folds": folds}
+
+
+def _latency(model: Any, frame: pd.DataFrame, repeats: int = 5) -> float:
+    """Median wall time of predicting a single stroke, in milliseconds."""
+    one = frame.iloc[:1]
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        model.predict(one)
+        times.append(time.perf_counter() - t0)
+    return 1e3 * float(np.median(times))
+
+
+def save_predictor(model: LearnedPredictor, path: Path, *, cv: pd.DataFrame | None = None,
+                   runs: Sequence[str] = ()) -> Path:
+    """Write `<path>.json` (sidecar, the file to load) and `<path stem>.joblib`; returns the JSON path."""
+    path = Path(path)
+    json_path = path if path.suffix == ".json" else path.with_suffix(".json")
+    blob = json_path.with_suffix(".joblib")
+    json_path.parent.mkdir(parents=True, exist_ok=True)
+    joblib.dump(model, blob)
+    import pianobot
+
+    sidecar = {
+        "schema": PREDICTOR_SCHEMA,
+        "kind": model.kind,
+        "inputs": list(model.inputs_),
+        "ranges": {k: list(v) for k, v in model.ranges_.items()},
+        "defaults": model.defaults_,
+        "estimator_file": blob.name,
+        "estimator_sha256": hashlib.sha256(blob.read_bytes()).hexdigest(),
+        "runs": list(runs),
+        "cv": [] if cv is None else json.loads(cv.to_json(orient="records")),
+        "pianobot_version": getattr(pianobot, "__version__", "unknown"),
+    }
+    json_path.write_text(json.dumps(sidecar, indent=2), encoding="utf-8")
+    return json_path
+
+
+def load_learned(path: Path, sidecar: dict[str, Any]) -> LearnedPredictor:
+    """Load the estimator a sidecar names, after checking its hash (a changed file is refused)."""
+    blob = Path(path).parent / str(sidecar.get("estimator_file", ""))
+    if not blob.is_file():
+        raise InputError(f"estimator file {blob.name} named by the predictor is missing", str(path))
+    digest = hashlib.sha256(blob.read_bytes()).hexdigest()
+    if digest != sidecar.get("estimator_sha256"):
+        raise InputError(f"estimator file {blob.name} does not match its recorded sha256", str(path))
+    model = joblib.load(blob)
+    if not isinstance(model, LearnedPredictor):
+        raise InputError("the estimator file does not hold a pianobot predictor", str(blob))
+    return model
