@@ -1,0 +1,53 @@
+"""`pianobot fit`: trials of one or more runs → grouped-CV table and saved predictors."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import pandas as pd
+
+from pianobot.analysis.learn import LearnedPredictor, cross_validate, save_predictor, training_set
+from pianobot.analysis.learn_models import MODEL_KINDS
+from pianobot.analysis.predictors import PhysicsPredictor, load_predictor
+from pianobot.errors import InputError
+from pianobot.store import load_run
+
+
+def load_trials(run_ids: Sequence[str], data_dir: Path) -> pd.DataFrame:
+    """The trials of every run, concatenated."""
+    frames = []
+    for run_id in run_ids:
+        run = load_run(run_id, data_dir)
+        trials = run.trials
+        if trials.empty:
+            raise InputError("the run has no trials", run.run_id)
+        frames.append(trials)
+    return pd.concat(frames, ignore_index=True)
+
+
+def fit_runs(
+    run_ids: Sequence[str], data_dir: Path, *, kinds: Sequence[str], out_dir: Path | None,
+    folds: int = 5, seed: int = 0, physics_model: Path | None = None,
+) -> tuple[pd.DataFrame, dict[str, Path]]:
+    """Cross-validate `kinds` and save one predictor per learned kind under `out_dir`.
+
+    Returns the CV table (with the `mean` baseline row) and the saved files by kind.
+    """
+    bad = [k for k in kinds if k not in MODEL_KINDS]
+    if bad:
+        raise InputError(f"unknown model {bad[0]!r}; valid: {', '.join(MODEL_KINDS)}", "--model")
+    data = training_set(load_trials(run_ids, data_dir))
+    physics = None
+    if "physics" in kinds:
+        physics = load_predictor(physics_model) if physics_model else PhysicsPredictor.published()
+    table = cross_validate(data, kinds, folds=folds, seed=seed, physics=physics)
+    saved: dict[str, Path] = {}
+    if out_dir is not None:
+        for kind in kinds:
+            if kind == "physics":
+                continue
+            model = LearnedPredictor(kind, seed).fit(data)
+            saved[kind] = save_predictor(model, Path(out_dir) / f"predictor-{kind}.json",
+                                         cv=table, runs=list(run_ids))
+    return table, saved

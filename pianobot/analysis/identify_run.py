@@ -1,0 +1,121 @@
+"""`pianobot identify`: runs in, identified model file out (with intervals and provenance)."""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+import pianobot
+from pianobot.analysis.identify import TrajectoryFit, identify_trajectories, rms_x2_m, split_holdout
+from pianobot.analysis.keystroke_batch import KeystrokeBatch, keystroke_batch
+from pianobot.analysis.static_stiffness import StaticStiffness
+from pianobot.errors import InputError
+from pianobot.physics.model import KeystrokeModel, save_model
+from pianobot.physics.msd import MSDParams, peak_response
+from pianobot.store import load_run
+
+
+@dataclass(frozen=True)
+class IdentifyResult:
+    """What `identify` found: the fit, held-out comparison and the written model file."""
+
+    fit: TrajectoryFit
+    model: KeystrokeModel
+    holdout_rms_identified_m: float
+    holdout_rms_published_m: float
+    peak_hz: dict[str, float]
+    static: StaticStiffness | None
+    model_path: Path | None
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {
+            "parameters": {e.name: e.row() for e in self.fit.estimates},
+            "coupling": self.fit.coupling,
+            "fixed": self.fit.fixed,
+            "rms_m": self.fit.rms_m,
+            "n_keystrokes": self.fit.n_keystrokes,
+            "holdout_rms_x2_identified_m": self.holdout_rms_identified_m,
+            "holdout_rms_x2_published_m": self.holdout_rms_published_m,
+            "x2_x0_peak_hz": self.peak_hz,
+            "model_file": None if self.model_path is None else str(self.model_path),
+        }
+        if self.static is not None:
+            s = self.static
+            out["static_stiffness"] = {
+                "levels_kpa": s.levels_kpa.tolist(), "k1_npm": s.k1_npm.tolist(),
+                "k1_a_npm": s.k1_a_npm, "k1_b_npm_per_kpa": s.k1_b_npm_per_kpa,
+                "ci_a": list(s.ci_a), "ci_b": list(s.ci_b), "compression_m": s.compression_m,
+            }
+        return out
+
+
+def _file_hash(path: Path) -> str:
+    digest = hashlib.sha256()
+    for name in ("trials.parquet", "samples.parquet"):
+        file = path / name
+        if file.is_file():
+            digest.update(file.read_bytes())
+    return digest.hexdigest()
+
+
+def load_batch(run_ids: Sequence[str], data_dir: Path, *, x0_source: str = "auto",
+               vacuum_kpa: float | None = None) -> tuple[KeystrokeBatch, dict[str, str]]:
+    """Keystroke batch over several runs (trial ids prefixed by run), and each run's data hash."""
+    samples, trials, hashes = [], [], {}
+    for run_id in run_ids:
+        run = load_run(run_id, data_dir)
+        t, s = run.trials, run.samples
+        if t.empty:
+            raise InputError("the run has no trials", run.run_id)
+        if vacuum_kpa is not None:
+            t = t.assign(vacuum_kpa=vacuum_kpa)
+        if t["vacuum_kpa"].isna().all():
+            raise InputError("the run records no vacuum level; give --vacuum-kpa", run.run_id)
+        prefix = f"{run.run_id}/"
+        trials.append(t.assign(trial_id=prefix + t["trial_id"].astype(str)))
+        samples.append(s.assign(trial_id=prefix + s["trial_id"].astype(str)))
+        hashes[run.run_id] = _file_hash(run.path)
+    batch = keystroke_batch(pd.concat(samples, ignore_index=True), pd.concat(trials, ignore_index=True),
+                            x0_source=x0_source)
+    return batch, hashes
+
+
+def identify_runs(
+    run_ids: Sequence[str], data_dir: Path, *, out: Path | None, coupling: str = "auto",
+    bootstrap: int = 20, seed: int = 0, x0_source: str = "auto", vacuum_kpa: float | None = None,
+    static: StaticStiffness | None = None,
+) -> IdentifyResult:
+    """Identify the model from the runs' trajectories; compare with the published parameters on
+    held-out keystrokes (every third per level); write the model file when `out` is given."""
+    batch, hashes = load_batch(run_ids, data_dir, x0_source=x0_source, vacuum_kpa=vacuum_kpa)
+    published = MSDParams()
+    train, test = split_holdout(batch)
+    held = identify_trajectories(train, prior=published, coupling=coupling)  # type: ignore[arg-type]
+    rms_id = rms_x2_m(test, held.params)
+    rms_pub = rms_x2_m(test, published)
+    fit = identify_trajectories(batch, prior=published, coupling=held.coupling, bootstrap=bootstrap, seed=seed)
+    model = KeystrokeModel.study().replace(msd=fit.params)
+    peaks = {f"{-abs(p):g}": peak_response(fit.params.at(-abs(p)))[0]
+             for p in sorted(set(np.abs(batch.vacuum_kpa).tolist()))}
+    path = None
+    if out is not None:
+        intervals = {e.name: {"value": e.value, "ci95": list(e.ci95), "jacobian": list(e.ci_jacobian),
+                              "bootstrap": None if e.ci_bootstrap is None else list(e.ci_bootstrap)}
+                     for e in fit.estimates}
+        provenance = {
+            "method": "output-error least squares (soft-L1) on mocap trajectories",
+            "runs": list(hashes), "data_sha256": hashes, "pianobot_version": pianobot.__version__,
+            "fixed": fit.fixed, "coupling": fit.coupling, "bootstrap": bootstrap, "seed": seed,
+            "holdout_rms_x2_m": {"identified": rms_id, "published": rms_pub},
+        }
+        if static is not None:
+            provenance["static_stiffness"] = {"k1_a_npm": static.k1_a_npm,
+                                              "k1_b_npm_per_kpa": static.k1_b_npm_per_kpa}
+        path = save_model(model, out, intervals=intervals, provenance=provenance)
+    return IdentifyResult(fit, model, rms_id, rms_pub, peaks, static, path)

@@ -1,0 +1,139 @@
+"""Commands `identify`, `fit` and `report`: thin wrappers over pianobot.analysis and pianobot.reports."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import Annotated
+
+import pandas as pd
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from pianobot.analysis.fit_run import fit_runs
+from pianobot.analysis.identify_run import identify_runs
+from pianobot.analysis.static_stiffness import (
+    STUDY_COMPRESSION_M,
+    StaticStiffness,
+    burst_peaks_n,
+    static_stiffness,
+)
+from pianobot.cli.common import DEFAULT_DATA, DataDir, JsonFlag, emit_json
+from pianobot.errors import InputError
+from pianobot.reports.run_report import build_run_report
+
+RunIds = Annotated[list[str], typer.Argument(help="Run ids (or unique prefixes).")]
+_READING = re.compile(r"Analog reading\s*=\s*(-?\d+)\s*$")
+
+
+def _force_peaks(spec: str) -> tuple[float, list[float]]:
+    """`P=FILE` → (vacuum kPa, press peak forces in N) using the study's sensor conversion."""
+    if "=" not in spec:
+        raise InputError(f"expected P=FILE, got {spec!r}", "--force-log")
+    level, name = spec.split("=", 1)
+    try:
+        vacuum = -abs(float(level))
+    except ValueError:
+        raise InputError(f"vacuum level {level!r} is not a number", "--force-log") from None
+    path = Path(name)
+    if not path.is_file():
+        raise InputError("force log not found", str(path))
+    readings = [int(m.group(1)) for line in path.read_text(errors="replace").splitlines()
+                if (m := _READING.search(line))]
+    if not readings:
+        raise InputError("no 'Analog reading = N' lines", str(path))
+    force_n = [0.0353 * r + 0.204 for r in readings]  # the study's sensor calibration
+    return vacuum, burst_peaks_n(force_n).tolist()
+
+
+def _static(force_logs: list[str], compression_m: float) -> StaticStiffness | None:
+    specs: list[str] = []
+    for item in force_logs:
+        folder = Path(item)
+        if "=" not in item and folder.is_dir():  # a folder of {P}.txt files
+            specs += [f"{f.stem}={f}" for f in sorted(folder.glob("*.txt")) if re.fullmatch(r"\d+", f.stem)]
+        else:
+            specs.append(item)
+    if not specs:
+        return None
+    peaks = dict(_force_peaks(s) for s in specs)
+    return static_stiffness(peaks, compression_m=compression_m)
+
+
+def register(app: typer.Typer) -> None:
+    """Add identify, fit and report to the app."""
+
+    @app.command()
+    def identify(
+        runs: RunIds,
+        data: DataDir = DEFAULT_DATA,
+        json_out: JsonFlag = False,
+        out: Annotated[Path, typer.Option("--out", help="Model file to write.")] = Path("model.json"),
+        coupling: Annotated[str, typer.Option(help="tied | free | auto (BIC).")] = "auto",
+        bootstrap: Annotated[int, typer.Option(min=0, help="Bootstrap refits over keystrokes.")] = 20,
+        seed: Annotated[int, typer.Option(help="Bootstrap seed.")] = 0,
+        x0_source: Annotated[str, typer.Option(help="arm | mocap | sim-truth | auto.")] = "auto",
+        vacuum_kpa: Annotated[float | None, typer.Option(help="Vacuum of runs that do not record it.")] = None,
+        force_log: Annotated[list[str] | None, typer.Option(help="P=FILE or a folder of P.txt force logs.")] = None,
+        compression_m: Annotated[float, typer.Option(help="Compression of the force-log presses.")] = STUDY_COMPRESSION_M,
+    ) -> None:
+        """Identify the keystroke model from mocap trajectories; write a model file with intervals."""
+        if coupling not in ("tied", "free", "auto"):
+            raise InputError(f"expected tied, free or auto, got {coupling!r}", "--coupling")
+        static = _static(force_log or [], compression_m)
+        result = identify_runs(runs, data, out=out, coupling=coupling, bootstrap=bootstrap, seed=seed,
+                               x0_source=x0_source, vacuum_kpa=vacuum_kpa, static=static)
+        if json_out:
+            emit_json(result.to_dict())
+            return
+        table = Table("parameter", "value", "unit", "95 % low", "95 % high", title=f"model → {result.model_path}")
+        for e in result.fit.estimates:
+            lo, hi = e.ci95
+            table.add_row(e.name, f"{e.value:.4g}", e.unit, f"{lo:.4g}", f"{hi:.4g}")
+        console = Console()
+        console.print(table)
+        console.print(f"held-out RMS x2: identified {1e3 * result.holdout_rms_identified_m:.4f} mm, "
+                      f"published {1e3 * result.holdout_rms_published_m:.4f} mm; x2/x0 peak (Hz): {result.peak_hz}")
+
+    @app.command()
+    def fit(
+        runs: RunIds,
+        data: DataDir = DEFAULT_DATA,
+        json_out: JsonFlag = False,
+        model: Annotated[list[str] | None, typer.Option("--model", help="gp | poly | spline | mlp | physics (repeatable).")] = None,
+        out_dir: Annotated[Path, typer.Option("--out-dir", help="Folder for the saved predictors.")] = Path("models"),
+        folds: Annotated[int, typer.Option(min=2, help="Grouped CV folds.")] = 5,
+        physics_model: Annotated[Path | None, typer.Option(help="Model file for --model physics.")] = None,
+    ) -> None:
+        """Cross-validate learned maps to on-velocity, hold and silence; save each as a predictor."""
+        table, saved = fit_runs(runs, data, kinds=model or ["gp"], out_dir=out_dir, folds=folds,
+                                physics_model=physics_model)
+        if json_out:
+            emit_json({"cv": table.to_dict(orient="records"), "saved": {k: str(v) for k, v in saved.items()}})
+            return
+        _print_frame(table, "grouped cross-validation (on-velocity of sounded keystrokes)")
+
+    @app.command()
+    def report(
+        runs: RunIds,
+        data: DataDir = DEFAULT_DATA,
+        json_out: JsonFlag = False,
+        model: Annotated[Path | None, typer.Option("--model", help="Model file (identify output).")] = None,
+        out: Annotated[Path, typer.Option("--out", help="HTML file to write.")] = Path("report.html"),
+        compare: Annotated[bool, typer.Option(help="Also run a quick grouped CV (poly, spline).")] = False,
+    ) -> None:
+        """Write one self-contained HTML report (figures embedded, no network)."""
+        cv = fit_runs(runs, data, kinds=["poly", "spline"], out_dir=None)[0] if compare else None
+        path = build_run_report(runs, data, out, model_file=model, cv_table=cv)
+        if json_out:
+            emit_json({"report": str(path)})
+        else:
+            print(f"report written to {path}")
+
+
+def _print_frame(frame: pd.DataFrame, title: str) -> None:
+    table = Table(*[str(c) for c in frame.columns], title=title)
+    for row in frame.itertuples(index=False):
+        table.add_row(*[f"{v:.4g}" if isinstance(v, float) else str(v) for v in row])
+    Console().print(table)
