@@ -1,0 +1,310 @@
+"""UR5Arm against fakes of the ur_rtde objects (same method names, same failure habits)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from fake_rtde import (
+    CONTROLLER_EPOCH_S,
+    CONTROLLER_PERIOD_S,
+    FakeClock,
+    FakeControl,
+    FakeController,
+    FakeReceive,
+)
+
+from pianobot.physics.keyboard import KeyboardGeometry
+from pianobot.physics.trajectory import Press, move_profile
+from pianobot.rig.errors import (
+    ConnectionLost,
+    DeviceUnavailable,
+    RigError,
+    SafetyStop,
+    SafetyViolation,
+)
+from pianobot.rig.protocols import Arm
+from pianobot.rig.ur5 import UR5Arm
+from pianobot.rig.ur5_link import ArmStatus, failure
+from pianobot.spec.rig import UR5Config
+
+REFERENCE_POSE = (0.45, -0.10, 0.10, 0.0, math.pi, 0.0)
+PRESS = Press(
+    distance_m=0.02, depth_m=0.01, down_velocity_mps=0.05, up_velocity_mps=0.1,
+    acceleration_mps2=0.5, hold_s=0.1,
+)
+
+
+def make_config(**overrides: object) -> UR5Config:
+    fields: dict[str, object] = {
+        "host": "192.0.2.10",
+        "workspace_min_m": (0.2, -0.5, 0.05),
+        "workspace_max_m": (0.7, 0.5, 0.35),
+        "reference_pose": REFERENCE_POSE,
+        "calibrated_utc": "2026-01-01T00:00:00Z",
+    }
+    fields.update(overrides)
+    return UR5Config.model_validate(fields)
+
+
+@pytest.fixture()
+def robot() -> FakeController:
+    return FakeController(clock=FakeClock(10.0))
+
+
+def make_arm(robot: FakeController, **overrides: object) -> UR5Arm:
+    return UR5Arm(
+        make_config(**overrides),
+        control=FakeControl(robot),
+        receive=FakeReceive(robot),
+        clock=robot.clock,
+    )
+
+
+def moves(robot: FakeController) -> list[list[float]]:
+    return [args[0] for args in robot.calls_to("moveL")]
+
+
+def test_satisfies_the_arm_protocol(robot: FakeController) -> None:
+    assert isinstance(make_arm(robot), Arm)
+
+
+def test_key_poses_follow_the_keyboard_geometry(robot: FakeController) -> None:
+    arm = make_arm(robot)
+    assert arm.key_pose(59) == pytest.approx(list(REFERENCE_POSE))
+    c4 = arm.key_pose(60, 0.02)
+    assert c4[0] - REFERENCE_POSE[0] == pytest.approx(0.0235)  # one white key to the right
+    assert c4[2] == pytest.approx(REFERENCE_POSE[2] + 0.02)
+    c_sharp = arm.key_pose(61)
+    assert c_sharp[0] - REFERENCE_POSE[0] == pytest.approx(1.4 * 0.0235)  # C# leans left
+    assert c_sharp[3:] == pytest.approx(list(REFERENCE_POSE[3:]))
+
+
+def test_keyboard_axis_and_offsets_come_from_the_rig(robot: FakeController) -> None:
+    arm = UR5Arm(
+        make_config(),
+        control=FakeControl(robot),
+        receive=FakeReceive(robot),
+        clock=robot.clock,
+        geometry=KeyboardGeometry(0.0235, 59, ((57, 0.001),)),
+        keyboard_axis=(0.0, -2.0, 0.0),
+    )
+    a3 = arm.key_pose(57)
+    assert a3[0] == pytest.approx(REFERENCE_POSE[0])
+    assert a3[1] - REFERENCE_POSE[1] == pytest.approx(-(-0.0235 + 0.001))  # A3 is one white key left
+
+
+def test_press_records_the_tcp_trace_with_controller_timestamps(robot: FakeController) -> None:
+    arm = make_arm(robot)
+    arm.move_to_key(57, PRESS.distance_m)
+    n_travel = len(moves(robot))
+    record = arm.press(PRESS, 57)
+
+    down, up = moves(robot)[n_travel:]
+    hover = arm.key_pose(57, PRESS.distance_m)
+    assert down[2] == pytest.approx(hover[2] - PRESS.distance_m - PRESS.depth_m)
+    assert up == pytest.approx(hover)
+    assert [args[1:] for args in robot.calls_to("moveL")[n_travel:]] == [
+        (PRESS.down_velocity_mps, PRESS.acceleration_mps2, True),
+        (PRESS.up_velocity_mps, PRESS.acceleration_mps2, True),
+    ]
+
+    trace = record.arm
+    assert trace is not None and trace.x0_m is not None and trace.source == "arm"
+    # One sample per controller tick (500 Hz), mapped onto the run clock.
+    steps = np.diff(trace.t_s)
+    assert np.allclose(steps, CONTROLLER_PERIOD_S, atol=1e-9)
+    assert abs(trace.t_s[0] - record.t_start_s) < CONTROLLER_PERIOD_S
+    assert record.t_start_s < record.t_end_s
+    assert trace.t_s[-1] <= record.t_end_s + 1e-9
+    # Downward displacement from the hover pose: 0 → distance + depth → 0.
+    travel_m = PRESS.distance_m + PRESS.depth_m
+    assert trace.x0_m[0] == pytest.approx(0.0, abs=1e-4)
+    assert trace.x0_m.max() == pytest.approx(travel_m, abs=1e-9)
+    assert trace.x0_m[-1] == pytest.approx(0.0, abs=1e-9)
+    # The down stroke follows the moveL trapezoid.
+    profile = move_profile(travel_m, PRESS.down_velocity_mps, PRESS.acceleration_mps2)
+    t_rel = trace.t_s - trace.t_s[0]
+    going_down = t_rel <= profile.duration_s
+    expected, _ = profile.sample(t_rel[going_down])
+    assert np.max(np.abs(trace.x0_m[going_down] - expected)) < 2e-4
+    at_bottom = np.isclose(trace.x0_m, travel_m, atol=1e-9)
+    assert np.ptp(trace.t_s[at_bottom]) >= PRESS.hold_s - 2 * CONTROLLER_PERIOD_S
+    assert record.warnings == ()
+
+
+def test_trace_clock_mapping_uses_the_controller_time(robot: FakeController) -> None:
+    arm = make_arm(robot)
+    record = arm.press(PRESS, 59)
+    assert record.arm is not None
+    # The fake controller's clock is the run clock shifted by its epoch, in 2 ms ticks: the
+    # mapped times are those ticks shifted back (a read can lag its tick by < one period).
+    ticks = record.arm.t_s + CONTROLLER_EPOCH_S
+    assert np.allclose(ticks / CONTROLLER_PERIOD_S, np.round(ticks / CONTROLLER_PERIOD_S),
+                       atol=0.51)
+
+
+def test_speed_scaling_below_one_warns(robot: FakeController) -> None:
+    robot.speed_scaling = 0.5
+    arm = make_arm(robot)
+    arm.move_to_key(59, PRESS.distance_m)
+    record = arm.press(PRESS, 59)
+    assert len(record.warnings) == 1 and "speed scaling 0.50" in record.warnings[0]
+    travel_m = PRESS.distance_m + PRESS.depth_m
+    nominal_s = (
+        move_profile(travel_m, PRESS.down_velocity_mps, PRESS.acceleration_mps2).duration_s
+        + PRESS.hold_s
+        + move_profile(travel_m, PRESS.up_velocity_mps, PRESS.acceleration_mps2).duration_s
+    )
+    assert record.t_end_s - record.t_start_s > 1.8 * nominal_s - PRESS.hold_s
+
+
+def test_target_outside_the_workspace_is_refused_before_sending(robot: FakeController) -> None:
+    arm = make_arm(robot)
+    with pytest.raises(SafetyViolation, match="outside the workspace"):
+        arm.move_to_key(108, 0.02)  # C8: 1.2 m to the right of the reference key
+    too_deep = Press(0.02, 0.06, 0.05, 0.1, 0.5)  # bottom at z = 0.04 < 0.05
+    with pytest.raises(SafetyViolation, match="z = 0.0400 m is outside"):
+        arm.press(too_deep, 59)
+    assert moves(robot) == []
+
+
+def test_pose_outside_the_robot_safety_limits_is_refused(robot: FakeController) -> None:
+    robot.reach_m = 0.3
+    arm = make_arm(robot)
+    with pytest.raises(SafetyViolation, match="safety limits"):
+        arm.move_to_key(59, 0.02)
+    assert robot.calls_to("isPoseWithinSafetyLimits")
+    assert moves(robot) == []
+
+
+def test_bad_press_parameters_are_refused(robot: FakeController) -> None:
+    arm = make_arm(robot)
+    with pytest.raises(SafetyViolation, match="down_velocity_mps must be > 0"):
+        arm.press(Press(0.02, 0.01, 0.0, 0.1, 0.5), 59)
+    assert moves(robot) == []
+
+
+def test_protective_stop_mid_press_aborts_safely_and_is_not_retried(
+    robot: FakeController,
+) -> None:
+    arm = make_arm(robot)
+    arm.move_to_key(59, PRESS.distance_m)
+    n_before = len(moves(robot))
+    robot.fail_on_move = robot._moves_started + 1  # the down stroke
+    robot.fail_what = "protective_stop"
+    with pytest.raises(SafetyStop, match="protective stopped"):
+        arm.press(PRESS, 59)
+    # Safe abort: the motion was stopped and nothing else was sent to the stopped robot.
+    assert robot.calls_to("stopL")
+    assert len(moves(robot)) == n_before + 1
+    # A reconnect does not clear a stop: the runner cannot resume without an operator.
+    with pytest.raises(SafetyStop):
+        arm.connect()
+    assert len(moves(robot)) == n_before + 1
+
+
+def test_emergency_stop_is_a_safety_stop(robot: FakeController) -> None:
+    arm = make_arm(robot)
+    arm.move_to_key(59, PRESS.distance_m)
+    robot.fail_on_move = robot._moves_started + 2  # the up stroke
+    robot.fail_what = "emergency_stop"
+    with pytest.raises(SafetyStop, match="emergency stopped"):
+        arm.press(PRESS, 59)
+
+
+def test_connection_drop_mid_press_reconnects_and_retries(robot: FakeController) -> None:
+    arm = make_arm(robot)
+    arm.move_to_key(59, PRESS.distance_m)
+    robot.fail_on_move = robot._moves_started + 1
+    robot.fail_what = "drop"
+    attempts = 0
+    record = None
+    for _ in range(3):  # the runner's policy: reconnect on ConnectionLost, retry the trial
+        attempts += 1
+        try:
+            arm.move_to_key(59, PRESS.distance_m)
+            record = arm.press(PRESS, 59)
+            break
+        except ConnectionLost:
+            arm.connect()
+    assert attempts == 2 and record is not None and record.arm is not None
+    assert robot.calls_to("reconnect")  # both links were re-opened
+    assert record.arm.x0_m is not None
+    assert record.arm.x0_m.max() == pytest.approx(PRESS.distance_m + PRESS.depth_m)
+
+
+def test_reconnect_that_fails_raises_connection_lost(robot: FakeController) -> None:
+    arm = make_arm(robot)
+    robot.connected = False
+    robot.reconnect_works = False
+    with pytest.raises(ConnectionLost, match="did not reconnect"):
+        arm.connect()
+
+
+def test_make_safe_retracts_and_never_raises(robot: FakeController) -> None:
+    arm = make_arm(robot)
+    arm.move_to_key(59, 0.0)
+    arm.make_safe()
+    assert robot.pose[2] == pytest.approx(REFERENCE_POSE[2] + 0.05)
+
+    class Broken:
+        def __getattr__(self, name: str) -> object:
+            raise RuntimeError("link gone")
+
+    broken = UR5Arm(make_config(), control=Broken(), receive=Broken(), clock=robot.clock)
+    broken.make_safe()
+    broken.close()
+
+
+def test_moves_between_keys_lift_first(robot: FakeController) -> None:
+    arm = make_arm(robot)
+    arm.move_to_key(59, 0.02)
+    n = len(moves(robot))
+    arm.move_to_key(64, 0.02)
+    up, across, down = moves(robot)[n:]
+    lift_z = REFERENCE_POSE[2] + 0.05
+    assert up[2] == pytest.approx(lift_z) and across[2] == pytest.approx(lift_z)
+    assert down == pytest.approx(arm.key_pose(64, 0.02))
+
+
+def test_uncalibrated_arm_is_unavailable(robot: FakeController) -> None:
+    with pytest.raises(DeviceUnavailable, match="rig calibrate"):
+        make_arm(robot, reference_pose=None)
+
+
+def test_connect_to_maps_a_refused_connection(robot: FakeController) -> None:
+    robot.listening = False
+
+    def receive_factory(host: str, frequency: float) -> FakeReceive:
+        return FakeReceive(robot, host, frequency)
+
+    with pytest.raises(DeviceUnavailable, match=r"192\.0\.2\.10:30004 refused ur_rtde"):
+        UR5Arm.connect_to(make_config(), clock=robot.clock, receive_factory=receive_factory)
+
+
+def test_connect_to_with_fakes_builds_a_working_arm(robot: FakeController) -> None:
+    arm = UR5Arm.connect_to(
+        make_config(),
+        clock=robot.clock,
+        receive_factory=lambda host, f: FakeReceive(robot, host, f),
+        control_factory=lambda host, f: FakeControl(robot, host, f),
+    )
+    assert ("control", "__init__", ("192.0.2.10", 500.0)) in robot.calls
+    assert arm.press(PRESS, 59).arm is not None
+
+
+def test_connect_to_an_unreachable_host_fails_fast() -> None:
+    config = make_config(host="127.0.0.1", connect_timeout_s=0.5)
+    with pytest.raises(DeviceUnavailable, match=r"127\.0\.0\.1:30004"):
+        UR5Arm.connect_to(config, clock=FakeClock())
+
+
+def test_unknown_failures_are_not_mislabelled() -> None:
+    quiet = ArmStatus(True, True, True, False, False, 1, 7, 1, 1.0)
+    assert type(failure("moveL", quiet)) is RigError
+    powered_off = ArmStatus(True, True, True, False, False, 1, 3, 1, 1.0)
+    assert isinstance(failure("moveL", powered_off), SafetyStop)
+    script_dead = ArmStatus(True, True, False, False, False, 1, 7, 1, 1.0)
+    assert isinstance(failure("moveL", script_dead), ConnectionLost)
