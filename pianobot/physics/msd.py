@@ -226,15 +226,25 @@ def lsim_uniform(ss: StateSpace, t_s: npt.ArrayLike, u: npt.ArrayLike) -> FloatA
     Ad = E[..., :n, :n]
     Bd1 = E[..., :n, n + m :]
     Bd0 = E[..., :n, n : n + m] - Bd1
-    # Input terms of every step at once; only the state recursion remains sequential.
-    drive = Bd0 @ u_arr[..., :-1] + Bd1 @ u_arr[..., 1:]
-    z = np.empty((*batch, n, t.size))
     if np.any(u_arr[..., 0] != 0.0):
-        z[..., 0] = -np.linalg.solve(A, B @ u_arr[..., 0][..., None])[..., 0]
+        z_start = -np.linalg.solve(A, B @ u_arr[..., 0][..., None])[..., 0]
     else:
-        z[..., 0] = 0.0  # at rest (also when A is singular, e.g. a free finger with k0 = 0)
+        z_start = np.zeros((*batch, n))  # at rest (also when A is singular: k0 = 0)
+    # Input terms of every step at once; only the state recursion remains sequential. It runs
+    # time-major on contiguous (batch, n) slices, one column of Ad at a time (n is small).
+    drive = np.moveaxis(
+        (Bd0 @ u_arr[..., :-1] + Bd1 @ u_arr[..., 1:]).reshape(-1, n, t.size - 1), -1, 0
+    )
+    columns = [np.ascontiguousarray(Ad.reshape(-1, n, n)[:, :, j]) for j in range(n)]
+    zt = np.empty((t.size, drive.shape[1], n))
+    zt[0] = z_start.reshape(-1, n)
     for k in range(1, t.size):
-        z[..., k] = (Ad @ z[..., k - 1][..., None])[..., 0] + drive[..., k - 1]
+        prev = zt[k - 1]
+        step = drive[k - 1].copy()
+        for j, column in enumerate(columns):
+            step += column * prev[:, j : j + 1]
+        zt[k] = step
+    z = np.moveaxis(zt, 0, -1).reshape(*batch, n, t.size)
     return np.asarray(C @ z + D @ u_arr, dtype=np.float64)
 
 
@@ -338,7 +348,10 @@ def frequency_response(
     """Gain and unwrapped phase (rad) of x2/x0 (or x1/x0 with `output="x1"`) at `f_hz`."""
     s = 2j * np.pi * np.asarray(f_hz, dtype=np.float64)
     h = _transfer(lp, s, output)
-    return np.abs(h).astype(np.float64), np.unwrap(np.angle(h)).astype(np.float64)
+    phase = np.angle(h)
+    if phase.ndim > 0:
+        phase = np.unwrap(phase)  # continuous through the resonances along the frequency axis
+    return np.abs(h).astype(np.float64), np.asarray(phase, dtype=np.float64)
 
 
 def peak_response(lp: LinearParams, *, output: str = "x2") -> tuple[float, float]:

@@ -149,8 +149,9 @@ def test_frequency_response_matches_state_space(lp: LinearParams) -> None:
         np.testing.assert_allclose(np.exp(1j * phase), h[:, col, 0] / np.abs(h[:, col, 0]))
     # Static gain of x2/x0: springs in series, k0 k1 / (k0 k1 + k0 k2 + k1 k2).
     k0, k1, k2 = lp.k0_npm, lp.k1_npm, lp.k2_npm
-    g0, _ = frequency_response(lp, np.array([0.0]))
-    assert float(g0[0]) == pytest.approx(k0 * k1 / (k0 * k1 + k0 * k2 + k1 * k2))
+    g0, phase0 = frequency_response(lp, 0.0)
+    assert float(phase0) == 0.0
+    assert float(g0) == pytest.approx(k0 * k1 / (k0 * k1 + k0 * k2 + k1 * k2))
 
 
 @pytest.mark.parametrize("lp", [MSDParams().at(-60), ASYMMETRIC], ids=["published", "asym"])
