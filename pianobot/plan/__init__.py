@@ -1,0 +1,35 @@
+"""Plans: the exact trials a spec runs, their safety check, lab time and dry-run summary.
+
+    trials = expand(spec)                                  # pure, deterministic, stable ids
+    violations = check_envelope(trials, spec.finger, rig)  # errors refuse, warnings inform
+    print(summarize(spec, trials, violations, rig).to_text())
+"""
+
+from __future__ import annotations
+
+from pianobot.plan.envelope import Violation, check_envelope, raise_for_errors
+from pianobot.plan.labtime import LabTime, estimate_lab_time_s, key_change_s, lab_time
+from pianobot.plan.summary import Coverage, PlanSummary, ViolationGroup, format_duration, summarize
+from pianobot.plan.trials import PLAN_COLUMNS, Trial, expand, plan_frame
+from pianobot.spec import resolved_spec_dict, spec_sha256
+
+__all__ = [
+    "PLAN_COLUMNS",
+    "Coverage",
+    "LabTime",
+    "PlanSummary",
+    "Trial",
+    "Violation",
+    "ViolationGroup",
+    "check_envelope",
+    "estimate_lab_time_s",
+    "expand",
+    "format_duration",
+    "key_change_s",
+    "lab_time",
+    "plan_frame",
+    "raise_for_errors",
+    "resolved_spec_dict",
+    "spec_sha256",
+    "summarize",
+]

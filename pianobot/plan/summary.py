@@ -1,0 +1,160 @@
+"""What `pianobot sweep --dry-run` shows: trial count, coverage, lab time, violations."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+from pianobot.plan.envelope import Violation
+from pianobot.plan.labtime import LabTime, lab_time
+from pianobot.spec import PARAMETER_NAMES, PARAMETERS, ExperimentSpec, RigSpec, load_rig_for
+from pianobot.spec.parameters import format_value
+
+if TYPE_CHECKING:
+    from pianobot.plan.trials import Trial
+
+_SHOWN_INDICES = 8
+
+
+@dataclass(frozen=True)
+class Coverage:
+    """How a parameter is covered by a plan."""
+
+    minimum: float
+    maximum: float
+    levels: int  # distinct values
+
+    def to_dict(self) -> dict[str, float | int]:
+        """Plain JSON-able dict."""
+        return {"min": self.minimum, "max": self.maximum, "levels": self.levels}
+
+
+@dataclass(frozen=True)
+class ViolationGroup:
+    """Violations of one rule on one parameter, with one example message."""
+
+    severity: str
+    rule: str
+    parameter: str
+    count: int
+    indices: tuple[int, ...]  # the first few trial indices
+    example: str
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain JSON-able dict."""
+        return {"severity": self.severity, "rule": self.rule, "parameter": self.parameter,
+                "count": self.count, "indices": list(self.indices), "example": self.example}
+
+
+@dataclass(frozen=True)
+class PlanSummary:
+    """A plan at a glance, before anything moves."""
+
+    name: str
+    finger: str
+    rig: str
+    mode: str
+    order: str
+    trial_count: int
+    coverage: dict[str, Coverage]
+    lab_time: LabTime
+    violations: tuple[Violation, ...]
+
+    @property
+    def errors(self) -> int:
+        """Number of error-severity violations (the plan is refused if > 0)."""
+        return sum(v.severity == "error" for v in self.violations)
+
+    @property
+    def warnings(self) -> int:
+        """Number of warnings."""
+        return sum(v.severity == "warning" for v in self.violations)
+
+    def groups(self) -> list[ViolationGroup]:
+        """Violations grouped by severity, rule and parameter (errors first)."""
+        grouped: dict[tuple[str, str, str], list[Violation]] = {}
+        for v in self.violations:
+            grouped.setdefault((v.severity, v.rule, v.parameter), []).append(v)
+        return [
+            ViolationGroup(sev, rule, param, len(vs),
+                           tuple(v.index for v in vs[:_SHOWN_INDICES]), vs[0].message)
+            for (sev, rule, param), vs in sorted(grouped.items(), key=lambda kv: kv[0][0] != "error")
+        ]
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain JSON-able dict (every violation listed, plus the groups)."""
+        return {
+            "name": self.name,
+            "finger": self.finger,
+            "rig": self.rig,
+            "mode": self.mode,
+            "order": self.order,
+            "trials": self.trial_count,
+            "coverage": {name: c.to_dict() for name, c in self.coverage.items()},
+            "lab_time": self.lab_time.to_dict(),
+            "errors": self.errors,
+            "warnings": self.warnings,
+            "violation_groups": [g.to_dict() for g in self.groups()],
+            "violations": [v.to_dict() for v in self.violations],
+        }
+
+    def to_text(self) -> str:
+        """A few lines for people: counts, a coverage table, time, grouped violations."""
+        t = self.lab_time
+        lines = [
+            f"{self.name}: {self.trial_count} trials, {self.finger} finger, rig {self.rig}, "
+            f"{self.mode} sweep, order {self.order}",
+            f"lab time ≈ {format_duration(t.total_s)} (presses {format_duration(t.presses_s)}, "
+            f"pauses {format_duration(t.pauses_s)}, {t.vacuum_changes} vacuum changes "
+            f"{format_duration(t.vacuum_s)}, {t.key_changes} key changes "
+            f"{format_duration(t.travel_s)})",
+            f"{'parameter':<20} {'min':>10} {'max':>10} {'levels':>7}",
+        ]
+        for name, c in self.coverage.items():
+            unit = PARAMETERS[name].unit
+            lines.append(f"{name:<20} {format_value(c.minimum):>10} {format_value(c.maximum):>10} "
+                         f"{c.levels:>7}  {unit}".rstrip())
+        lines.append(f"violations: {self.errors} errors, {self.warnings} warnings")
+        for g in self.groups():
+            shown = ", ".join(str(i) for i in g.indices) + (", …" if g.count > len(g.indices) else "")
+            lines.append(f"  {g.severity} ×{g.count} {g.parameter} ({g.rule}), trials {shown}: "
+                         f"{g.example}")
+        return "\n".join(lines)
+
+
+def summarize(
+    spec: ExperimentSpec,
+    trials: Sequence[Trial],
+    violations: Sequence[Violation],
+    rig: RigSpec | None = None,
+) -> PlanSummary:
+    """The dry-run summary of a plan (`rig` defaults to the one the spec names)."""
+    rig = rig if rig is not None else load_rig_for(spec)
+    coverage = {}
+    for name in PARAMETER_NAMES:
+        values = [float(getattr(t, name)) for t in trials]
+        if values:
+            coverage[name] = Coverage(min(values), max(values),
+                                      len({round(v, 9) for v in values}))
+    return PlanSummary(
+        name=spec.name,
+        finger=spec.finger,
+        rig=spec.rig,
+        mode=spec.sweep.mode,
+        order=spec.sweep.order,
+        trial_count=len(trials),
+        coverage=coverage,
+        lab_time=lab_time(trials, rig),
+        violations=tuple(violations),
+    )
+
+
+def format_duration(seconds: float) -> str:
+    """`42 s`, `3 min 05 s`, `1 h 23 min`."""
+    s = int(round(seconds))
+    if s < 60:
+        return f"{seconds:.1f} s" if seconds < 10 else f"{s} s"
+    if s < 3600:
+        return f"{s // 60} min {s % 60:02d} s"
+    return f"{s // 3600} h {s % 3600 // 60:02d} min"

@@ -1,0 +1,228 @@
+"""Read spec and rig files: YAML in, validated models out, one-line InputErrors for bad input.
+
+Every error names the file and the YAML path (`spec.yaml: sweep.params.depth_m[2]`), the bad
+value and what would be valid, with the line number; a YAML syntax error names line:column.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import os
+import tempfile
+from collections.abc import Sequence
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any, TypeVar
+
+import yaml
+from pydantic import BaseModel, ValidationError
+
+from pianobot.errors import InputError
+from pianobot.spec.checks import Problem, spec_problems
+from pianobot.spec.experiment import SIM_RIG, ExperimentSpec
+from pianobot.spec.messages import Location, error_message, format_path
+from pianobot.spec.rig import RigSpec
+
+ModelT = TypeVar("ModelT", bound=BaseModel)
+
+
+def _read_yaml(path: Path) -> tuple[Any, yaml.Node | None]:
+    """The parsed document and its node tree (for line numbers)."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise InputError("no such file", str(path)) from None
+    except IsADirectoryError:
+        raise InputError("is a folder, not a YAML file", str(path)) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read the file: {exc}", str(path)) from None
+    return _parse_yaml(text, str(path))
+
+
+def _parse_yaml(text: str, label: str) -> tuple[Any, yaml.Node | None]:
+    try:
+        root = yaml.compose(text, Loader=yaml.SafeLoader)
+        data = yaml.safe_load(text)
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        where = f"{label}:{mark.line + 1}:{mark.column + 1}" if mark else label
+        problem = exc.problem or exc.context or "invalid YAML"
+        raise InputError(f"YAML syntax error: {problem}", where) from None
+    except yaml.YAMLError as exc:
+        raise InputError(f"YAML syntax error: {' '.join(str(exc).split())}", label) from None
+    if root is not None:
+        _refuse_duplicate_keys(root, (), label)
+    if data is None:
+        raise InputError("the file is empty", label)
+    if not isinstance(data, dict):
+        raise InputError(f"must be a YAML mapping (key: value), got {type(data).__name__}", label)
+    return data, root
+
+
+def _refuse_duplicate_keys(node: yaml.Node, path: Location, label: str) -> None:
+    """PyYAML keeps the last of two equal keys silently; a spec with one is a mistake."""
+    if isinstance(node, yaml.MappingNode):
+        seen: set[str] = set()
+        for key, value in node.value:
+            name = str(key.value)
+            if name in seen:
+                where = f"{label}: {format_path((*path, name))}"
+                raise InputError(f"duplicate key {name!r} (line {key.start_mark.line + 1})", where)
+            seen.add(name)
+            _refuse_duplicate_keys(value, (*path, name), label)
+    elif isinstance(node, yaml.SequenceNode):
+        for i, item in enumerate(node.value):
+            _refuse_duplicate_keys(item, (*path, i), label)
+
+
+def _line_of(root: yaml.Node | None, path: Location) -> int | None:
+    """1-based line of the deepest node of `path` present in the YAML."""
+    if root is None:
+        return None
+    node, line = root, root.start_mark.line
+    for part in path:
+        if isinstance(node, yaml.MappingNode):
+            match = next(((k, v) for k, v in node.value if str(k.value) == str(part)), None)
+            if match is None:
+                break
+            node, line = match[1], match[0].start_mark.line
+        elif isinstance(node, yaml.SequenceNode) and isinstance(part, int) and part < len(node.value):
+            node = node.value[part]
+            line = node.start_mark.line
+        else:
+            break
+    return line + 1
+
+
+def _input_error(label: str, root: yaml.Node | None, path: Location, message: str) -> InputError:
+    line = _line_of(root, path)
+    suffix = f" (line {line})" if line is not None else ""
+    return InputError(f"{message}{suffix}", f"{label}: {format_path(path)}")
+
+
+def _validate(model: type[ModelT], data: Any, label: str, root: yaml.Node | None) -> ModelT:
+    try:
+        return model.model_validate(data)
+    except ValidationError as exc:
+        errors = exc.errors()
+        path, message = error_message(errors[0])
+        if len(errors) > 1:
+            message += f" (and {len(errors) - 1} more problem{'s' if len(errors) > 2 else ''})"
+        raise _input_error(label, root, path, message) from None
+
+
+def load_rig(path: str | Path) -> RigSpec:
+    """The rig described by a rig file, or the default simulated rig for `"sim"`."""
+    if str(path) == SIM_RIG:
+        return RigSpec()
+    label = str(path)
+    data, root = _read_yaml(Path(path))
+    return _validate(RigSpec, data, label, root)
+
+
+def load_rig_for(spec: ExperimentSpec) -> RigSpec:
+    """The rig a spec names (a rig file resolves relative to the spec file)."""
+    rig_path = spec.rig_path()
+    if rig_path is None:
+        return RigSpec()
+    if not rig_path.exists():
+        label = str(spec.source_path) if spec.source_path else "spec"
+        raise InputError(
+            f"rig file {spec.rig!r} not found (paths are relative to the spec file)",
+            f"{label}: rig",
+        )
+    return load_rig(rig_path)
+
+
+def load_spec(path: str | Path) -> ExperimentSpec:
+    """Read, validate and envelope-check an experiment spec.
+
+    Raises InputError naming the file and YAML path for an unreadable file, a YAML syntax
+    error, an unknown key, a wrong type, an empty grid or a value outside the finger's
+    safety envelope (as the spec's rig file sets it).
+    """
+    label = str(path)
+    data, root = _read_yaml(Path(path))
+    spec = _validate(ExperimentSpec, data, label, root).with_source(Path(path))
+    rig = load_rig_for(spec)
+    problems: list[Problem] = spec_problems(spec, rig, spec.rig)
+    if problems:
+        first = problems[0]
+        message = first.message
+        if len(problems) > 1:
+            message += f" (and {len(problems) - 1} more problem{'s' if len(problems) > 2 else ''})"
+        raise _input_error(label, root, first.path, message)
+    return spec
+
+
+def spec_sha256(path: str | Path) -> str:
+    """SHA-256 (hex) of a spec file's bytes, as recorded with a run."""
+    try:
+        return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+    except OSError as exc:
+        raise InputError(f"cannot read the file: {exc}", str(path)) from None
+
+
+def write_rig_calibration(path: str | Path, pose: Sequence[float], when: datetime) -> RigSpec:
+    """Set `ur5.reference_pose` and `ur5.calibrated_utc` in a rig file, keeping the rest as is.
+
+    Only the two values are rewritten (comments and layout stay); the result is validated
+    before it replaces the file atomically. Returns the updated rig.
+    """
+    label = str(path)
+    values = [float(v) for v in pose]
+    if len(values) != 6 or not all(math.isfinite(v) for v in values):
+        raise InputError(f"a pose is 6 finite numbers [x, y, z, rx, ry, rz], got {list(pose)}", "pose")
+    stamp = when.astimezone(UTC) if when.tzinfo else when.replace(tzinfo=UTC)
+    replacements = {
+        "reference_pose": "[" + ", ".join(f"{round(v, 7)!r}" for v in values) + "]",
+        "calibrated_utc": f'"{stamp.strftime("%Y-%m-%dT%H:%M:%SZ")}"',
+    }
+    _, root = _read_yaml(Path(path))
+    text = Path(path).read_text(encoding="utf-8")
+    new_text = _replace_values(text, root, "ur5", replacements, label)
+    data, new_root = _parse_yaml(new_text, label)
+    rig = _validate(RigSpec, data, label, new_root)
+    _write_atomically(Path(path), new_text)
+    return rig
+
+
+def _replace_values(
+    text: str, root: yaml.Node | None, section: str, values: dict[str, str], label: str
+) -> str:
+    """`text` with the values of `section.<key>` replaced by the given YAML snippets."""
+    if not isinstance(root, yaml.MappingNode):
+        raise InputError("must be a YAML mapping", label)
+    block = next((v for k, v in root.value if k.value == section), None)
+    if not isinstance(block, yaml.MappingNode) or not block.value or block.flow_style:
+        raise InputError(f"needs a block-style `{section}:` section to calibrate", f"{label}: {section}")
+    edits: list[tuple[int, int, str]] = []
+    first_key = block.value[0][0]
+    for key, snippet in values.items():
+        node = next((v for k, v in block.value if k.value == key), None)
+        if node is None:
+            # Insert a new line before the section's first key, with the same indentation.
+            start = first_key.start_mark.index - first_key.start_mark.column
+            indent = " " * first_key.start_mark.column
+            edits.append((start, start, f"{indent}{key}: {snippet}\n"))
+            continue
+        start, end = node.start_mark.index, node.end_mark.index
+        gap = "" if text[start - 1 : start].isspace() else " "
+        edits.append((start, end, gap + snippet))
+    for start, end, snippet in sorted(edits, reverse=True):
+        text = text[:start] + snippet + text[end:]
+    return text
+
+
+def _write_atomically(path: Path, text: str) -> None:
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as handle:
+            handle.write(text)
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise

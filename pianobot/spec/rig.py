@@ -1,0 +1,274 @@
+"""Rig files: which rig runs a spec (simulated or the UR5 lab) and how it is set up.
+
+A rig file holds everything about the lab that is not the experiment: the simulated world and
+its injected faults, retry policy, settle pauses, explicit widening of a finger's safety
+envelope, and for the real rig the arm, vacuum regulator, MIDI port, mocap markers and keyboard
+geometry. `load_rig("sim")` is the default simulated rig.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+from pydantic import Field, field_validator, model_validator
+
+from pianobot.spec.parameters import FINGER_ENVELOPES, PARAMETERS, Finger, Limits
+from pianobot.spec.sweep import StrictModel
+
+WORLD_PRESETS: tuple[str, ...] = ("default", "linear")
+Vector3 = tuple[float, float, float]
+Pose6 = tuple[float, float, float, float, float, float]
+
+
+class Faults(StrictModel):
+    """Faults the simulated rig injects, to exercise retries and safety stops."""
+
+    drop_connection_every_n_presses: int | None = Field(
+        None, ge=1, description="Drop the arm connection on every n-th press (null: never)."
+    )
+    protective_stop_at_trial: int | None = Field(
+        None, ge=0, description="Raise a protective stop when the trial with this index starts."
+    )
+    midi_loss_prob: float = Field(
+        0.0, ge=0.0, le=1.0, description="Probability that a MIDI event is lost."
+    )
+    mocap_drop_prob: float = Field(
+        0.0, ge=0.0, le=1.0, description="Probability that a mocap frame is dropped."
+    )
+
+
+class Retry(StrictModel):
+    """Retries of a trial after a transient fault (a dropped connection)."""
+
+    max_attempts: int = Field(3, ge=1, le=100, description="Attempts per trial, the first included.")
+    backoff_s: float = Field(1.0, ge=0.0, le=600.0, description="Wait before the first retry.")
+    backoff_factor: float = Field(
+        2.0, ge=1.0, le=10.0, description="Each further retry waits this many times longer."
+    )
+
+
+class Settle(StrictModel):
+    """Pauses that let the rig come to rest; they dominate the lab time of a sweep."""
+
+    after_vacuum_change_s: float = Field(
+        5.0, ge=0.0, le=600.0,
+        description="Wait after the vacuum level changes (the regulator and the particle "
+        "jamming settle in seconds).",
+    )
+    between_presses_s: float = Field(
+        0.5, ge=0.0, le=60.0,
+        description="Wait between two presses, so the key and the finger are at rest (the "
+        "study's script slept 0.5 s around each press).",
+    )
+
+
+class Travel(StrictModel):
+    """How the arm moves between keys (used by lab-time estimates)."""
+
+    velocity_mps: float = Field(0.1, gt=0.0, le=1.0, description="moveL speed between keys.")
+    acceleration_mps2: float = Field(
+        0.5, gt=0.0, le=5.0, description="moveL acceleration between keys."
+    )
+    lift_m: float = Field(
+        0.05, ge=0.0, le=0.3, description="Lift above the hover height before moving sideways."
+    )
+
+
+class FingerEnvelope(StrictModel):
+    """Explicit per-parameter [low, high] ranges that replace a finger's built-in envelope."""
+
+    vacuum_kpa: tuple[float, float] | None = Field(None, description="[low, high] kPa gauge.")
+    down_velocity_mps: tuple[float, float] | None = Field(None, description="[low, high] m/s.")
+    up_velocity_mps: tuple[float, float] | None = Field(None, description="[low, high] m/s.")
+    acceleration_mps2: tuple[float, float] | None = Field(None, description="[low, high] m/s².")
+    depth_m: tuple[float, float] | None = Field(None, description="[low, high] m.")
+    distance_m: tuple[float, float] | None = Field(None, description="[low, high] m.")
+    hold_s: tuple[float, float] | None = Field(None, description="[low, high] s.")
+
+    @model_validator(mode="after")
+    def _ordered_and_physical(self) -> FingerEnvelope:
+        for name, limits in self.ranges().items():
+            low, high = limits
+            if high < low:
+                raise ValueError(f"{name}: high ({high}) must be >= low ({low})")
+            p = PARAMETERS[name]
+            if low < p.minimum or high > p.maximum:
+                raise ValueError(
+                    f"{name}: [{low}, {high}] leaves the physical bounds {p.bounds_text()}"
+                )
+        return self
+
+    def ranges(self) -> dict[str, tuple[float, float]]:
+        """The parameters this envelope sets, with their [low, high]."""
+        return {
+            name: value
+            for name in type(self).model_fields
+            if (value := getattr(self, name)) is not None
+        }
+
+
+class EnvelopeOverrides(StrictModel):
+    """Per finger, ranges that replace the built-in safety envelope (normally to widen it)."""
+
+    soft: FingerEnvelope | None = Field(None, description="Ranges for the soft finger.")
+    rigid: FingerEnvelope | None = Field(None, description="Ranges for the rigid finger.")
+
+
+class UR5Config(StrictModel):
+    """The UR5 arm, reached over RTDE."""
+
+    host: str = Field(min_length=1, description="IP address or host name of the UR controller.")
+    frequency_hz: float = Field(500.0, gt=0.0, le=500.0, description="RTDE control/receive rate.")
+    connect_timeout_s: float = Field(2.0, gt=0.0, le=120.0, description="Connection timeout.")
+    workspace_min_m: Vector3 = Field(
+        description="Lower corner [x, y, z] of the box the TCP must stay in (base frame)."
+    )
+    workspace_max_m: Vector3 = Field(
+        description="Upper corner [x, y, z] of the box the TCP must stay in (base frame)."
+    )
+    reference_pose: Pose6 | None = Field(
+        None,
+        description="TCP pose [x, y, z, rx, ry, rz] (m, rad, base frame) with the fingertip "
+        "resting on the reference key; null until `pianobot rig calibrate` writes it.",
+    )
+    reference_note: int = Field(59, ge=21, le=108, description="MIDI note of the reference key.")
+    calibrated_utc: str | None = Field(
+        None, description="When the reference pose was calibrated (ISO 8601, UTC)."
+    )
+    safe_lift_m: float = Field(
+        0.05, ge=0.0, le=0.3, description="Height above the hover pose the arm retracts to."
+    )
+    max_speed_scaling_warning: float = Field(
+        1.0, gt=0.0, le=1.0,
+        description="Warn when the controller's speed slider is below this (it stretches moves).",
+    )
+
+    @model_validator(mode="after")
+    def _box(self) -> UR5Config:
+        if any(lo >= hi for lo, hi in zip(self.workspace_min_m, self.workspace_max_m, strict=True)):
+            raise ValueError("workspace_min_m must be below workspace_max_m on every axis")
+        return self
+
+
+class VacuumConfig(StrictModel):
+    """The vacuum regulator that stiffens the soft finger."""
+
+    mode: Literal["sim", "manual", "ur-analog"] = Field(
+        "sim",
+        description="sim: commanded = measured; manual: the operator sets the regulator when "
+        "asked; ur-analog: the UR's analog output drives the regulator.",
+    )
+    output_channel: int = Field(0, ge=0, le=1, description="UR analog output of the setpoint.")
+    input_channel: int | None = Field(
+        None, ge=0, le=1, description="UR analog input of the pressure sensor (null: none)."
+    )
+    kpa_at_ratio_0: float = Field(0.0, description="Pressure when the output ratio is 0.")
+    kpa_at_ratio_1: float = Field(-100.0, description="Pressure when the output ratio is 1.")
+    settle_timeout_s: float = Field(
+        20.0, gt=0.0, le=600.0, description="Give up if the level has not settled by then."
+    )
+    tolerance_kpa: float = Field(2.0, gt=0.0, le=50.0, description="Settled when within this.")
+
+
+class MidiConfig(StrictModel):
+    """The piano's MIDI output, as seen by this computer."""
+
+    api: Literal["ALSA", "JACK", "auto"] = Field("auto", description="rtmidi backend.")
+    port: str = Field(min_length=1, description="Substring or regex of the input port's name.")
+    note: int | None = Field(
+        None, ge=21, le=108, description="Only accept this note (null: the trial's note)."
+    )
+
+
+class MocapMarkers(StrictModel):
+    """Names of the Motive markers that track the arm, the fingertip and the key."""
+
+    arm: str = Field(description="Marker on the UR5 end effector.")
+    fingertip: str = Field(description="Marker on the fingertip.")
+    key: str = Field(description="Marker on the key surface.")
+
+
+class MocapConfig(StrictModel):
+    """OptiTrack motion capture."""
+
+    markers: MocapMarkers | None = Field(None, description="Marker names (null: no mocap).")
+
+
+class KeyboardConfig(StrictModel):
+    """Keyboard geometry: where each key is relative to the reference key."""
+
+    white_key_pitch_m: float = Field(
+        0.0235, gt=0.0, le=0.05, description="Centre-to-centre distance of white keys."
+    )
+    offsets_m: dict[int, float] = Field(
+        default_factory=dict,
+        description="Measured lateral corrections per MIDI note, in metres.",
+    )
+
+    @field_validator("offsets_m")
+    @classmethod
+    def _notes(cls, value: dict[int, float]) -> dict[int, float]:
+        bad = [n for n in value if not 21 <= n <= 108]
+        if bad:
+            raise ValueError(f"notes must be in [21, 108], got {bad[0]}")
+        return value
+
+
+class RigSpec(StrictModel):
+    """A rig file: the simulated rig or the UR5 lab, with faults, pauses and envelope."""
+
+    kind: Literal["sim", "ur5"] = Field("sim", description="sim: the simulated world; ur5: the lab.")
+    seed: int = Field(0, ge=0, description="Seed of the simulated world (noise, faults).")
+    realtime: bool = Field(
+        False, description="Run the sim at wall-clock speed (default: a virtual clock)."
+    )
+    world: dict[str, Any] = Field(
+        default_factory=dict,
+        description="Simulated world configuration passed to the physics World; "
+        "`preset: default | linear` picks a preset, other keys override it.",
+    )
+    faults: Faults = Field(default_factory=Faults, description="Faults the sim injects.")
+    retry: Retry = Field(default_factory=Retry, description="Retry policy for transient faults.")
+    envelope: EnvelopeOverrides = Field(
+        default_factory=EnvelopeOverrides,
+        description="Explicit per-finger ranges that widen (or narrow) the safety envelope.",
+    )
+    settle_s: Settle = Field(default_factory=Settle, description="Settle pauses.")
+    travel: Travel = Field(default_factory=Travel, description="Moves between keys.")
+    ur5: UR5Config | None = Field(None, description="The arm (kind ur5 only).")
+    vacuum: VacuumConfig = Field(default_factory=VacuumConfig, description="Vacuum regulator.")
+    midi: MidiConfig | None = Field(None, description="MIDI input (required for kind ur5).")
+    mocap: MocapConfig = Field(default_factory=MocapConfig, description="Motion capture.")
+    keyboard: KeyboardConfig = Field(
+        default_factory=KeyboardConfig, description="Keyboard geometry."
+    )
+
+    @field_validator("world")
+    @classmethod
+    def _world(cls, value: dict[str, Any]) -> dict[str, Any]:
+        preset = value.get("preset", "default")
+        if preset not in WORLD_PRESETS:
+            raise ValueError(f"preset must be one of {', '.join(WORLD_PRESETS)}, got {preset!r}")
+        return value
+
+    @model_validator(mode="after")
+    def _sections_match_kind(self) -> RigSpec:
+        if self.kind == "ur5" and (self.ur5 is None or self.midi is None):
+            raise ValueError("a ur5 rig needs both a `ur5:` and a `midi:` section")
+        if self.kind == "sim" and self.ur5 is not None:
+            raise ValueError("the `ur5:` section is only for kind: ur5")
+        return self
+
+    def envelope_for(self, finger: Finger, source: str = "the rig file") -> dict[str, Limits]:
+        """The finger's safety envelope with this rig's explicit overrides applied."""
+        limits = dict(FINGER_ENVELOPES[finger])
+        overrides: FingerEnvelope | None = getattr(self.envelope, finger)
+        if overrides is not None:
+            for name, (low, high) in overrides.ranges().items():
+                limits[name] = Limits(low, high, source=f"set by {source}")
+        return limits
+
+    @property
+    def lift_m(self) -> float:
+        """Lift before a sideways move: the arm's safe lift on the UR5, else `travel.lift_m`."""
+        return self.ur5.safe_lift_m if self.ur5 is not None else self.travel.lift_m
