@@ -222,7 +222,7 @@ def lsim_uniform(ss: StateSpace, t_s: npt.ArrayLike, u: npt.ArrayLike) -> FloatA
     M[..., :n, :n] = A * dt
     M[..., :n, n : n + m] = B * dt
     M[..., n : n + m, n + m :] = np.eye(m)
-    E = linalg.expm(M)
+    E = _expm_unique(M)
     Ad = E[..., :n, :n]
     Bd1 = E[..., :n, n + m :]
     Bd0 = E[..., :n, n : n + m] - Bd1
@@ -246,6 +246,16 @@ def lsim_uniform(ss: StateSpace, t_s: npt.ArrayLike, u: npt.ArrayLike) -> FloatA
         zt[k] = step
     z = np.moveaxis(zt, 0, -1).reshape(*batch, n, t.size)
     return np.asarray(C @ z + D @ u_arr, dtype=np.float64)
+
+
+def _expm_unique(M: FloatArray) -> FloatArray:
+    """Matrix exponential of a batch, computed once per distinct matrix (batches repeat a few
+    vacuum levels many times)."""
+    size = M.shape[-1]
+    flat = M.reshape(-1, size * size)
+    unique, inverse = np.unique(flat, axis=0, return_inverse=True)
+    E = linalg.expm(unique.reshape(-1, size, size))
+    return np.asarray(E[inverse.ravel()].reshape(M.shape), dtype=np.float64)
 
 
 def inverse_state_space(lp: LinearParams) -> StateSpace:
