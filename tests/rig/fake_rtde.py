@@ -76,15 +76,15 @@ class FakeController:
     analog_out: list[float] = field(default_factory=lambda: [0.0, 0.0])  # voltage ratios
     regulator_tau_s: float = 0.5  # the vacuum regulator follows the analog output like this
     regulator_gain: float = 1.0  # monitor volts per commanded volt (1 = perfect regulator)
+    regulator_output_channel: int = 1  # the analog output that drives the regulator
+    regulator_input_channel: int = 0  # the analog input its monitor output is wired to
     calls: list[tuple[str, str, tuple[Any, ...]]] = field(default_factory=list)
     _move: _Move | None = None
     _moves_started: int = 0
     _progress: int = -1
     _last_finished: int = -1
     _updated_at_s: float = -1.0
-    _analog_state: list[tuple[float, float, float]] = field(
-        default_factory=lambda: [(0.0, 0.0, 0.0), (0.0, 0.0, 0.0)]
-    )  # per channel: (value at t, target, t)
+    _regulator: tuple[float, float, float] = (0.0, 0.0, 0.0)  # (volts at t, target volts, t)
 
     # -- time and motion -------------------------------------------------------------------
     def controller_time_s(self) -> float:
@@ -167,15 +167,20 @@ class FakeController:
 
     # -- analog I/O with a first-order regulator -------------------------------------------
     def set_analog(self, channel: int, ratio: float) -> None:
-        now = self.clock.now()
-        current = self.analog_in(channel)
-        self._analog_state[channel] = (current, ratio * 10.0 * self.regulator_gain, now)
         self.analog_out[channel] = ratio
+        if channel == self.regulator_output_channel:
+            now = self.clock.now()
+            volts = self._regulator_volts()
+            self._regulator = (volts, ratio * 10.0 * self.regulator_gain, now)
 
-    def analog_in(self, channel: int) -> float:
-        value, target, t0 = self._analog_state[channel]
+    def _regulator_volts(self) -> float:
+        value, target, t0 = self._regulator
         dt = self.clock.now() - t0
         return target + (value - target) * math.exp(-dt / self.regulator_tau_s)
+
+    def analog_in(self, channel: int) -> float:
+        """Volts on an analog input: the regulator's monitor output where it is wired."""
+        return self._regulator_volts() if channel == self.regulator_input_channel else 0.0
 
     def safety_bits(self) -> int:
         bits = 0
