@@ -40,17 +40,37 @@ class Journal:
         if last != b"\n":
             self._write(b"\n")
 
-    def write(self, event: str, **fields: Any) -> None:
-        """Append one event (JSON-serialisable fields; NaN is written as null)."""
-        record = {"t_utc": utc_now(), "event": event, **fields}
-        line = json.dumps(_nan_to_none(record), default=str, separators=(",", ":")) + "\n"
-        self._write(line.encode())
+    def write(self, event: str, fields: dict[str, Any], *, sync: bool = True) -> None:
+        """Append one event (JSON-serialisable fields; NaN is written as null).
 
-    def _write(self, data: bytes) -> None:
+        With `sync=False` the line is visible to readers and survives a killed process at once,
+        but reaches the disk with the next synced write: fsync flushes the whole file, so a
+        durable line implies every line before it is durable too.
+        """
+        self.write_many([(event, fields)], sync=sync)
+
+    def write_many(self, events: list[tuple[str, dict[str, Any]]], *, sync: bool = True) -> None:
+        """Append several events with one write and (optionally) one fsync."""
+        if not events:
+            return
+        now = utc_now()
+        lines = [
+            json.dumps(_nan_to_none({"t_utc": now, "event": event, **fields}), default=str, separators=(",", ":"))
+            + "\n"
+            for event, fields in events
+        ]
+        self._write("".join(lines).encode(), sync=sync)
+
+    def sync(self) -> None:
+        """Make every line written so far durable."""
+        if self._fd is not None and self.fsync:
+            os.fsync(self._fd)
+
+    def _write(self, data: bytes, *, sync: bool = True) -> None:
         if self._fd is None:
             raise ValueError(f"journal {self.path} is closed")
         os.write(self._fd, data)
-        if self.fsync:
+        if sync and self.fsync:
             os.fsync(self._fd)
 
     def close(self) -> None:

@@ -1,0 +1,301 @@
+"""The simulated rig: arm, vacuum, keyboard and mocap sharing one physics `World`.
+
+A press runs `world.keystroke(...)` once and feeds every device from that one result, so the
+arm trace, the MIDI note and the mocap trace of a keystroke are consistent with each other (the
+ophyd-async sim pattern: devices share one generator). Time is a `VirtualClock`; a keystroke is
+a pure function of (world config, seed, press, vacuum, note, key) where key = trial id and
+attempt, so a redone trial after a crash reproduces the uninterrupted run exactly.
+
+Injected faults (rig file `faults:`):
+- `drop_connection_every_n_presses: N` — every N-th press sent loses the link half-way down
+  (ConnectionLost); the arm must `connect()` again.
+- `protective_stop_at_trial: k` — the press of the trial with plan index k triggers a
+  protective stop (SafetyStop), once. The operator "clears" it by resuming the run: the runner
+  calls `Rig.clear_stop()`, which for the sim disarms the fault (it is recorded in run.json, so
+  it fires once per run folder); on the UR5 the stop is acknowledged on the pendant first.
+- `midi_loss_prob: q` — each MIDI message is lost with probability q.
+- `mocap_drop_prob: q` — each mocap frame is dropped (NaN) with probability q.
+Fault randomness is seeded by (rig seed, key), so it too repeats exactly for a redone trial.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from pianobot.physics.trajectory import Press
+from pianobot.rig.clock import VirtualClock
+from pianobot.rig.errors import ConnectionLost, SafetyStop
+from pianobot.rig.protocols import FloatArray, KeystrokeResult, MidiEvent, PressRecord, Trace
+from pianobot.rig.station import Rig, Station, StationSettings, TrialLike
+
+# Lateral travel to another key or run-up height: lift, traverse, lower. A UR5 at the study's
+# 0.25 m/s covers a few key widths plus the lift in about a second.
+MOVE_TO_KEY_S = 1.0
+# Events and frames older than this before a query window can no longer be asked for: dropping
+# them keeps memory flat over a 100,000-trial sweep.
+BUFFER_HORIZON_S = 60.0
+
+
+@dataclass(frozen=True)
+class SimFaults:
+    """Fault injection settings (all off by default)."""
+
+    drop_connection_every_n_presses: int | None = None
+    protective_stop_at_trial: int | None = None
+    midi_loss_prob: float = 0.0
+    mocap_drop_prob: float = 0.0
+
+
+@dataclass
+class SimState:
+    """What the simulated devices share: the world, the clock, the current key and the buffers."""
+
+    world: Any  # pianobot.physics.world.World (duck-typed: keystroke, vacuum_settle_s)
+    clock: VirtualClock
+    seed: int
+    faults: SimFaults
+    vacuum_kpa: float = 0.0
+    key: str = "0"
+    trial_index: int | None = None
+    presses_sent: int = 0
+    stop_armed: bool = True
+    midi: list[MidiEvent] = field(default_factory=list)
+    mocap: list[Trace] = field(default_factory=list)
+    truth: Trace | None = None
+    extra: dict[str, float] = field(default_factory=dict)
+
+    def rng(self, stream: str) -> np.random.Generator:
+        """A generator seeded by (seed, key, stream): the same draws for a redone keystroke."""
+        digest = hashlib.sha256(f"{self.seed}|{self.key}|{stream}".encode()).digest()
+        return np.random.default_rng(int.from_bytes(digest[:8], "little"))
+
+
+class SimArm:
+    """A UR5 stand-in whose press runs the world's keystroke (implements `Arm`)."""
+
+    def __init__(self, state: SimState) -> None:
+        self.state = state
+        self.connected = False
+        self.connects = 0
+
+    def connect(self) -> None:
+        self.connected = True
+        self.connects += 1
+
+    def move_to_key(self, note: int, distance_m: float) -> None:
+        self._require_link()
+        self.state.clock.sleep(MOVE_TO_KEY_S)
+
+    def press(self, press: Press, note: int) -> PressRecord:
+        """Run one keystroke in the world; may raise an injected ConnectionLost or SafetyStop."""
+        self._require_link()
+        state = self.state
+        state.presses_sent += 1
+        t0_s = state.clock.now()
+        faults = state.faults
+        if state.stop_armed and faults.protective_stop_at_trial is not None and (
+            state.trial_index == faults.protective_stop_at_trial
+        ):
+            state.stop_armed = False
+            state.clock.sleep(0.2)
+            raise SafetyStop(
+                f"protective stop during the press of trial {state.trial_index} (injected fault)"
+            )
+        every = faults.drop_connection_every_n_presses
+        if every and state.presses_sent % every == 0:
+            self.connected = False
+            state.clock.sleep(0.1)  # the link drops part-way down
+            raise ConnectionLost(f"RTDE connection lost during press #{state.presses_sent} (injected fault)")
+        stroke = state.world.keystroke(press, state.vacuum_kpa, note=note, t0_s=t0_s, key=state.key)
+        self._publish(stroke)
+        state.clock.sleep(t0_s + float(stroke.duration_s) - state.clock.now())
+        arm = Trace(t_s=_f64(stroke.arm_t_s), x0_m=_f64(stroke.arm_x0_m), source="arm")
+        return PressRecord(t_start_s=t0_s, t_end_s=t0_s + float(stroke.duration_s), arm=arm)
+
+    def _publish(self, stroke: Any) -> None:
+        """Feed the keyboard's MIDI queue, the mocap buffer and the truth record from one stroke."""
+        state = self.state
+        events = [MidiEvent(float(e.t_s), str(e.type), int(e.note), int(e.velocity)) for e in stroke.midi]
+        if state.faults.midi_loss_prob > 0 and events:
+            keep = state.rng("midi-loss").random(len(events)) >= state.faults.midi_loss_prob
+            events = [e for e, k in zip(events, keep, strict=True) if k]
+        state.midi.extend(events)
+        t_s = _f64(stroke.mocap_t_s)
+        xs = [_f64(stroke.mocap_x0_m), _f64(stroke.mocap_x1_m), _f64(stroke.mocap_x2_m)]
+        if state.faults.mocap_drop_prob > 0 and len(t_s):
+            # A dropped frame: the markers were occluded, every coordinate of it is missing.
+            dropped = state.rng("mocap-drop").random(len(t_s)) < state.faults.mocap_drop_prob
+            xs = [np.where(dropped, np.nan, x) for x in xs]
+        state.mocap.append(Trace(t_s=t_s, x0_m=xs[0], x1_m=xs[1], x2_m=xs[2], source="mocap"))
+        state.truth = Trace(
+            t_s=_f64(stroke.truth_t_s),
+            x0_m=_f64(stroke.truth_x0_m),
+            x1_m=_f64(stroke.truth_x1_m),
+            x2_m=_f64(stroke.truth_x2_m),
+            source="sim-truth",
+        )
+        state.extra = {
+            "key_speed_at_trigger_mps": float(stroke.key_speed_at_trigger_mps),
+            "max_key_travel_m": float(stroke.max_key_travel_m),
+        }
+
+    def _require_link(self) -> None:
+        if not self.connected:
+            raise ConnectionLost("the simulated arm is not connected; call connect()")
+
+    def make_safe(self) -> None:
+        """The simulated arm is always back at its start height between presses."""
+
+    def close(self) -> None:
+        self.connected = False
+
+    def describe(self) -> dict[str, Any]:
+        return {"kind": "sim-arm", "move_to_key_s": MOVE_TO_KEY_S}
+
+
+class SimVacuum:
+    """A regulator that takes the world's settling time to change level (implements `Vacuum`)."""
+
+    def __init__(self, state: SimState) -> None:
+        self.state = state
+
+    def set_kpa(self, vacuum_kpa: float) -> float:
+        settle_s = float(self.state.world.vacuum_settle_s(self.state.vacuum_kpa, vacuum_kpa))
+        self.state.clock.sleep(settle_s)
+        self.state.vacuum_kpa = float(vacuum_kpa)
+        return float(vacuum_kpa)
+
+    def vent(self) -> None:
+        self.state.vacuum_kpa = 0.0
+
+    def describe(self) -> dict[str, Any]:
+        return {"kind": "sim-vacuum"}
+
+
+class SimKeyboard:
+    """MIDI input fed by the world (implements `Keyboard`)."""
+
+    def __init__(self, state: SimState) -> None:
+        self.state = state
+
+    def start(self) -> None:
+        """Nothing to open: events arrive from the shared state."""
+
+    def events_between(self, t_from_s: float, t_to_s: float) -> list[MidiEvent]:
+        events = self.state.midi
+        found = [e for e in events if t_from_s <= e.t_s < t_to_s]
+        horizon = t_from_s - BUFFER_HORIZON_S
+        if events and events[0].t_s < horizon:
+            self.state.midi = [e for e in events if e.t_s >= horizon]
+        return sorted(found, key=lambda e: e.t_s)
+
+    def close(self) -> None:
+        self.state.midi.clear()
+
+    def describe(self) -> dict[str, Any]:
+        return {"kind": "sim-keyboard", "midi_loss_prob": self.state.faults.midi_loss_prob}
+
+
+class SimMocap:
+    """A 120 Hz motion-capture stream fed by the world (implements `Mocap`)."""
+
+    def __init__(self, state: SimState) -> None:
+        self.state = state
+
+    def trace_between(self, t_from_s: float, t_to_s: float) -> Trace:
+        chunks = [c for c in self.state.mocap if len(c.t_s) and c.t_s[-1] >= t_from_s and c.t_s[0] < t_to_s]
+        horizon = t_from_s - BUFFER_HORIZON_S
+        self.state.mocap = [c for c in self.state.mocap if len(c.t_s) and c.t_s[-1] >= horizon]
+        if not chunks:
+            empty = np.empty(0)
+            return Trace(t_s=empty, x0_m=empty, x1_m=empty, x2_m=empty, source="mocap")
+        t_s = np.concatenate([c.t_s for c in chunks])
+        inside = (t_s >= t_from_s) & (t_s < t_to_s)
+
+        def cut(name: str) -> FloatArray:
+            return np.concatenate([_column(c, name) for c in chunks])[inside]
+
+        return Trace(t_s=t_s[inside], x0_m=cut("x0_m"), x1_m=cut("x1_m"), x2_m=cut("x2_m"), source="mocap")
+
+    def describe(self) -> dict[str, Any]:
+        return {"kind": "sim-mocap", "mocap_drop_prob": self.state.faults.mocap_drop_prob}
+
+
+def _column(trace: Trace, name: str) -> FloatArray:
+    values = getattr(trace, name)
+    return np.full(len(trace.t_s), np.nan) if values is None else _f64(values)
+
+
+def _f64(values: Any) -> FloatArray:
+    return np.asarray(values, dtype=np.float64)
+
+
+def make_world(world: dict[str, Any], seed: int) -> Any:
+    """The physics World a rig file's `world:` section describes (`preset` plus overrides)."""
+    from pianobot.physics.world import World
+
+    settings = dict(world)
+    preset = settings.pop("preset", "default")
+    base = World.linear(seed) if preset == "linear" else World.default(seed)
+    if not settings:
+        return base
+    return World(base.config.with_overrides(settings), seed)
+
+
+def build_sim_rig(rig_spec: Any, seed: int, *, world: Any | None = None) -> Rig:
+    """Assemble the simulated rig of a RigSpec (kind sim); `world` replaces the physics World."""
+    clock = VirtualClock(realtime=bool(rig_spec.realtime))
+    faults = SimFaults(**rig_spec.faults.model_dump())
+    state = SimState(
+        world=world if world is not None else make_world(rig_spec.world, seed),
+        clock=clock,
+        seed=seed,
+        faults=faults,
+    )
+    arm, vacuum, keyboard, mocap = SimArm(state), SimVacuum(state), SimKeyboard(state), SimMocap(state)
+
+    def before_press(trial: TrialLike, attempt: int) -> None:
+        # The keystroke's identity: a redone trial (same id, same attempt) replays exactly.
+        state.key = f"{trial.trial_id}#{attempt}"
+        state.trial_index = trial.index
+        state.truth = None
+        state.extra = {}
+
+    def finish(result: KeystrokeResult) -> KeystrokeResult:
+        traces = result.traces if state.truth is None else (*result.traces, state.truth)
+        return replace(result, traces=traces, extra={**result.extra, **state.extra})
+
+    def clear_stop() -> None:
+        state.stop_armed = False
+
+    settle = rig_spec.settle_s
+    station = Station(
+        arm, vacuum, keyboard, mocap, clock,
+        StationSettings(
+            settle_s=settle.between_presses_s,
+            after_vacuum_change_s=settle.after_vacuum_change_s,
+        ),
+        before_press=before_press,
+    )
+    arm.connect()
+    keyboard.start()
+    return Rig(
+        kind="sim",
+        arm=arm,
+        vacuum=vacuum,
+        keyboard=keyboard,
+        mocap=mocap,
+        clock=clock,
+        station=station,
+        finish=finish,
+        clear_stop=clear_stop,
+        description={
+            "seed": seed,
+            "world": {"preset": "default", **rig_spec.world},
+            "faults": rig_spec.faults.model_dump(),
+        },
+    )

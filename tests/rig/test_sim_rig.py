@@ -1,0 +1,215 @@
+"""The simulated rig: shared world, virtual clock, determinism, fault injection, safe exit."""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pytest
+
+from pianobot.physics.trajectory import Press, press_duration_s
+from pianobot.rig import Rig, open_rig
+from pianobot.rig.clock import VirtualClock, WallClock
+from pianobot.rig.errors import ConnectionLost, SafetyStop
+from pianobot.rig.protocols import Arm, Keyboard, Mocap, Vacuum
+from pianobot.spec import RigSpec
+
+
+@dataclass(frozen=True)
+class Event:
+    t_s: float
+    type: str
+    note: int
+    velocity: int
+
+
+@dataclass(frozen=True)
+class Stroke:
+    t0_s: float
+    duration_s: float
+    truth_t_s: np.ndarray
+    truth_x0_m: np.ndarray
+    truth_x1_m: np.ndarray
+    truth_x2_m: np.ndarray
+    arm_t_s: np.ndarray
+    arm_x0_m: np.ndarray
+    mocap_t_s: np.ndarray
+    mocap_x0_m: np.ndarray
+    mocap_x1_m: np.ndarray
+    mocap_x2_m: np.ndarray
+    midi: tuple[Event, ...]
+    key_speed_at_trigger_mps: float
+    max_key_travel_m: float
+
+
+@dataclass
+class FakeWorld:
+    """A tiny stand-in for physics.World with the same keystroke contract (pure in its inputs)."""
+
+    seed: int = 0
+    calls: list[tuple[str, float]] = field(default_factory=list)
+
+    def vacuum_settle_s(self, from_kpa: float, to_kpa: float) -> float:
+        return 0.05 * abs(to_kpa - from_kpa)
+
+    def keystroke(self, press: Press, vacuum_kpa: float, *, note: int, t0_s: float, key: str) -> Stroke:
+        self.calls.append((key, vacuum_kpa))
+        digest = hashlib.sha256(f"{self.seed}|{key}".encode()).digest()
+        jitter = digest[0] / 255.0
+        duration = press_duration_s(press)
+        t = np.linspace(0.0, duration, 50)
+        x0 = (press.distance_m + press.depth_m) * np.sin(np.pi * t / duration)
+        x2 = np.clip(x0 - press.distance_m, 0.0, 0.01)
+        mocap_t = np.arange(0.0, duration, 1 / 120)
+        events: tuple[Event, ...] = ()
+        speed = press.down_velocity_mps
+        if speed > 0.02:
+            velocity = int(np.clip(20 + 1000 * speed + 0.3 * abs(vacuum_kpa) + 5 * jitter, 1, 127))
+            events = (
+                Event(t0_s + 0.3 * duration, "note_on", note, velocity),
+                Event(t0_s + 0.8 * duration, "note_off", note, 64),
+            )
+        return Stroke(
+            t0_s, duration, t + t0_s, x0, x0 * 0.9, x2, t + t0_s, x0,
+            mocap_t + t0_s, np.interp(mocap_t, t, x0), np.interp(mocap_t, t, x0 * 0.9),
+            np.interp(mocap_t, t, x2), events, speed * 0.5 + 0.001 * jitter, float(x2.max()),
+        )
+
+
+@dataclass(frozen=True)
+class T:
+    trial_id: str
+    index: int
+    note: int = 60
+    vacuum_kpa: float = -20.0
+    distance_m: float = 0.01
+    down_velocity_mps: float = 0.05
+
+    def press(self) -> Press:
+        return Press(self.distance_m, 0.02, self.down_velocity_mps, self.down_velocity_mps, 0.5, 0.0)
+
+
+def _rig(**faults: Any) -> RigSpec:
+    return RigSpec(faults=faults, settle_s={"after_vacuum_change_s": 2.0, "between_presses_s": 0.5})
+
+
+def test_devices_satisfy_the_protocols_and_share_one_world() -> None:
+    world = FakeWorld()
+    with open_rig(_rig(), world=world) as rig:
+        assert isinstance(rig, Rig) and rig.simulated
+        assert isinstance(rig.arm, Arm) and isinstance(rig.vacuum, Vacuum)
+        assert isinstance(rig.keyboard, Keyboard) and isinstance(rig.mocap, Mocap)
+        result = rig.keystroke(T("a", 0))
+        sources = [t.source for t in result.traces]
+        assert sources == ["arm", "mocap", "sim-truth"]
+        on = [e for e in result.midi if e.type == "note_on"]
+        assert len(on) == 1 and result.press.t_start_s <= on[0].t_s <= result.press.t_end_s
+        mocap = result.traces[1]
+        assert mocap.t_s.min() >= result.press.t_start_s
+        # The arm trace and the mocap trace come from the same stroke.
+        assert np.nanmax(mocap.x0_m) == pytest.approx(np.max(result.traces[0].x0_m), rel=0.05)
+        assert result.extra["max_key_travel_m"] == pytest.approx(0.01)
+        assert world.calls == [("a#1", -20.0)]
+        description = rig.describe()
+        assert description["kind"] == "sim" and description["clock"]["kind"] == "virtual"
+
+
+def test_virtual_clock_accounts_settles_moves_and_presses_without_sleeping() -> None:
+    with open_rig(_rig(), world=FakeWorld()) as rig:
+        t_start = rig.clock.now()
+        result = rig.keystroke(T("a", 0))
+        duration = press_duration_s(T("a", 0).press())
+        # vacuum 0 -> -20: 2 s settle; first hover: a move; press; 0.5 s after the press.
+        assert result.press.t_start_s - t_start == pytest.approx(2.0 + 1.0)
+        assert rig.clock.now() == pytest.approx(t_start + 3.0 + duration + 0.5)
+        before = rig.clock.now()
+        rig.keystroke(T("b", 1))  # same vacuum, same key: no settle, no move
+        assert rig.clock.now() - before == pytest.approx(duration + 0.5)
+
+
+def test_keystrokes_are_deterministic_for_a_key_and_differ_between_attempts() -> None:
+    def velocities(attempt: int, seed: int) -> list[int]:
+        with open_rig(_rig(midi_loss_prob=0.0), seed=seed, world=FakeWorld(seed)) as rig:
+            return [e.velocity for e in rig.keystroke(T("k", 3), attempt).midi]
+
+    assert velocities(1, 0) == velocities(1, 0)
+    world = FakeWorld()
+    with open_rig(_rig(), world=world) as rig:
+        rig.keystroke(T("k", 3), 2)
+    assert world.calls[0][0] == "k#2"
+
+
+def test_connection_drops_every_n_presses_until_reconnected() -> None:
+    with open_rig(_rig(drop_connection_every_n_presses=2), world=FakeWorld()) as rig:
+        rig.keystroke(T("a", 0))
+        with pytest.raises(ConnectionLost):
+            rig.keystroke(T("b", 1))
+        with pytest.raises(ConnectionLost):
+            rig.keystroke(T("b", 1))  # still down
+        rig.reconnect()
+        assert rig.keystroke(T("b", 1), 2).midi
+
+
+def test_protective_stop_fires_once_at_its_trial_and_clear_disarms_it() -> None:
+    with open_rig(_rig(protective_stop_at_trial=1), world=FakeWorld()) as rig:
+        rig.keystroke(T("a", 0))
+        with pytest.raises(SafetyStop, match="trial 1"):
+            rig.keystroke(T("b", 1))
+        assert rig.keystroke(T("b", 1)).midi  # fired once
+    with open_rig(_rig(protective_stop_at_trial=1), world=FakeWorld()) as rig:
+        rig.clear_stop()  # a resumed run: the operator cleared it
+        assert rig.keystroke(T("b", 1)).midi
+
+
+def test_midi_loss_and_mocap_drop_are_seeded_per_keystroke() -> None:
+    def run(seed: int) -> tuple[list[int], int]:
+        lost, dropped = [], 0
+        with open_rig(_rig(midi_loss_prob=0.5, mocap_drop_prob=0.3), seed=seed, world=FakeWorld()) as rig:
+            for i in range(40):
+                result = rig.keystroke(T(f"t{i}", i))
+                lost.append(len(result.midi))
+                dropped += int(np.isnan(result.traces[1].x2_m).sum())
+        return lost, dropped
+
+    first, again, other = run(1), run(1), run(2)
+    assert first == again and first != other
+    counts = first[0]
+    assert 0 < sum(counts) < 80 and counts.count(2) < 40
+    assert first[1] > 0
+
+
+def test_exit_makes_safe_even_on_an_exception() -> None:
+    vented: list[bool] = []
+    with pytest.raises(KeyboardInterrupt), open_rig(_rig(), world=FakeWorld()) as rig:
+        original = rig.vacuum.vent
+
+        def vent() -> None:
+            vented.append(True)
+            original()
+
+        rig.vacuum.vent = vent  # type: ignore[method-assign]
+        rig.keystroke(T("a", 0))
+        raise KeyboardInterrupt
+    assert vented == [True]
+    assert not rig.arm.connected  # type: ignore[attr-defined]
+
+
+def test_keyboard_window_excludes_other_keystrokes_and_buffers_stay_bounded() -> None:
+    with open_rig(_rig(), world=FakeWorld()) as rig:
+        results = [rig.keystroke(T(f"t{i}", i)) for i in range(200)]
+        for result in results:
+            assert len(result.midi) == 2
+        state = rig.arm.state  # type: ignore[attr-defined]
+        assert len(state.midi) < 200 and len(state.mocap) < 200
+
+
+def test_clocks() -> None:
+    clock = VirtualClock(5.0)
+    clock.sleep(1.5)
+    clock.sleep(-3.0)
+    clock.sleep(float("nan"))
+    assert clock.now() == 6.5
+    wall = WallClock()
+    assert 0.0 <= wall.now() < 60.0
