@@ -21,20 +21,19 @@ Fault randomness is seeded by (rig seed, key), so it too repeats exactly for a r
 from __future__ import annotations
 
 import hashlib
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
 from pianobot.physics.trajectory import Press
+from pianobot.plan import key_change_s
 from pianobot.rig.clock import VirtualClock
 from pianobot.rig.errors import ConnectionLost, SafetyStop
 from pianobot.rig.protocols import FloatArray, KeystrokeResult, MidiEvent, PressRecord, Trace
 from pianobot.rig.station import Rig, Station, StationSettings, TrialLike
 
-# Lateral travel to another key or run-up height: lift, traverse, lower. A UR5 at the study's
-# 0.25 m/s covers a few key widths plus the lift in about a second.
-MOVE_TO_KEY_S = 1.0
 # Events and frames older than this before a query window can no longer be asked for: dropping
 # them keeps memory flat over a 100,000-trial sweep.
 BUFFER_HORIZON_S = 60.0
@@ -75,12 +74,19 @@ class SimState:
 
 
 class SimArm:
-    """A UR5 stand-in whose press runs the world's keystroke (implements `Arm`)."""
+    """A UR5 stand-in whose press runs the world's keystroke (implements `Arm`).
 
-    def __init__(self, state: SimState) -> None:
+    Moves between keys take `travel_s(from_note, to_note)` (the plan's lab-time model: lift,
+    traverse, lower), so a simulated run's lab time matches the dry-run estimate. The arm starts
+    hovering over the first key, as the operator leaves it after calibration.
+    """
+
+    def __init__(self, state: SimState, travel_s: Callable[[int, int], float] | None = None) -> None:
         self.state = state
+        self.travel_s = travel_s
         self.connected = False
         self.connects = 0
+        self.note: int | None = None
 
     def connect(self) -> None:
         self.connected = True
@@ -88,7 +94,9 @@ class SimArm:
 
     def move_to_key(self, note: int, distance_m: float) -> None:
         self._require_link()
-        self.state.clock.sleep(MOVE_TO_KEY_S)
+        if self.note is not None and note != self.note and self.travel_s is not None:
+            self.state.clock.sleep(self.travel_s(self.note, note))
+        self.note = note
 
     def press(self, press: Press, note: int) -> PressRecord:
         """Run one keystroke in the world; may raise an injected ConnectionLost or SafetyStop."""
@@ -154,7 +162,7 @@ class SimArm:
         self.connected = False
 
     def describe(self) -> dict[str, Any]:
-        return {"kind": "sim-arm", "move_to_key_s": MOVE_TO_KEY_S}
+        return {"kind": "sim-arm", "connects": self.connects}
 
 
 class SimVacuum:
@@ -256,7 +264,8 @@ def build_sim_rig(rig_spec: Any, seed: int, *, world: Any | None = None) -> Rig:
         seed=seed,
         faults=faults,
     )
-    arm, vacuum, keyboard, mocap = SimArm(state), SimVacuum(state), SimKeyboard(state), SimMocap(state)
+    arm = SimArm(state, travel_s=lambda a, b: key_change_s(a, b, rig_spec))
+    vacuum, keyboard, mocap = SimVacuum(state), SimKeyboard(state), SimMocap(state)
 
     def before_press(trial: TrialLike, attempt: int) -> None:
         # The keystroke's identity: a redone trial (same id, same attempt) replays exactly.

@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import hashlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 import pytest
 
 from pianobot.physics.trajectory import Press, press_duration_s
+from pianobot.plan import key_change_s
 from pianobot.rig import Rig, open_rig
 from pianobot.rig.clock import VirtualClock, WallClock
 from pianobot.rig.errors import ConnectionLost, SafetyStop
@@ -117,16 +118,22 @@ def test_devices_satisfy_the_protocols_and_share_one_world() -> None:
 
 
 def test_virtual_clock_accounts_settles_moves_and_presses_without_sleeping() -> None:
-    with open_rig(_rig(), world=FakeWorld()) as rig:
+    rig_spec = _rig()
+    with open_rig(rig_spec, world=FakeWorld()) as rig:
         t_start = rig.clock.now()
         result = rig.keystroke(T("a", 0))
         duration = press_duration_s(T("a", 0).press())
-        # vacuum 0 -> -20: 2 s settle; first hover: a move; press; 0.5 s after the press.
-        assert result.press.t_start_s - t_start == pytest.approx(2.0 + 1.0)
-        assert rig.clock.now() == pytest.approx(t_start + 3.0 + duration + 0.5)
+        # vacuum 0 -> -20: 2 s settle (the arm starts over the first key); press; 0.5 s pause.
+        assert result.press.t_start_s - t_start == pytest.approx(2.0)
+        assert rig.clock.now() == pytest.approx(t_start + 2.0 + duration + 0.5)
         before = rig.clock.now()
         rig.keystroke(T("b", 1))  # same vacuum, same key: no settle, no move
         assert rig.clock.now() - before == pytest.approx(duration + 0.5)
+        before = rig.clock.now()
+        rig.keystroke(replace(T("c", 2), note=72))  # another key: lift, traverse, lower
+        travel = key_change_s(60, 72, rig_spec)
+        assert travel > 0.5
+        assert rig.clock.now() - before == pytest.approx(travel + duration + 0.5)
 
 
 def test_keystrokes_are_deterministic_for_a_key_and_differ_between_attempts() -> None:
