@@ -1,0 +1,381 @@
+"""Turning parsed old data into runs (kind "import") through the store.
+
+Every import creates a NEW run and never modifies a stored one. A run's meta records the source
+file name, its sha256, the layout or settings used and the skipped lines. A mocap take aligned to
+an existing run becomes a *derived* run: a copy of that run's trials, samples and MIDI plus the
+mocap samples re-timed to its trials, with `derived_from` naming the original. Nothing is written
+when the input is rejected (InputError is raised before the run folder is created).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from pianobot.errors import InputError
+from pianobot.io.force_log import BurstRule, Calibration, align_to_note_ons, read_force_log
+from pianobot.io.keystroke_log import read_keystroke_log
+from pianobot.io.mocap import MocapTake, read_mocap
+from pianobot.io.mocap_align import ClockAlignment, run_arm_trace, starts_offset, xcorr_offset
+from pianobot.io.mocap_segment import rest_level, segment_take
+from pianobot.store import RunWriter, load_run
+
+SAMPLE_PRE_S = 0.2  # mocap samples kept before each keystroke's motion start
+SAMPLE_POST_S = 0.5  # ... and after its end (the key rings after release)
+
+
+@dataclass(frozen=True)
+class ImportResult:
+    """What an import stored; `to_dict()` is the CLI's JSON."""
+
+    run_id: str
+    kind: str  # "keystroke-log" | "force-log" | "mocap"
+    trials: int
+    silent: int
+    skipped_lines: tuple[tuple[int, str], ...] = ()
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "run_id": self.run_id,
+            "trials": self.trials,
+            "silent": self.silent,
+            "skipped_lines": [{"line": n, "reason": r} for n, r in self.skipped_lines],
+            **self.extra,
+        }
+
+
+def file_sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with path.open("rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def _trial_ids(sha: str, n: int) -> list[str]:
+    """Stable ids: the same file always gives the same trial ids."""
+    return [f"{sha[:10]}-{i:05d}" for i in range(n)]
+
+
+def import_keystroke_log(
+    path: Path | str, data_dir: Path | str, layout: str = "auto"
+) -> ImportResult:
+    """Import a dict-per-line keystroke log as a new run (one trial per keystroke line)."""
+    path, data_dir = Path(path), Path(data_dir)
+    log = read_keystroke_log(path, layout)
+    sha = file_sha256(path)
+    ids = _trial_ids(sha, len(log.trials))
+    trials = log.trials.copy()
+    trials.insert(0, "trial_id", ids)
+    trials["attempt"] = 1
+    # Session clocks restart; stack them on one run clock, 1 s apart, so MIDI times stay ordered.
+    offsets = _session_offsets(log.midi)
+    trials["t_start_s"] = math.nan  # the logs never recorded when motion started
+    trials["session_offset_s"] = trials["session"].map(offsets).fillna(0.0)
+    trials["t_on_log_s"], trials["t_off_log_s"] = trials["t_on_s"], trials["t_off_s"]
+    trials["t_on_s"], trials["t_off_s"] = math.nan, math.nan  # relative to motion start: unknown
+    midi = pd.DataFrame(
+        {
+            "trial_id": [ids[i] for i in log.midi["index"]],
+            "t_s": log.midi["t_s"] + log.midi["session"].map(offsets).fillna(0.0),
+            "type": log.midi["type"],
+            "note": log.midi["note"],
+            "velocity": log.midi["velocity"],
+        }
+    )
+    skipped = tuple((s.line, s.reason) for s in log.skipped)
+    meta = {
+        "source": {"file": path.name, "sha256": sha, "format": "keystroke-log"},
+        "layout": log.layout,
+        "finger": log.finger,
+        "header": _jsonable(log.header),
+        "sessions": log.n_sessions,
+        "skipped_lines": [{"line": n, "reason": r} for n, r in skipped],
+        "event_assignment": "by timestamp (pianobot.io.keystroke_events)",
+    }
+    run_id = _write_run(data_dir, f"import-{path.stem}", meta, trials, None, midi)
+    counts = trials["status"].value_counts()
+    return ImportResult(
+        run_id, "keystroke-log", len(trials), int(counts.get("silent", 0)), skipped,
+        {"layout": log.layout, "finger": log.finger, "sounded": int(counts.get("ok", 0)),
+         "unknown": int(counts.get("failed", 0)), "sessions": log.n_sessions},
+    )  # fmt: skip
+
+
+def _session_offsets(midi: pd.DataFrame) -> dict[int, float]:
+    offsets: dict[int, float] = {}
+    running = 0.0
+    for session in sorted(int(s) for s in midi["session"].unique()):
+        offsets[session] = running
+        running += float(midi.loc[midi["session"] == session, "t_s"].max()) + 1.0
+    return offsets
+
+
+def import_force_log(
+    path: Path | str,
+    data_dir: Path | str,
+    calibration: Calibration | None = None,
+    align_run: str | None = None,
+    rule: BurstRule | None = None,
+) -> ImportResult:
+    """Import a force capture as a new run: one trial per burst (press) with its peak force.
+
+    With `align_run`, the capture's sample rate and clock offset are fitted to that run's note-ons
+    and each burst names the trial whose note-on it matched (`matched_trial_id`).
+    """
+    path, data_dir = Path(path), Path(data_dir)
+    calibration = calibration or Calibration()
+    force = read_force_log(path, calibration, rule)
+    bursts = force.bursts.copy()
+    extra: dict[str, Any] = {"bursts": len(bursts), "rate_hz": calibration.rate_hz}
+    meta_align: dict[str, Any] | None = None
+    if align_run is not None:
+        run = load_run(align_run, data_dir)
+        midi = run.midi
+        ons = (
+            midi[midi["type"] == "note_on"].drop_duplicates("trial_id") if not midi.empty else midi
+        )
+        fit = align_to_note_ons(
+            bursts["start_index"], ons["t_s"] if not ons.empty else [], calibration.rate_hz
+        )
+        if fit is None:
+            raise InputError(
+                f"cannot align: fewer than 3 bursts match note-ons of run {run.run_id}",
+                "--align-run",
+            )
+        bursts["start_s"] = fit.offset_s + bursts["start_index"] / fit.rate_hz
+        bursts["end_s"] = fit.offset_s + bursts["end_index"] / fit.rate_hz
+        note_trials = ons.sort_values("t_s")["trial_id"].tolist()
+        matched: list[str | None] = [None] * len(bursts)
+        for b, n in fit.matches:
+            matched[b] = note_trials[n]
+        bursts["matched_trial_id"] = matched
+        meta_align = {"run_id": run.run_id, "rate_hz": fit.rate_hz, "clock_offset_s": fit.offset_s,
+                      "matched": fit.n_matched, "rms_s": fit.rms_s}  # fmt: skip
+        extra.update(rate_hz=fit.rate_hz, clock_offset_s=fit.offset_s, matched=fit.n_matched)
+    sha = file_sha256(path)
+    trials = pd.DataFrame(
+        {
+            "trial_id": _trial_ids(sha, len(bursts)),
+            "index": np.arange(len(bursts)),
+            "attempt": 1,
+            "status": "ok",
+        }
+    )
+    trials["t_start_s"] = bursts["start_s"].to_numpy()
+    for column in bursts.columns:
+        if column not in ("start_s",):
+            trials[column] = bursts[column].to_numpy()
+    skipped = tuple((s.line, s.reason) for s in force.skipped)
+    meta = {
+        "source": {"file": path.name, "sha256": sha, "format": "force-log"},
+        "calibration": {
+            "gain_n": calibration.gain_n,
+            "offset_n": calibration.offset_n,
+            "rate_hz": calibration.rate_hz,
+        },
+        "baseline_n": force.baseline_n,
+        "samples": len(force.samples),
+        "truncated_lines": list(force.truncated_lines),
+        "skipped_lines": [{"line": n, "reason": r} for n, r in skipped],
+        "aligned_to": meta_align,
+    }
+    run_id = _write_run(data_dir, f"import-{path.stem}", meta, trials, None, None)
+    return ImportResult(run_id, "force-log", len(trials), 0, skipped, extra)
+
+
+def import_mocap(
+    path: Path | str,
+    data_dir: Path | str,
+    run_id: str | None = None,
+    markers: dict[str, str] | None = None,
+    min_coverage: float = 0.5,
+    up_axis: str = "y",
+) -> ImportResult:
+    """Import a Motive take: a new run with one trial per keystroke, or aligned to `run_id`.
+
+    Without `run_id`: trials carry the segmented keystrokes (arm speed estimate as
+    down_velocity_mps, arm travel, key travel and speed) and mocap samples from motion start.
+    With `run_id`: a derived run = that run's tables + mocap samples re-timed to its trials.
+    """
+    path, data_dir = Path(path), Path(data_dir)
+    take = read_mocap(path, markers, min_coverage, up_axis)
+    strokes = segment_take(take)
+    sha = file_sha256(path)
+    meta: dict[str, Any] = {
+        "source": {"file": path.name, "sha256": sha, "format": "motive-csv"},
+        "take": take.meta.get("Take Name"),
+        "motive_format": take.meta.get("Format Version"),
+        "frame_rate_hz": take.frame_rate_hz,
+        "roles": take.roles,
+        "coverage_dropped": sorted(n for n, c in take.coverage.items() if c < min_coverage),
+        "up_axis": up_axis,
+        "skipped_lines": [],
+    }
+    extra: dict[str, Any] = {"keystrokes": len(strokes), "roles": take.roles}
+    if run_id is None:
+        trials = _stroke_trials(strokes, sha)
+        samples = _stroke_samples(
+            take, strokes, trials["trial_id"].tolist(), strokes["t_start_s"].to_numpy(), 0.0
+        )
+        new_id = _write_run(data_dir, f"import-{path.stem}", meta, trials, samples, None)
+        return ImportResult(new_id, "mocap", len(trials), 0, (), extra)
+    run = load_run(run_id, data_dir)
+    trials = run.trials
+    if trials.empty:
+        raise InputError(f"run {run.run_id} has no trials to align to", "--run")
+    alignment = _align(take, strokes, trials, run.samples)
+    if alignment is None:
+        raise InputError(
+            f"cannot align take to run {run.run_id}: no arm trace and no trial start times", "--run"
+        )
+    starts = trials["t_start_s"].to_numpy(dtype=np.float64) - alignment.clock_offset_s
+    mocap = _stroke_samples(take, None, trials["trial_id"].tolist(), starts, 0.0, trials)
+    samples = pd.concat([run.samples, mocap], ignore_index=True) if not run.samples.empty else mocap
+    meta.update(derived_from=run.run_id, clock_offset_s=alignment.clock_offset_s,
+                alignment={"method": alignment.method, "score": alignment.score})  # fmt: skip
+    base = trials.drop(columns=["run_id"], errors="ignore")
+    midi = run.midi.drop(columns=["run_id"], errors="ignore")
+    new_id = _write_run(
+        data_dir,
+        f"{run.run_id}-mocap",
+        meta,
+        base,
+        samples.drop(columns=["run_id"], errors="ignore"),
+        midi,
+    )
+    extra.update(
+        clock_offset_s=alignment.clock_offset_s, derived_from=run.run_id, method=alignment.method
+    )
+    return ImportResult(
+        new_id, "mocap", len(base), int((base["status"] == "silent").sum()), (), extra
+    )
+
+
+def _align(
+    take: MocapTake, strokes: pd.DataFrame, trials: pd.DataFrame, samples: pd.DataFrame
+) -> ClockAlignment | None:
+    t_ref, x_ref = run_arm_trace(trials, samples)
+    arm = take.down_m("arm")
+    if t_ref.size >= 4 and arm is not None:
+        dt = min(
+            1.0 / take.frame_rate_hz, float(np.median(np.diff(t_ref))) if t_ref.size > 1 else 1.0
+        )
+        found = xcorr_offset(t_ref, x_ref, take.t_s, arm, max(dt, 1e-3))
+        if found is not None:
+            return found
+    if "t_start_s" in trials and not strokes.empty:
+        return starts_offset(
+            trials["t_start_s"].to_numpy(dtype=np.float64),
+            strokes["t_start_s"].to_numpy(dtype=np.float64),
+        )
+    return None
+
+
+def _stroke_trials(strokes: pd.DataFrame, sha: str) -> pd.DataFrame:
+    """One trial per segmented keystroke; the arm speed estimate stands for the down velocity."""
+    trials = pd.DataFrame(
+        {
+            "trial_id": _trial_ids(sha, len(strokes)),
+            "index": np.arange(len(strokes)),
+            "attempt": 1,
+            "status": "ok",
+            "t_start_s": strokes["t_start_s"].to_numpy(),
+            "down_velocity_mps": strokes["arm_speed_mps"].to_numpy(),
+            "max_key_travel_m": strokes["key_travel_m"].to_numpy(),
+        }
+    )
+    for column in ("t_bottom_s", "t_end_s", "duration_s", "arm_travel_m", "arm_speed_mps",
+                   "fingertip_travel_m", "key_travel_m", "key_speed_mps"):  # fmt: skip
+        trials[column] = strokes[column].to_numpy()
+    return trials
+
+
+def _stroke_samples(
+    take: MocapTake,
+    strokes: pd.DataFrame | None,
+    trial_ids: list[str],
+    starts_s: np.ndarray,
+    offset_s: float,
+    trials: pd.DataFrame | None = None,
+) -> pd.DataFrame:
+    """Mocap samples per trial: t_s from motion start, x0/x1/x2 from each role's rest before it.
+
+    The window runs from SAMPLE_PRE_S before the start to SAMPLE_POST_S after the end (the
+    keystroke's end, or the trial's next start / start + its own span when aligned to a run).
+    """
+    t = take.t_s
+    signals = {
+        col: take.down_m(role)
+        for col, role in (("x0_m", "arm"), ("x1_m", "fingertip"), ("x2_m", "key"))
+    }
+    ends = strokes["t_end_s"].to_numpy() if strokes is not None else _trial_ends(starts_s)
+    pieces = []
+    for trial_id, start, end in zip(trial_ids, starts_s, ends, strict=True):
+        if not (np.isfinite(start) and np.isfinite(end)):
+            continue
+        window = (t >= start - SAMPLE_PRE_S) & (t <= end + SAMPLE_POST_S)
+        if not window.any():
+            continue
+        first = int(np.argmax(t >= start)) if (t >= start).any() else t.size - 1
+        piece = {"trial_id": trial_id, "source": "mocap", "t_s": t[window] - start + offset_s}
+        for column, x in signals.items():
+            piece[column] = (
+                (x[window] - rest_level(t, x, first))
+                if x is not None
+                else np.full(int(window.sum()), np.nan)
+            )
+        pieces.append(pd.DataFrame(piece))
+    if not pieces:
+        return pd.DataFrame(columns=["trial_id", "source", "t_s", "x0_m", "x1_m", "x2_m"])
+    return pd.concat(pieces, ignore_index=True)
+
+
+def _trial_ends(starts_s: np.ndarray) -> np.ndarray:
+    """Without segmentation, a trial's window ends where the next trial starts (last: +2 s)."""
+    order = np.argsort(starts_s)
+    ends = np.full(starts_s.size, np.nan)
+    sorted_starts = starts_s[order]
+    following = (
+        np.append(sorted_starts[1:] - SAMPLE_POST_S - SAMPLE_PRE_S, sorted_starts[-1] + 2.0)
+        if starts_s.size
+        else sorted_starts
+    )
+    ends[order] = following
+    return ends
+
+
+def _write_run(
+    data_dir: Path, name: str, meta: dict[str, Any], trials: pd.DataFrame,
+    samples: pd.DataFrame | None, midi: pd.DataFrame | None,
+) -> str:  # fmt: skip
+    """Create the run, write one batch and finish it; a failure marks the run failed."""
+    writer = RunWriter.create(data_dir, name=name, kind="import", meta=meta, plan=None)
+    try:
+        writer.journal("import started", source=meta["source"]["file"])
+        writer.append(trials, samples=samples, midi=midi)
+        writer.journal("import done", trials=len(trials))
+        writer.finish("completed")
+    except BaseException:
+        writer.finish("failed", reason="import aborted")
+        raise
+    finally:
+        writer.close()
+    return writer.run_id
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value if isinstance(value, str | int | float | bool) or value is None else repr(value)

@@ -1,0 +1,262 @@
+"""Reader of OptiTrack Motive CSV exports (format 1.2x) and marker-role assignment.
+
+Layout of an export: line 1 is key/value metadata (`Format Version,1.21,Take Name,...`), then
+rows labelled by asset type (`Marker`, `Rigid Body`, ...), name, ID and property (`Position`,
+`Rotation`), then the `Frame,Time,X,Y,Z,...` header and the data. Rows are found by their labels,
+never by fixed offsets (Motive 1.23 adds `Type`/`Name`/`ID` in the first cell, older exports
+leave it empty). Empty cells are occlusions (NaN). Positions are converted to metres from the
+`Length Units` field. Only positions are read; rotations are not needed for vertical travel.
+
+Vertical axis: Motive is Y-up by default, so the downward displacement of a marker is
+−(Y − Y_rest); `up_axis` selects another axis for a Z-up export.
+
+Marker roles (arm, fingertip, key) come from a mapping (a rig file's `mocap.markers`) or are
+inferred from the persistent markers (coverage ≥ `min_coverage`; shorter tracks are ghosts):
+the arm marker sits on the end effector above the finger, so it is the highest; of the rest the
+key moves least (its travel is limited by the key bed, and it stays still between presses);
+the fingertip is then the lowest remaining marker (markers higher up the finger are ignored).
+With only two persistent markers they are arm and fingertip (no piano in view).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+import pandas as pd
+
+from pianobot.errors import InputError
+
+FloatArray = npt.NDArray[np.float64]
+ROLES = ("arm", "fingertip", "key")
+_UNITS_M = {
+    "meters": 1.0,
+    "metres": 1.0,
+    "millimeters": 1e-3,
+    "millimetres": 1e-3,
+    "centimeters": 1e-2,
+}
+_TYPES = {"Marker", "Rigid Body", "Rigid Body Marker", "Bone", "Bone Marker"}
+_POSITION_TYPES = {"Marker", "Rigid Body", "Rigid Body Marker"}
+_AXES = {"x": 0, "y": 1, "z": 2}
+
+
+@dataclass(frozen=True)
+class MocapTake:
+    """One take: metadata, frame rate, marker positions (metres) and their roles.
+
+    `markers` is long: t_s, frame, marker, x, y, z (positions in metres, NaN when occluded), only
+    for markers kept by coverage. `coverage` holds every marker's fraction of frames present.
+    `keystrokes` is filled by `mocap_segment.segment_take`.
+    """
+
+    path: Path
+    meta: dict[str, str]
+    frame_rate_hz: float
+    t_s: FloatArray
+    markers: pd.DataFrame
+    coverage: dict[str, float]
+    roles: dict[str, str]
+    up_axis: str = "y"
+    keystrokes: pd.DataFrame = field(default_factory=pd.DataFrame)
+
+    def up_m(self, marker: str) -> FloatArray:
+        """The marker's coordinate along the up axis on every frame (NaN when missing)."""
+        rows = self.markers[self.markers["marker"] == marker]
+        out = np.full(self.t_s.size, np.nan)
+        out[rows["frame_index"].to_numpy()] = rows[self.up_axis].to_numpy(dtype=np.float64)
+        return out
+
+    def down_m(self, role: str) -> FloatArray | None:
+        """Downward displacement of a role's marker relative to its median height (None if absent)."""
+        name = self.roles.get(role)
+        if name is None:
+            return None
+        up = self.up_m(name)
+        return -(up - np.nanmedian(up))
+
+
+def read_mocap(
+    path: Path | str,
+    markers: dict[str, str] | None = None,
+    min_coverage: float = 0.5,
+    up_axis: str = "y",
+) -> MocapTake:
+    """Read a Motive CSV export and assign marker roles.
+
+    Args:
+        path: the CSV file.
+        markers: role → marker name (`arm`, `fingertip`, `key`); missing roles are inferred.
+        min_coverage: markers present on fewer frames than this fraction are ghosts and dropped.
+        up_axis: "x", "y" or "z" (Motive default: y).
+
+    Raises:
+        InputError: not a Motive CSV export, no position column, an unknown marker or role.
+    """
+    path = Path(path)
+    where = str(path)
+    if up_axis not in _AXES:
+        raise InputError(f"up axis should be one of x, y, z, got {up_axis!r}", "--up-axis")
+    lines = _read_text(path).splitlines()
+    meta = _metadata(lines[0] if lines else "", where)
+    header_at = next((i for i, line in enumerate(lines[:100]) if line.startswith("Frame,")), None)
+    if header_at is None:
+        raise InputError("no 'Frame,Time,...' header row within the first 100 lines", where)
+    label_rows = [next(csv.reader([line])) for line in lines[1:header_at] if line.strip()]
+    columns = _position_columns(label_rows, next(csv.reader([lines[header_at]])), where)
+    frame_rate = _frame_rate(meta, where)
+    scale = _UNITS_M.get(meta.get("Length Units", "Meters").strip().lower())
+    if scale is None:
+        raise InputError(f"unknown length units {meta.get('Length Units')!r}", where)
+    data = _data(lines[header_at + 1 :], len(next(csv.reader([lines[header_at]]))), where)
+    if data.shape[0] == 0:
+        raise InputError("no data rows after the header", where)
+    t = data[:, 1] if data.shape[1] > 1 else np.arange(data.shape[0]) / frame_rate
+    t = np.where(np.isfinite(t), t, np.arange(data.shape[0]) / frame_rate)
+    frames = np.arange(data.shape[0])
+    coverage: dict[str, float] = {}
+    pieces = []
+    for name, axes in columns.items():
+        xyz = np.full((data.shape[0], 3), np.nan)
+        for axis, col in axes.items():
+            if col < data.shape[1]:
+                xyz[:, _AXES[axis]] = data[:, col] * scale
+        present = np.isfinite(xyz).all(axis=1)
+        coverage[name] = float(present.mean())
+        if coverage[name] < min_coverage:
+            continue
+        keep = present
+        pieces.append(
+            pd.DataFrame(
+                {
+                    "t_s": t[keep],
+                    "frame_index": frames[keep],
+                    "marker": name,
+                    "x": xyz[keep, 0],
+                    "y": xyz[keep, 1],
+                    "z": xyz[keep, 2],
+                }
+            )
+        )
+    if not pieces:
+        best = max(coverage.values(), default=0.0)
+        raise InputError(
+            f"no marker is present on at least {min_coverage:.0%} of frames (best {best:.0%})",
+            where,
+        )
+    long = pd.concat(pieces, ignore_index=True)
+    take = MocapTake(path, meta, frame_rate, t, long, coverage, {}, up_axis)
+    roles = assign_roles(take, markers or {}, where)
+    return MocapTake(path, meta, frame_rate, t, long, coverage, roles, up_axis)
+
+
+def _read_text(path: Path) -> str:
+    where = str(path)
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        raise InputError("no such file", where) from None
+    except OSError as exc:
+        raise InputError(f"cannot read the file ({exc.strerror or exc})", where) from None
+    if not data.strip():
+        raise InputError("the file is empty", where)
+    if b"\x00" in data:
+        raise InputError("not a Motive CSV export (binary data)", where)
+    return data.decode("utf-8-sig", errors="replace")
+
+
+def _metadata(line: str, where: str) -> dict[str, str]:
+    cells = next(csv.reader([line])) if line else []
+    meta = {cells[i].strip(): cells[i + 1].strip() for i in range(0, len(cells) - 1, 2)}
+    if "Format Version" not in meta:
+        raise InputError("not a Motive CSV export (line 1 lacks 'Format Version')", where)
+    return meta
+
+
+def _frame_rate(meta: dict[str, str], where: str) -> float:
+    for key in ("Export Frame Rate", "Capture Frame Rate"):
+        try:
+            rate = float(meta.get(key, "nan"))
+        except ValueError:
+            continue
+        if math.isfinite(rate) and rate > 0:
+            return rate
+    raise InputError("no valid 'Export Frame Rate' or 'Capture Frame Rate' in line 1", where)
+
+
+def _position_columns(
+    label_rows: list[list[str]], header: list[str], where: str
+) -> dict[str, dict[str, int]]:
+    """Column of each (asset name, axis) whose type is a marker or rigid body and property Position."""
+    type_row = next((r for r in label_rows if any(c in _TYPES for c in r)), None)
+    prop_row = next((r for r in label_rows if "Position" in r), None)
+    if type_row is None or prop_row is None:
+        raise InputError(
+            "no 'Marker'/'Rigid Body' type row or no 'Position' row above the header", where
+        )
+    name_row = (
+        label_rows[label_rows.index(type_row) + 1] if type_row is not label_rows[-1] else None
+    )
+    named = next((r for r in label_rows if r and r[0] == "Name"), name_row)
+    if named is None:
+        raise InputError("no marker-name row under the type row", where)
+    columns: dict[str, dict[str, int]] = {}
+    for col in range(2, len(header)):
+        kind = type_row[col] if col < len(type_row) else ""
+        prop = prop_row[col] if col < len(prop_row) else ""
+        axis = header[col].strip().lower()
+        name = named[col].strip() if col < len(named) else ""
+        if kind in _POSITION_TYPES and prop == "Position" and axis in _AXES and name:
+            columns.setdefault(name, {})[axis] = col
+    if not columns:
+        raise InputError("no marker or rigid-body position columns", where)
+    return columns
+
+
+def _data(lines: list[str], n_columns: int, where: str) -> npt.NDArray[np.float64]:
+    """Data rows as floats (empty or unparsable cells NaN; extra cells beyond the header ignored)."""
+    body = "\n".join(line for line in lines if line.strip())
+    if not body:
+        return np.empty((0, n_columns))
+    try:
+        frame = pd.read_csv(
+            io.StringIO(body), header=None, names=range(n_columns), usecols=range(n_columns),
+            index_col=False, on_bad_lines="skip", low_memory=False,
+        )  # fmt: skip
+    except (pd.errors.ParserError, ValueError) as exc:
+        raise InputError(f"unreadable data rows ({str(exc).splitlines()[0]})", where) from None
+    for column in frame.columns:
+        if frame[column].dtype == object:
+            frame[column] = pd.to_numeric(frame[column], errors="coerce")
+    return frame.to_numpy(dtype=np.float64)
+
+
+def assign_roles(take: MocapTake, given: dict[str, str], where: str) -> dict[str, str]:
+    """Roles from `given` (validated) plus inferred ones for the missing roles (module docstring)."""
+    names = list(dict.fromkeys(take.markers["marker"]))
+    for role, name in given.items():
+        if role not in ROLES:
+            raise InputError(f"marker role should be one of {ROLES}, got {role!r}", "--marker")
+        if name not in names:
+            known = ", ".join(names[:8])
+            raise InputError(
+                f"marker {name!r} is not a persistent marker of the take ({known})", "--marker"
+            )
+    roles = dict(given)
+    free = [n for n in names if n not in roles.values()]
+    height = {n: float(np.nanmedian(take.up_m(n))) for n in free}
+    motion = {n: float(np.subtract(*np.nanpercentile(take.up_m(n), [99, 1]))) for n in free}
+    if "arm" not in roles and free:
+        roles["arm"] = max(free, key=lambda n: (height[n], motion[n]))
+        free.remove(roles["arm"])
+    if "key" not in roles and len(free) >= 2:
+        roles["key"] = min(free, key=lambda n: motion[n])
+        free.remove(roles["key"])
+    if "fingertip" not in roles and free:
+        roles["fingertip"] = min(free, key=lambda n: height[n])
+    return {role: roles[role] for role in ROLES if role in roles}
