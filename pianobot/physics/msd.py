@@ -230,21 +230,12 @@ def lsim_uniform(ss: StateSpace, t_s: npt.ArrayLike, u: npt.ArrayLike) -> FloatA
         z_start = -np.linalg.solve(A, B @ u_arr[..., 0][..., None])[..., 0]
     else:
         z_start = np.zeros((*batch, n))  # at rest (also when A is singular: k0 = 0)
-    # Input terms of every step at once; only the state recursion remains sequential. It runs
-    # time-major on contiguous (batch, n) slices, one column of Ad at a time (n is small).
-    drive = np.moveaxis(
-        (Bd0 @ u_arr[..., :-1] + Bd1 @ u_arr[..., 1:]).reshape(-1, n, t.size - 1), -1, 0
-    )
-    columns = [np.ascontiguousarray(Ad.reshape(-1, n, n)[:, :, j]) for j in range(n)]
-    zt = np.empty((t.size, drive.shape[1], n))
-    zt[0] = z_start.reshape(-1, n)
+    # Input terms of every step at once; only the state recursion remains sequential.
+    drive = Bd0 @ u_arr[..., :-1] + Bd1 @ u_arr[..., 1:]
+    z = np.empty((*batch, n, t.size))
+    z[..., 0] = z_start
     for k in range(1, t.size):
-        prev = zt[k - 1]
-        step = drive[k - 1].copy()
-        for j, column in enumerate(columns):
-            step += column * prev[:, j : j + 1]
-        zt[k] = step
-    z = np.moveaxis(zt, 0, -1).reshape(*batch, n, t.size)
+        z[..., k] = (Ad @ z[..., k - 1][..., None])[..., 0] + drive[..., k - 1]
     return np.asarray(C @ z + D @ u_arr, dtype=np.float64)
 
 
