@@ -9,7 +9,6 @@ from typing import TYPE_CHECKING, Any
 from pianobot.plan.envelope import Violation
 from pianobot.plan.labtime import LabTime, lab_time
 from pianobot.spec import PARAMETER_NAMES, PARAMETERS, ExperimentSpec, RigSpec, load_rig_for
-from pianobot.spec.parameters import format_value
 
 if TYPE_CHECKING:
     from pianobot.plan.trials import Trial
@@ -105,16 +104,16 @@ class PlanSummary:
         lines = [
             f"{self.name}: {self.trial_count} trials, {self.finger} finger, rig {self.rig}, "
             f"{self.mode} sweep, order {self.order}",
-            f"lab time ≈ {format_duration(t.total_s)} (presses {format_duration(t.presses_s)}, "
-            f"pauses {format_duration(t.pauses_s)}, {t.vacuum_changes} vacuum changes "
-            f"{format_duration(t.vacuum_s)}, {t.key_changes} key changes "
-            f"{format_duration(t.travel_s)})",
+            f"lab time ≈ {format_duration(t.total_s)}: presses {format_duration(t.presses_s)}, "
+            f"pauses {format_duration(t.pauses_s)}, vacuum settling {format_duration(t.vacuum_s)} "
+            f"({t.vacuum_changes} changes), key moves {format_duration(t.travel_s)} "
+            f"({t.key_changes} changes)",
             f"{'parameter':<20} {'min':>10} {'max':>10} {'levels':>7}",
         ]
         for name, c in self.coverage.items():
             unit = PARAMETERS[name].unit
-            lines.append(f"{name:<20} {format_value(c.minimum):>10} {format_value(c.maximum):>10} "
-                         f"{c.levels:>7}  {unit}".rstrip())
+            lines.append(f"{name:<20} {c.minimum:>10.4g} {c.maximum:>10.4g} {c.levels:>7}  {unit}"
+                         .rstrip())
         lines.append(f"violations: {self.errors} errors, {self.warnings} warnings")
         for g in self.groups():
             shown = ", ".join(str(i) for i in g.indices) + (", …" if g.count > len(g.indices) else "")
