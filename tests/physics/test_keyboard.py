@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pianobot.physics.keyboard import (
@@ -75,6 +75,7 @@ def test_other_reference_and_offsets() -> None:
     assert key_center_m(64, offsets={62: 0.001}) == pytest.approx(3 * 0.0235)
 
 
+@settings(deadline=None)  # no wall-clock limits: the machine is shared
 @given(st.integers(LOWEST_NOTE, HIGHEST_NOTE), st.floats(-0.003, 0.003))
 def test_geometry_object_matches_function(note: int, offset: float) -> None:
     geo = KeyboardGeometry().with_offset(note, offset)

@@ -24,6 +24,7 @@ speeds = st.floats(1e-3, 0.7)
 accels = st.floats(0.05, 2.0)
 
 
+@settings(deadline=None)  # no wall-clock limits: the machine is shared
 @given(distances, speeds, accels)
 def test_profile_phases_add_up_and_cover_the_distance(d: float, v: float, a: float) -> None:
     prof = move_profile(d, v, a)
@@ -35,6 +36,7 @@ def test_profile_phases_add_up_and_cover_the_distance(d: float, v: float, a: flo
     assert prof.peak_velocity_mps == pytest.approx(a * prof.t_accel_s)
 
 
+@settings(deadline=None)  # no wall-clock limits: the machine is shared
 @given(distances, speeds, accels)
 def test_triangle_when_too_short_to_cruise(d: float, v: float, a: float) -> None:
     prof = move_profile(d, v, a)
@@ -180,6 +182,7 @@ def test_low_acceleration_caps_contact_speed() -> None:
     assert contact_speed_mps(press) < 0.08
 
 
+@settings(deadline=None)  # no wall-clock limits: the machine is shared
 @given(distances, speeds, accels, st.floats(0.0, 1.0))
 def test_time_at_distance_inverts_the_profile(d: float, v: float, a: float, frac: float) -> None:
     prof: MoveProfile = move_profile(d, v, a)
