@@ -1,0 +1,129 @@
+"""Commands `pianobot import keystroke-log | force-log | mocap`: old data into new runs."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from pianobot.cli.common import DEFAULT_DATA, DataDir, JsonFlag, emit_json
+from pianobot.errors import InputError
+from pianobot.io.force_log import DEFAULT_GAIN_N, DEFAULT_OFFSET_N, DEFAULT_RATE_HZ, Calibration
+from pianobot.io.importers import ImportResult, import_force_log, import_keystroke_log, import_mocap
+from pianobot.io.keystroke_layouts import LAYOUT_CHOICES
+
+imports = typer.Typer(
+    help="Import old data (keystroke logs, force logs, Motive mocap CSV) as runs.",
+    no_args_is_help=True,
+)
+SourceFile = Annotated[Path, typer.Argument(help="The file to import.", show_default=False)]
+
+
+def register(app: typer.Typer) -> None:
+    app.add_typer(imports, name="import")
+
+
+@imports.command("keystroke-log")
+def keystroke_log(
+    file: SourceFile,
+    layout: Annotated[
+        str, typer.Option(help=f"Control-list layout: {', '.join(LAYOUT_CHOICES)}.")
+    ] = "auto",
+    data: DataDir = DEFAULT_DATA,
+    json: JsonFlag = False,
+) -> None:
+    """Import a dict-per-line keystroke log; MIDI events are re-assigned to keystrokes by time."""
+    _show(import_keystroke_log(file, data, layout=layout), json)
+
+
+@imports.command("force-log")
+def force_log(
+    file: SourceFile,
+    rate_hz: Annotated[
+        float, typer.Option("--rate-hz", help="Sample rate of the capture.")
+    ] = DEFAULT_RATE_HZ,
+    gain_n: Annotated[
+        float, typer.Option("--gain-n", help="Newtons per reading.")
+    ] = DEFAULT_GAIN_N,
+    offset_n: Annotated[
+        float, typer.Option("--offset-n", help="Force at reading 0, N.")
+    ] = DEFAULT_OFFSET_N,
+    align_run: Annotated[
+        str | None, typer.Option("--align-run", help="Fit rate and clock to this run's note-ons.")
+    ] = None,
+    data: DataDir = DEFAULT_DATA,
+    json: JsonFlag = False,
+) -> None:
+    """Import an `Analog reading = N` force capture; one trial per press (burst)."""
+    calibration = Calibration(gain_n=gain_n, offset_n=offset_n, rate_hz=rate_hz)
+    _show(import_force_log(file, data, calibration=calibration, align_run=align_run), json)
+
+
+@imports.command("mocap")
+def mocap(
+    file: SourceFile,
+    run: Annotated[
+        str | None, typer.Option("--run", help="Align the take to this run (new derived run).")
+    ] = None,
+    marker: Annotated[
+        list[str] | None,
+        typer.Option("--marker", help="ROLE=NAME (arm, fingertip, key); repeatable."),
+    ] = None,
+    rig: Annotated[
+        Path | None, typer.Option("--rig", help="Rig file whose mocap.markers name the roles.")
+    ] = None,
+    min_coverage: Annotated[
+        float, typer.Option(help="Drop markers present on fewer frames (ghosts).")
+    ] = 0.5,
+    up_axis: Annotated[
+        str, typer.Option("--up-axis", help="Vertical axis of the export (x|y|z).")
+    ] = "y",
+    data: DataDir = DEFAULT_DATA,
+    json: JsonFlag = False,
+) -> None:
+    """Import a Motive CSV take: keystrokes segmented from the arm marker, or aligned to a run."""
+    markers = _rig_markers(rig) if rig is not None else {}
+    markers.update(_marker_options(marker or []))
+    result = import_mocap(
+        file, data, run_id=run, markers=markers or None, min_coverage=min_coverage, up_axis=up_axis
+    )
+    _show(result, json)
+
+
+def _marker_options(items: list[str]) -> dict[str, str]:
+    out: dict[str, str] = {}
+    for item in items:
+        role, sep, name = item.partition("=")
+        if not sep or not role.strip() or not name.strip():
+            raise InputError(f"expected ROLE=NAME, got {item!r}", "--marker")
+        out[role.strip()] = name.strip()
+    return out
+
+
+def _rig_markers(path: Path) -> dict[str, str]:
+    from pianobot.spec.loader import load_rig
+
+    rig = load_rig(path)
+    names = rig.mocap.markers
+    if names is None:
+        raise InputError("the rig file names no mocap markers (mocap.markers)", str(path))
+    return {"arm": names.arm, "fingertip": names.fingertip, "key": names.key}
+
+
+def _show(result: ImportResult, json: bool) -> None:
+    if json:
+        emit_json(result.to_dict())
+        return
+    table = Table(title=f"imported {result.kind}", show_header=False)
+    for key, value in result.to_dict().items():
+        if key == "skipped_lines":
+            continue
+        table.add_row(key, f"{value:.6g}" if isinstance(value, float) else str(value))
+    table.add_row("skipped lines", str(len(result.skipped_lines)))
+    console = Console()
+    console.print(table)
+    for line, reason in result.skipped_lines:
+        console.print(f"  line {line}: {reason}", markup=False, highlight=False)
