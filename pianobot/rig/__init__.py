@@ -57,7 +57,8 @@ def _build_lab(rig_spec: Any) -> Rig:
             after_vacuum_change_s=settle.after_vacuum_change_s,
         ),
     )
-    rig = Rig(
+    # open_lab_devices has connected the arm and started the MIDI input already.
+    return Rig(
         kind="ur5",
         arm=arm,
         vacuum=vacuum,
@@ -67,10 +68,3 @@ def _build_lab(rig_spec: Any) -> Rig:
         station=station,
         description={"host": rig_spec.ur5.host if rig_spec.ur5 is not None else None},
     )
-    try:
-        arm.connect()
-        keyboard.start()
-    except BaseException:
-        rig.close()
-        raise
-    return rig

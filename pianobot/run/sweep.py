@@ -1,0 +1,328 @@
+"""`run_sweep`: a spec file in, a run folder out — validate, persist the plan, run, compact.
+
+Everything that can be wrong with the input is checked before the run folder is made, so a bad
+spec leaves nothing behind. The plan is on disk before the arm moves. A resume (`resume=RUN_ID`)
+re-reads the same spec (its sha256 must match), skips every trial whose data is on disk, redoes
+the one in flight, and continues the run clock where it stopped.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable
+from contextlib import ExitStack
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from pianobot.errors import InputError
+from pianobot.plan import PlanSummary, Trial, check_envelope, expand, plan_frame, summarize
+from pianobot.rig import open_rig
+from pianobot.run.progress import ProgressBar
+from pianobot.run.records import Subscriber
+from pianobot.run.runner import RetryPolicy, Runner, SessionResult
+from pianobot.run.signals import SignalHandlers, StopControl
+from pianobot.run.sink import StoreSink
+from pianobot.spec import (
+    ExperimentSpec,
+    RigSpec,
+    load_rig,
+    load_rig_for,
+    load_spec,
+    resolved_spec_dict,
+    spec_sha256,
+)
+from pianobot.store import Run, RunLocked, RunWriter, load_run, read_journal, summarize_run
+from pianobot.store.tables import read_run_table, trial_status_counts
+
+
+@dataclass(frozen=True)
+class PreparedSweep:
+    """A validated spec with its rig and plan, before anything is written or moved."""
+
+    spec_path: Path
+    spec: ExperimentSpec
+    rig: RigSpec
+    trials: list[Trial]
+    spec_text: str
+    spec_sha256: str
+    seed: int
+    rig_path: Path | None = None  # a rig file given instead of the spec's own
+
+
+@dataclass(frozen=True)
+class RunOutcome:
+    """How a sweep (or a resumed session of it) ended, and where its data is."""
+
+    run_id: str
+    path: Path
+    status: str  # completed | stopped | interrupted | failed
+    reason: str | None
+    trials: int  # completed trials (ok + silent) over the whole run
+    planned: int
+    silent: int  # over the whole run
+    failed: int
+    retries: int  # in this session
+    executed: int  # keystrokes recorded in this session
+    lab_time_s: float
+    resumed: bool
+    warnings: list[str] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        data = asdict(self)
+        data["path"] = str(self.path)
+        return data
+
+
+def prepare_sweep(
+    spec_path: Path, *, seed: int | None = None, rig_path: Path | None = None
+) -> PreparedSweep:
+    """Load and check a spec and its rig and expand the plan; raises InputError, writes nothing.
+
+    `rig_path` replaces the rig file the spec names (e.g. the faulty sim rig for a drill).
+    """
+    path = Path(spec_path)
+    spec = load_spec(path)
+    rig = load_rig_for(spec) if rig_path is None else load_rig(rig_path)
+    trials = expand(spec, rig)
+    if not trials:
+        raise InputError("the sweep has no trials", f"{path}: sweep")
+    text = path.read_text(encoding="utf-8")
+    return PreparedSweep(
+        spec_path=path,
+        spec=spec,
+        rig=rig,
+        trials=trials,
+        spec_text=text,
+        spec_sha256=spec_sha256(path),
+        seed=int(rig.seed if seed is None else seed),
+        rig_path=rig_path,
+    )
+
+
+def run_sweep(
+    spec_path: Path | None,
+    *,
+    data_dir: Path,
+    resume: str | None = None,
+    seed: int | None = None,
+    rig_path: Path | None = None,
+    progress: bool = True,
+    subscribers: Iterable[Subscriber] = (),
+    control: StopControl | None = None,
+    batch_trials: int = 50,
+    batch_s: float = 2.0,
+    world: Any | None = None,
+) -> RunOutcome:
+    """Run a sweep on its rig into a new run folder, or resume run `resume`.
+
+    Args:
+        spec_path: the spec file (optional when resuming: the run remembers it).
+        data_dir: dataset folder; the run lands in `data_dir/runs/<run_id>/`.
+        resume: a run id (or unique prefix) to continue.
+        seed: overrides the rig's seed for a new run (the simulated world's noise and faults).
+        rig_path: a rig file instead of the one the spec names (a resume reuses the run's).
+        progress: draw a progress bar on stderr.
+        subscribers: more record consumers (e.g. a test collector).
+        control: a stop control (tests); by default SIGINT/SIGTERM drive one.
+        batch_trials, batch_s: part batching (a kill loses at most one batch, redone on resume).
+        world: a physics World for the sim rig instead of the rig file's (tests, benchmarks).
+
+    Raises:
+        InputError: bad spec, unknown run, a spec that changed since the run started.
+    """
+    if resume is not None:
+        writer, prepared, done_ids = _reopen(Path(data_dir), resume, spec_path, seed, rig_path)
+    else:
+        if spec_path is None:
+            raise InputError("give a spec file (or --resume RUN_ID)", "SPEC")
+        prepared = prepare_sweep(spec_path, seed=seed, rig_path=rig_path)
+        writer = _create(Path(data_dir), prepared)
+        done_ids = set()
+    with writer:
+        return _session(
+            writer, prepared, done_ids,
+            resumed=resume is not None, progress=progress, subscribers=list(subscribers),
+            control=control or StopControl(), batch_trials=batch_trials, batch_s=batch_s,
+            world=world,
+        )
+
+
+def _create(data_dir: Path, prepared: PreparedSweep) -> RunWriter:
+    spec = prepared.spec
+    meta = {
+        "spec": {
+            "path": str(prepared.spec_path.resolve()),
+            "text": prepared.spec_text,
+            "resolved": resolved_spec_dict(spec),
+        },
+        "spec_sha256": prepared.spec_sha256,
+        "seed": prepared.seed,
+        "finger": spec.finger,
+        "record": list(spec.record),
+        "rig": {
+            "file": str(prepared.rig_path.resolve()) if prepared.rig_path else spec.rig,
+            "override": prepared.rig_path is not None,
+            "spec": prepared.rig.model_dump(mode="json"),
+        },
+        "sessions": 1,
+        "lab_time_s": 0.0,
+    }
+    return RunWriter.create(
+        data_dir, name=spec.name, kind="sweep", meta=meta, plan=plan_frame(prepared.trials)
+    )
+
+
+def _reopen(
+    data_dir: Path, run_id: str, spec_path: Path | None, seed: int | None, rig_path: Path | None
+) -> tuple[RunWriter, PreparedSweep, set[str]]:
+    """Open a run to resume: same spec (by sha256), same plan, the trials already on disk."""
+    run = load_run(run_id, data_dir)
+    meta = run.meta
+    if meta.get("kind") != "sweep":
+        raise InputError(f"run {run.run_id} is a {meta.get('kind')!r} run, not a sweep", "--resume")
+    recorded = Path(str(meta.get("spec", {}).get("path", "")))
+    path = Path(spec_path) if spec_path is not None else recorded
+    if not path.is_file():
+        raise InputError(f"the run's spec file {path} is gone; give the spec: pianobot sweep SPEC --resume {run.run_id}", "SPEC")
+    if spec_sha256(path) != meta.get("spec_sha256"):
+        raise InputError(
+            f"{path} differs from the spec run {run.run_id} started with (sha256 mismatch); "
+            "restore it, or start a new run",
+            "--resume",
+        )
+    if seed is not None and seed != meta.get("seed"):
+        raise InputError(f"run {run.run_id} uses seed {meta.get('seed')}, not {seed}", "--seed")
+    rig_meta = meta.get("rig") or {}
+    if rig_path is None and rig_meta.get("override"):
+        rig_path = Path(str(rig_meta.get("file")))
+    prepared = prepare_sweep(path, seed=int(meta.get("seed", 0)), rig_path=rig_path)
+    planned_ids = list(run.plan["trial_id"]) if len(run.plan) else []
+    if planned_ids != [t.trial_id for t in prepared.trials]:
+        raise InputError(f"the plan of {path} no longer matches run {run.run_id}'s plan.parquet", "--resume")
+    try:
+        writer = RunWriter.reopen(data_dir, run.run_id)
+    except RunLocked as exc:
+        raise InputError(str(exc), "--resume") from None
+    trials = read_run_table(writer.paths, "trials", columns=["trial_id", "status"]).to_pydict()
+    done_ids = {
+        t for t, s in zip(trials["trial_id"], trials["status"], strict=True) if s in ("ok", "silent")
+    }
+    return writer, prepared, done_ids
+
+
+def _session(
+    writer: RunWriter,
+    prepared: PreparedSweep,
+    done_ids: set[str],
+    *,
+    resumed: bool,
+    progress: bool,
+    subscribers: list[Subscriber],
+    control: StopControl,
+    batch_trials: int,
+    batch_s: float,
+    world: Any | None,
+) -> RunOutcome:
+    meta = writer.meta
+    todo = [t for t in prepared.trials if t.trial_id not in done_ids]
+    if resumed:
+        _note_resume(writer, meta, done_ids)
+    if resumed and not todo:
+        writer.finish("completed", None)
+        return _outcome(writer, None, resumed=True)
+    sink = StoreSink(writer, batch_trials=batch_trials, batch_s=batch_s)
+    retry = prepared.rig.retry
+    result: SessionResult | None = None
+    with ExitStack() as stack:
+        stack.enter_context(SignalHandlers(control))
+        bar = stack.enter_context(ProgressBar()) if progress else None
+        try:
+            rig = stack.enter_context(open_rig(prepared.rig, seed=prepared.seed, world=world))
+            writer.update_meta(rig={**meta.get("rig", {}), "description": rig.describe()})
+            if any(i.get("kind") == "safety_stop" for i in meta.get("interruptions", [])):
+                # Resuming a run a protective stop ended means the operator cleared it.
+                rig.clear_stop()
+                writer.journal("stop_cleared")
+            runner = Runner(
+                rig,
+                subscribers=[sink, *([bar] if bar is not None else []), *subscribers],
+                retry=RetryPolicy(retry.max_attempts, retry.backoff_s, retry.backoff_factor),
+                record=prepared.spec.record,
+                control=control,
+                clock_offset_s=float(meta.get("lab_time_s") or 0.0),
+            )
+            result = runner.run(
+                writer.run_id, todo, planned=len(prepared.trials), done=len(done_ids)
+            )
+        except BaseException as exc:
+            # A bug or an unreachable device: keep what was measured, say why the run ended.
+            _flush_quietly(sink)
+            writer.finish("failed", f"{type(exc).__name__}: {exc}")
+            raise
+    _record_end(writer, result)
+    writer.finish(result.status, result.reason, lab_time_s=result.lab_time_s)
+    return _outcome(writer, result, resumed=resumed)
+
+
+def _note_resume(writer: RunWriter, meta: dict[str, Any], done_ids: set[str]) -> None:
+    """Journal the resume, and a crash if the last session never closed the run."""
+    if meta.get("status") == "running":
+        writer.add_interruption("crash", reason="the process ended without closing the run (killed?)")
+    journalled = {
+        e.get("trial_id") for e in read_journal(writer.paths.journal) if e.get("event") in ("done", "recovered")
+    }
+    for trial_id in sorted(done_ids - journalled):
+        # Its part landed but the process died before journalling `done`.
+        writer.journal("recovered", trial_id=trial_id)
+    writer.update_meta(
+        status="running", reason=None, end_utc=None, sessions=int(meta.get("sessions", 1)) + 1,
+        resumed_pid=os.getpid(),
+    )
+
+
+def _record_end(writer: RunWriter, result: SessionResult) -> None:
+    if result.status == "stopped":
+        writer.add_interruption("safety_stop", reason=result.reason)
+    elif result.status == "interrupted":
+        writer.add_interruption("signal", reason=result.reason)
+
+
+def _flush_quietly(sink: StoreSink) -> None:
+    try:
+        sink.flush()
+    except Exception:  # the original error matters more than a failed last write
+        pass
+
+
+def _outcome(writer: RunWriter, result: SessionResult | None, *, resumed: bool) -> RunOutcome:
+    summary = summarize_run(Run(run_id=writer.run_id, path=writer.path))
+    counts = trial_status_counts(writer.paths)
+    return RunOutcome(
+        run_id=writer.run_id,
+        path=writer.path,
+        status=summary.status,
+        reason=summary.reason,
+        trials=summary.trials_done,
+        planned=summary.trials_planned or 0,
+        silent=counts["silent"],
+        failed=counts["failed"],
+        retries=0 if result is None else result.retries,
+        executed=0 if result is None else result.executed,
+        lab_time_s=summary.lab_time_s,
+        resumed=resumed,
+    )
+
+
+def dry_run(spec_path: Path, *, rig_path: Path | None = None) -> PlanSummary:
+    """The plan of a spec without running it: count, coverage, lab time, every violation.
+
+    Spec-level problems (unknown key, wrong type, a written value outside the envelope) raise
+    InputError; trial-level envelope violations are listed in the summary, not raised.
+    """
+    spec = load_spec(Path(spec_path))
+    rig = load_rig_for(spec) if rig_path is None else load_rig(rig_path)
+    trials = expand(spec)
+    label = spec.rig if rig_path is None else str(rig_path)
+    violations = check_envelope(trials, spec.finger, rig, rig_label=label)
+    return summarize(spec, trials, violations, rig)
