@@ -15,7 +15,6 @@ import numpy.typing as npt
 from scipy.optimize import least_squares
 
 FloatArray = npt.NDArray[np.float64]
-Residuals = Callable[[FloatArray], FloatArray]
 
 
 @dataclass(frozen=True)
@@ -75,6 +74,7 @@ def fit(
     residuals: Callable[[dict[str, float]], FloatArray],
     max_nfev: int = 60,
     diff_step: float = 1e-3,
+    tol: float = 1e-4,
 ) -> FitResult:
     """Minimise the sum of squared residuals over the parameters within their bounds.
 
@@ -104,6 +104,9 @@ def fit(
         diff_step=diff_step,
         max_nfev=max_nfev,
         method="trf",
+        ftol=tol,
+        xtol=tol,
+        gtol=tol,
     )
     r = result.fun
     n = int(r.size)

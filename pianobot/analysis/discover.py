@@ -1,0 +1,330 @@
+"""`pianobot discover`: find where simulation and measurement disagree, name the missing effect.
+
+The loop (DESIGN.md, "Discovery"):
+
+1. fit the starting model's base parameters on the training keystrokes, so that a wrong
+   stiffness is never mistaken for missing physics;
+2. localise the disagreement on the held-out keystrokes (by phase, region, state, outcome);
+3. fit every effect of the vocabulary that the model lacks, jointly with the base parameters,
+   by simulation error on the training keystrokes; STLSQ on the residual key force proposes
+   which families to look at first (it never decides);
+4. accept the best candidate only if it passes the calibrated rule (`discover_decide`); repeat
+   until nothing passes, then say whether what is left looks like noise.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from pianobot.analysis import discover_model as dm
+from pianobot.analysis.discover_data import Keystroke, Prediction, stratified_split
+from pianobot.analysis.discover_decide import Candidate, DecisionRule, choose, family_of
+from pianobot.analysis.discover_fit import FitResult, bic, fit
+from pianobot.analysis.discover_localise import Localisation, localise
+from pianobot.analysis.sparse_terms import Proposal
+from pianobot.physics.model import KeystrokeModel
+
+
+@dataclass(frozen=True)
+class DiscoverySettings:
+    """Knobs of the discovery loop; the defaults are what the scenario suite is tested with."""
+
+    held_out_fraction: float = 0.33
+    rule: DecisionRule = field(default_factory=DecisionRule)
+    max_iterations: int = 4
+    bootstrap_samples: int = 2
+    max_nfev: int = 20
+    joint_refits: int = 2  # candidates refit jointly with the base after screening
+    seed: int = 0
+    # Lag-1 autocorrelation of the held-out residual below which it "looks like noise".
+    noise_lag1: float = 0.5
+    # ... and a systematic error below this fraction of the noise level counts as explained.
+    noise_fraction: float = 1.0
+
+
+@dataclass(frozen=True)
+class Iteration:
+    """One round: localisation before, every candidate judged, the accepted one (or none)."""
+
+    index: int
+    before: Localisation
+    after: Localisation | None
+    candidates: tuple[Candidate, ...]
+    accepted: Candidate | None
+    threshold: float
+    bootstrap_delta_bic: tuple[float, ...]
+    proposals: tuple[Proposal, ...]
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON form (`accepted_effect`, `candidates`, `gap_before`, `gap_after`, ...)."""
+        after = self.after if self.after is not None else self.before
+        return {
+            "index": self.index,
+            "accepted_effect": self.accepted.effect if self.accepted else None,
+            "accepted_family": family_of(self.accepted.effect) if self.accepted else None,
+            "gap_before": self.before.gap.to_dict(),
+            "gap_after": after.gap.to_dict(),
+            "threshold_delta_bic": self.threshold,
+            "bootstrap_delta_bic": list(self.bootstrap_delta_bic),
+            "candidates": [c.to_dict() for c in self.candidates],
+            "sparse_proposals": [
+                {"term": p.term, "family": p.family, "coefficient": p.coefficient, "share": p.share}
+                for p in self.proposals
+            ],
+            "localisation_before": self.before.to_dict(),
+            "localisation_after": after.to_dict(),
+        }
+
+
+@dataclass(frozen=True)
+class DiscoveryResult:
+    """Everything discovery found, with the model it ends with."""
+
+    iterations: tuple[Iteration, ...]
+    start_model: KeystrokeModel
+    base_model: KeystrokeModel  # the start model with its base parameters refit
+    final_model: KeystrokeModel
+    verdict: str
+    explained: bool
+    decision_line: str
+    n_train: int
+    n_held_out: int
+    held_out_ids: tuple[str, ...]
+    predictions_before: tuple[Prediction, ...] = ()  # held-out, base model
+    predictions_after: tuple[Prediction, ...] = ()  # held-out, final model
+    held_out: tuple[Keystroke, ...] = ()
+
+    @property
+    def accepted_effects(self) -> tuple[str, ...]:
+        """Accepted effects in the order they were found."""
+        return tuple(it.accepted.effect for it in self.iterations if it.accepted)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready summary (the `--json` output)."""
+        return {
+            "verdict": self.verdict,
+            "explained": self.explained,
+            "decision": self.decision_line,
+            "accepted_effects": list(self.accepted_effects),
+            "n_train": self.n_train,
+            "n_held_out": self.n_held_out,
+            "iterations": [it.to_dict() for it in self.iterations],
+            "final_model": dm.model_to_dict(self.final_model),
+        }
+
+
+def _chi2(model: KeystrokeModel, keystrokes: Sequence[Keystroke], weights: dm.Weights) -> float:
+    r = dm.residual_vector(keystrokes, dm.predict(model, keystrokes, states=False), weights)
+    return float(r @ r)
+
+
+def _fit_model(
+    model: KeystrokeModel,
+    effect: str | None,
+    keystrokes: Sequence[Keystroke],
+    weights: dm.Weights,
+    max_nfev: int,
+    *,
+    base: bool = True,
+) -> tuple[KeystrokeModel, FitResult]:
+    """Fit base parameters and/or one effect's parameters by simulation error.
+
+    `effect` must already be on in `model` (its current values are the start); `base=False`
+    keeps the base parameters fixed (the screening fit), but the information criterion still
+    counts them, so screened and joint fits compare on one scale.
+    """
+    base_specs = dm.base_specs(model, keystrokes)
+    specs = list(base_specs) if base else []
+    if effect is not None:
+        specs += dm.effect_specs(model, effect)
+
+    def residuals(values: dict[str, float]) -> np.ndarray:
+        trial = dm.apply_values(model, values)
+        return dm.residual_vector(keystrokes, dm.predict(trial, keystrokes, states=False), weights)
+
+    result = (
+        fit(specs, residuals, max_nfev=max_nfev) if max_nfev or not specs else fit([], residuals)
+    )
+    if not base:
+        result = replace(result, bic=bic(result.chi2, len(specs) + len(base_specs), result.n))
+    return dm.apply_values(model, result.as_dict()), result
+
+
+def _screen(
+    current: KeystrokeModel,
+    effect: str,
+    keystrokes: Sequence[Keystroke],
+    weights: dm.Weights,
+    max_nfev: int,
+) -> tuple[KeystrokeModel, FitResult]:
+    """Fit one effect with the base fixed, from the best of a few starting points."""
+    candidate = dm.with_effect(current, effect)
+    starts = [
+        dm.apply_values(candidate, start)
+        for start in dm.start_points(candidate, effect, keystrokes)
+    ]
+    best = min(starts, key=lambda m: _chi2(m, keystrokes, weights))
+    return _fit_model(best, effect, keystrokes, weights, max_nfev, base=False)
+
+
+def _bootstrap(
+    base: KeystrokeModel,
+    effect: str,
+    train: Sequence[Keystroke],
+    weights: dm.Weights,
+    settings: DiscoverySettings,
+    rng: np.random.Generator,
+) -> tuple[float, ...]:
+    """ΔBIC the candidate wins on data simulated from the base model (no effect): the null."""
+    out = []
+    predictions = dm.predict(base, train)
+    for _ in range(settings.bootstrap_samples):
+        synthetic = dm.synthesise(train, predictions, weights, rng)
+        _, null_base = _fit_model(base, None, synthetic, weights, settings.max_nfev)
+        screened, _ = _screen(base, effect, synthetic, weights, settings.max_nfev)
+        _, null_cand = _fit_model(screened, effect, synthetic, weights, settings.max_nfev)
+        out.append(null_base.bic - null_cand.bic)
+    return tuple(out)
+
+
+def _verdict(
+    iterations: Sequence[Iteration], final: Localisation, settings: DiscoverySettings
+) -> tuple[str, bool]:
+    accepted = [it.accepted.effect for it in iterations if it.accepted]
+    found = (
+        ("missing effects found: " + ", ".join(accepted)) if accepted else "no missing effect found"
+    )
+    lags = [row["lag1"] for row in final.phases if np.isfinite(row["lag1"])]
+    noisy_shape = not lags or float(np.median(lags)) < settings.noise_lag1
+    g = final.gap
+    if np.isfinite(g.position_m):
+        small = g.position_m <= settings.noise_fraction * max(g.sigma_m, 1e-12) or noisy_shape
+    else:
+        small = not np.isfinite(g.on_velocity) or g.on_velocity <= 1.0
+    if small:
+        return f"{found}; the remaining residual looks like noise (explained)", True
+    phases = final.worst_phases() or ["outcomes"]
+    return f"{found}; unexplained discrepancy remains in phases {', '.join(phases)}", False
+
+
+def _decision_line(iterations: Sequence[Iteration]) -> str:
+    parts = []
+    for it in iterations:
+        if it.accepted is None or it.after is None:
+            continue
+        c = it.accepted
+        params = ", ".join(
+            f"{name.split('.', 1)[1]} = {dm.format_value(name, c.fit.value(name), c.fit, name)}"
+            for name in c.effect_params
+        )
+        b, a = it.before.gap, it.after.gap
+        ratio = b.primary / a.primary if a.primary > 0 else float("inf")
+        unit, scale = ("mm", 1e3) if b.primary_name == "position_m" else ("", 1.0)
+        text = f"Missing effect: {c.effect}" + (f", {params}" if params else "")
+        text += (
+            f"; held-out systematic {'RMS' if unit else 'velocity RMS'} "
+            f"{b.primary * scale:.3g} → {a.primary * scale:.3g}{(' ' + unit) if unit else ''} "
+            f"({ratio:.1f}×)"
+        )
+        if np.isfinite(b.on_velocity) and np.isfinite(a.on_velocity) and unit:
+            text += f"; MIDI velocity RMS {b.on_velocity:.2g} → {a.on_velocity:.2g}"
+        parts.append(text)
+    return "\n".join(parts) if parts else "No missing effect found."
+
+
+def discover(
+    keystrokes: Sequence[Keystroke],
+    model: KeystrokeModel,
+    settings: DiscoverySettings | None = None,
+) -> DiscoveryResult:
+    """Run the discovery loop on measured keystrokes, starting from `model`."""
+    settings = settings or DiscoverySettings()
+    keystrokes = list(keystrokes)
+    train_idx, held_idx = stratified_split(keystrokes, settings.held_out_fraction, settings.seed)
+    train = [keystrokes[i] for i in train_idx]
+    held = [keystrokes[i] for i in held_idx]
+    rng = np.random.default_rng(settings.seed)
+
+    weights = dm.estimate_weights(train, dm.predict(model, train))
+    base, _ = _fit_model(model, None, train, weights, settings.max_nfev)
+    weights = dm.estimate_weights(train, dm.predict(base, train))
+    current, current_fit = base, None
+    held_before = tuple(dm.predict(base, held))
+    iterations: list[Iteration] = []
+    for index in range(settings.max_iterations):
+        # The current model is already fitted (base first, then jointly with each accepted
+        # effect): its χ² with the base parameters counted is the reference for ΔBIC.
+        _, current_fit = _fit_model(current, None, train, weights, 0, base=False)
+        predictions_held = dm.predict(current, held)
+        before = localise(held, predictions_held, sigma_m=weights.sigma_m)
+        proposals = dm.sparse_proposals(current, train, dm.predict(current, train))
+        pending: list[Candidate] = []
+        fitted: dict[str, KeystrokeModel] = {}
+        screened: dict[str, tuple[KeystrokeModel, FitResult]] = {}
+        for effect in dm.candidate_effects(current, train, proposals):
+            screened[effect] = _screen(current, effect, train, weights, settings.max_nfev)
+        # Joint refits (base + effect) for the most promising candidates only: screening with
+        # the base fixed already ranks them, and the decision uses the joint fit.
+        ranked = sorted(screened, key=lambda e: screened[e][1].bic)
+        for effect in ranked:
+            cand_model, cand_fit = screened[effect]
+            if effect in ranked[: settings.joint_refits] and current_fit.bic - cand_fit.bic > 0:
+                cand_model, cand_fit = _fit_model(
+                    cand_model, effect, train, weights, settings.max_nfev
+                )
+            after = localise(held, dm.predict(cand_model, held), sigma_m=weights.sigma_m)
+            names = tuple(n for n in cand_fit.names if n.startswith(effect + "."))
+            pending.append(
+                Candidate(
+                    effect=effect,
+                    fit=cand_fit,
+                    effect_params=names,
+                    off_values=dm.off_values(names),
+                    delta_bic=current_fit.bic - cand_fit.bic,
+                    gap_before=before.gap.primary,
+                    gap_after=after.gap.primary,
+                    proposed_by=("sparse",) if any(p.family == effect for p in proposals) else (),
+                )
+            )
+            fitted[effect] = cand_model
+        best = max(pending, key=lambda c: c.delta_bic, default=None)
+        null: tuple[float, ...] = ()
+        if (
+            best is not None
+            and best.delta_bic > settings.rule.bic_margin
+            and settings.bootstrap_samples
+        ):
+            null = _bootstrap(current, best.effect, train, weights, settings, rng)
+        threshold = settings.rule.threshold(null)
+        accepted, judged = choose(pending, settings.rule, threshold)
+        after_loc = None
+        if accepted is not None:
+            current = fitted[accepted.effect]
+            after_loc = localise(held, dm.predict(current, held), sigma_m=weights.sigma_m)
+        iterations.append(
+            Iteration(index, before, after_loc, tuple(judged), accepted, threshold, null, proposals)
+        )
+        if accepted is None:
+            break
+    held_after = tuple(dm.predict(current, held))
+    final = localise(held, list(held_after), sigma_m=weights.sigma_m)
+    verdict, explained = _verdict(iterations, final, settings)
+    return DiscoveryResult(
+        iterations=tuple(iterations),
+        start_model=model,
+        base_model=base,
+        final_model=current,
+        verdict=verdict,
+        explained=explained,
+        decision_line=_decision_line(iterations),
+        n_train=len(train),
+        n_held_out=len(held),
+        held_out_ids=tuple(k.key_id for k in held),
+        predictions_before=held_before,
+        predictions_after=held_after,
+        held_out=tuple(held),
+    )

@@ -1,0 +1,119 @@
+"""Turn stored runs into the measured keystrokes discovery compares against.
+
+Positions come from the mocap source only (the arm log is the command's echo and sim-truth is
+not a measurement); every trace is referenced to its own rest level, because a mocap marker sits
+at an arbitrary height above the surface it tracks. MIDI outcomes come from the trials table.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from pianobot.analysis.discover_data import Keystroke
+from pianobot.errors import InputError
+from pianobot.physics.trajectory import Press
+from pianobot.store import Run, load_run
+
+_REST_SAMPLES = 6
+
+
+def _rest_referenced(values: np.ndarray) -> np.ndarray:
+    finite = values[np.isfinite(values)]
+    if finite.size == 0:
+        return values
+    return values - float(np.median(finite[:_REST_SAMPLES]))
+
+
+def _float(row: pd.Series, name: str, default: float = float("nan")) -> float:
+    value = row.get(name, default)
+    try:
+        out = float(value)
+    except (TypeError, ValueError):
+        return default
+    return out if math.isfinite(out) else default
+
+
+def _press(row: pd.Series) -> Press:
+    down = _float(row, "down_velocity_mps")
+    up = _float(row, "up_velocity_mps", down)
+    return Press(
+        distance_m=_float(row, "distance_m", 0.0),
+        depth_m=_float(row, "depth_m"),
+        down_velocity_mps=down,
+        up_velocity_mps=up if math.isfinite(up) else down,
+        acceleration_mps2=_float(row, "acceleration_mps2", 1.0),
+        hold_s=_float(row, "hold_s", 0.0),
+    )
+
+
+def keystrokes_from_run(run: Run) -> list[Keystroke]:
+    """Every ok or silent trial of a run as a measured keystroke.
+
+    Raises:
+        InputError: when the run has no usable trial (no press parameters).
+    """
+    trials = run.trials
+    if trials.empty:
+        raise InputError("the run has no trials", run.run_id)
+    trials = trials[trials["status"].isin(["ok", "silent"])]
+    trials = trials[np.isfinite(trials["depth_m"]) & np.isfinite(trials["down_velocity_mps"])]
+    samples = run.samples
+    mocap = samples[samples["source"] == "mocap"] if not samples.empty else samples
+    by_trial = dict(tuple(mocap.groupby("trial_id", sort=False))) if not mocap.empty else {}
+    has_midi = bool(not run.midi.empty or trials["on_velocity"].notna().any())
+    out: list[Keystroke] = []
+    for _, row in trials.iterrows():
+        trial_id = str(row["trial_id"])
+        group = by_trial.get(trial_id)
+        if group is not None and len(group) > 8:
+            group = group.sort_values("t_s")
+            t = group["t_s"].to_numpy(np.float64)
+            x = np.vstack(
+                [_rest_referenced(group[c].to_numpy(np.float64)) for c in ("x0_m", "x1_m", "x2_m")]
+            )
+        else:
+            t, x = np.empty(0), np.empty((3, 0))
+        sounded = (
+            None
+            if not has_midi
+            else bool(row["status"] == "ok" and np.isfinite(_float(row, "on_velocity")))
+        )
+        out.append(
+            Keystroke(
+                key_id=f"{run.run_id}/{trial_id}",
+                press=_press(row),
+                vacuum_kpa=_float(row, "vacuum_kpa", 0.0),
+                t_s=t,
+                x_m=x,
+                on_velocity=_float(row, "on_velocity"),
+                t_on_s=_float(row, "t_on_s"),
+                t_off_s=_float(row, "t_off_s"),
+                sounded=sounded,
+            )
+        )
+    if not out:
+        raise InputError("the run has no ok or silent trial with press parameters", run.run_id)
+    return out
+
+
+def load_keystrokes(run_ids: Sequence[str], data_dir: Path) -> list[Keystroke]:
+    """Keystrokes of several runs, in run order.
+
+    Raises:
+        InputError: no run id given, an unknown run, or a run without usable trials.
+    """
+    if not run_ids:
+        raise InputError("give at least one run id", "RUN_ID")
+    keystrokes: list[Keystroke] = []
+    for run_id in run_ids:
+        keystrokes.extend(keystrokes_from_run(load_run(run_id, data_dir)))
+    if not any(k.has_motion for k in keystrokes) and not any(
+        k.sounded is not None for k in keystrokes
+    ):
+        raise InputError("the runs have neither mocap samples nor MIDI outcomes", ",".join(run_ids))
+    return keystrokes
