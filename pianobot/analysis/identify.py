@@ -265,9 +265,23 @@ def identify_trajectories(
 
     r = problem.residuals(theta)
     dof = max(r.size - theta.size, 1)
-    s2 = float(r @ r) / dof
+    # Residuals of neighbouring samples are correlated (model error, filtered input noise);
+    # treating them as independent would make the intervals too narrow. Scale the variance by
+    # the AR(1) factor (1 + ρ)/(1 − ρ), i.e. count effective rather than raw samples.
+    s2 = float(r @ r) / dof * _ar1_inflation(problem, theta)
     J = _jacobian(problem, theta)
-    cov = s2 * np.linalg.pinv(J.T @ J)
+    bread = np.linalg.pinv(J.T @ J)
+    cov = s2 * bread
+    # Cluster-robust (sandwich) covariance with keystrokes as clusters: honest when errors are
+    # correlated within a keystroke (e.g. noise on the measured input). Keep the larger variance.
+    keystroke_of = np.broadcast_to(np.arange(batch.n)[:, None, None], problem.mask.shape)[problem.mask]
+    meat = np.zeros((theta.size, theta.size))
+    for k in range(batch.n):
+        g = J[keystroke_of == k].T @ r[keystroke_of == k]
+        meat += np.outer(g, g)
+    n_cl = max(batch.n, 2)
+    sandwich = bread @ meat @ bread * n_cl / (n_cl - 1)
+    cov = np.where(np.eye(theta.size, dtype=bool), np.maximum(cov, sandwich), cov)
     point = _derived(theta, layout, prior)
     # Delta method for every derived quantity: gradient by finite differences in theta.
     jac_ci: dict[str, tuple[float, float]] = {}
@@ -319,6 +333,20 @@ def identify_trajectories(
         bic=bic,
         fixed={"m1_kg": prior.m1_kg, "m2_kg": prior.m2_kg},
     )
+
+
+def _ar1_inflation(problem: _Problem, theta: FloatArray) -> float:
+    """(1 + ρ)/(1 − ρ) for the lag-1 autocorrelation ρ ≥ 0 of the residuals along time."""
+    ss = _systems(theta, problem.layout, problem.prior, problem.level_idx)
+    y = lsim_uniform(ss, problem.batch.t_s, problem.batch.x0_m[:, None, :])
+    meas = np.stack([problem.batch.x1_m, problem.batch.x2_m], axis=1)
+    e = y - meas
+    a, b = e[..., 1:], e[..., :-1]
+    ok = np.isfinite(a) & np.isfinite(b)
+    den = float(np.sum(np.where(ok, b, 0.0) ** 2))
+    rho = float(np.sum(np.where(ok, a * b, 0.0))) / den if den > 0 else 0.0
+    rho = min(max(rho, 0.0), 0.99)
+    return (1.0 + rho) / (1.0 - rho)
 
 
 def _bic(problem: _Problem, theta: FloatArray) -> float:

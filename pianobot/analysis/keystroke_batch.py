@@ -50,12 +50,19 @@ class KeystrokeBatch:
         )
 
 
-def _rest(values: FloatArray) -> float:
-    """Rest level: the median of the first finite samples (every trace starts at rest)."""
-    finite = values[np.isfinite(values)]
-    if finite.size == 0:
+def _rest(t_s: FloatArray, values: FloatArray) -> float:
+    """Rest level: the median before motion start (t < 0) if recorded, else the first sample.
+
+    Times are relative to motion start, so samples at t < 0 are at rest; a trace that starts
+    at t = 0 is at rest only at its very first sample.
+    """
+    finite = np.isfinite(values)
+    before = finite & (t_s < 0.0)
+    if before.any():
+        return float(np.median(values[before]))
+    if not finite.any():
         return float("nan")
-    return float(np.median(finite[: max(3, min(12, finite.size // 10 + 1))]))
+    return float(values[np.argmax(finite)])
 
 
 def _on_grid(t: FloatArray, x: FloatArray, grid: FloatArray, *, hold: bool) -> FloatArray:
@@ -136,11 +143,11 @@ def keystroke_batch(
         g_in = by_in[tid].sort_values("t_s")
         t_in = g_in["t_s"].to_numpy(float)
         a = g_in["x0_m"].to_numpy(float)
-        x0[i] = _on_grid(t_in, a - _rest(a), grid, hold=True)
+        x0[i] = _on_grid(t_in, a - _rest(t_in, a), grid, hold=True)
         t_out = g_out["t_s"].to_numpy(float)
         for target, col in ((x1, "x1_m"), (x2, "x2_m")):
             v = g_out[col].to_numpy(float) if col in g_out else np.full(t_out.shape, np.nan)
-            target[i] = _on_grid(t_out, v - _rest(v), grid, hold=False)
+            target[i] = _on_grid(t_out, v - _rest(t_out, v), grid, hold=False)
     keep = np.isfinite(x0).all(axis=1)
     if not keep.any():
         raise InputError("no arm trace could be put on a uniform grid", "identify")
