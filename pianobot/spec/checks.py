@@ -132,9 +132,7 @@ def _value_problem(
     p = PARAMETERS[name]
     shown = format_value(value)
     if not p.within_bounds(value):
-        whole = " whole" if p.integer else ""
-        hint = " (kPa gauge: a vacuum is negative, e.g. -60)" if name == "vacuum_kpa" and value > 0 else ""
-        return Problem(path, f"must be a{whole} value in {p.bounds_text()}{hint}, got {shown}")
+        return Problem(path, p.bounds_message(value))
     limits = envelope.get(name)
     if limits is None or limits.contains(value):
         return None

@@ -208,6 +208,8 @@ def _replace_values(
             edits.append((start, start, f"{indent}{key}: {snippet}\n"))
             continue
         start, end = node.start_mark.index, node.end_mark.index
+        # A block list's node runs on to the next key; replace only the list itself.
+        end = start + len(text[start:end].rstrip())
         gap = "" if text[start - 1 : start].isspace() else " "
         edits.append((start, end, gap + snippet))
     for start, end, snippet in sorted(edits, reverse=True):

@@ -135,7 +135,7 @@ def error_message(error: ErrorDetails) -> tuple[Location, str]:
         return path, f"must be text{got}"
     if kind in ("greater_than", "greater_than_equal", "less_than", "less_than_equal"):
         if name in PARAMETERS:
-            return path, f"must be in {PARAMETERS[name].bounds_text()}{got}"
+            return path, PARAMETERS[name].bounds_message(value)
         op = {"greater_than": ">", "greater_than_equal": ">=", "less_than": "<"}.get(kind, "<=")
         bound = next(iter(ctx.values()))
         return path, f"must be {op} {bound}{_in_unit(name).replace(' in ', ' ')}{got}"

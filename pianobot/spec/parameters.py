@@ -40,6 +40,15 @@ class Parameter:
         left = "(" if self.exclusive_minimum else "["
         return f"{left}{_fmt(self.minimum)}, {_fmt(self.maximum)}] {self.unit}".rstrip()
 
+    def bounds_message(self, value: object) -> str:
+        """`must be in (0, 3] m/s, got -1`, with a hint for the usual vacuum sign mistake."""
+        whole = "a whole number " if self.integer else ""
+        shown = format_value(value) if isinstance(value, int | float) else repr(value)
+        hint = ""
+        if self.name == "vacuum_kpa" and isinstance(value, int | float) and value > 0:
+            hint = " (gauge pressure: a vacuum is negative, e.g. -60)"
+        return f"must be {whole}in {self.bounds_text()}{hint}, got {shown}"
+
     def within_bounds(self, value: float) -> bool:
         """Whether `value` is physically meaningful for this parameter."""
         if not math.isfinite(value):
