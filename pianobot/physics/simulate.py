@@ -1,0 +1,281 @@
+"""Fast batch simulation of keystrokes with any set of effects.
+
+A keystroke runs from approach to rest: before contact the fingertip is a free mass-spring-
+damper hanging from the arm (m1, k0, c0); once it touches the key (x1 − x2 ≥ distance_m) the
+coupling k1, c1 acts on the key (m2, k2, c2). Without the `contact` effect the coupling is the
+study's bilateral linear spring, engaged at first touch and never released (so it also pulls
+the key back up with the finger); with `contact` it only pushes, and the finger and key
+separate and re-touch. The other effects are described in `effects.py`.
+
+Integration is a compiled fixed-step semi-implicit scheme (see `_kernel.py`) with an internal
+step ≤ 0.2 ms, outputs taken every `out_dt_s`. Keystrokes of different length share one time
+grid: each is simulated to the end of the longest (arm at rest at its start height after).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+import pandas as pd
+
+from pianobot.physics import _kernel as K
+from pianobot.physics.effects import Effects
+from pianobot.physics.model import KeystrokeModel
+from pianobot.physics.msd import MSDParams
+from pianobot.physics.trajectory import Press, press_timing
+
+FloatArray = npt.NDArray[np.float64]
+
+MAX_STEP_S = 2e-4  # impacts on the keybed (≈ 150 Hz) need at least ~30 steps per period
+SETTLE_S = 0.3  # simulated after the arm is back up, so the key can come to rest
+
+
+@dataclass(frozen=True)
+class SimBatch:
+    """Simulated keystrokes on one time grid: arrays of shape (n, T), time (T,)."""
+
+    t_s: FloatArray
+    x0_m: FloatArray
+    x1_m: FloatArray
+    x2_m: FloatArray
+    v2_mps: FloatArray
+    contact_force_n: FloatArray
+
+    @property
+    def n(self) -> int:
+        return int(self.x2_m.shape[0])
+
+    def to_pandas(self) -> pd.DataFrame:
+        """Long form: one row per (keystroke, sample) with every signal as a column."""
+        n, T = self.x2_m.shape
+        return pd.DataFrame(
+            {
+                "keystroke": np.repeat(np.arange(n), T),
+                "t_s": np.tile(self.t_s, n),
+                "x0_m": self.x0_m.ravel(),
+                "x1_m": self.x1_m.ravel(),
+                "x2_m": self.x2_m.ravel(),
+                "v2_mps": self.v2_mps.ravel(),
+                "contact_force_n": self.contact_force_n.ravel(),
+            }
+        )
+
+
+def drift_factor(block_key: str, drift_fraction: float) -> float:
+    """Relative finger stiffness of a block: 1 + drift_fraction·u, u ∈ [−1, 1] from the key.
+
+    Deterministic (a hash, not hidden state) so a resumed run sees the same drift.
+    """
+    digest = hashlib.sha256(block_key.encode("utf-8")).digest()
+    u = int.from_bytes(digest[:8], "big") / float(2**64) * 2.0 - 1.0
+    return 1.0 + drift_fraction * u
+
+
+def effect_vector(effects: Effects) -> FloatArray:
+    """The kernel's effect switches and values for a set of effects."""
+    ep = np.zeros(K.N_EP)
+    ep[K.E_CONTACT] = 1.0 if "contact" in effects else 0.0
+    if "keybed" in effects:
+        p = effects.params("keybed")
+        ep[K.E_BED_ON] = 1.0 if p["bed_stiffness_npm"] > 0.0 else 0.0
+        ep[K.E_BED_HC] = 1.0 if effects.form("keybed") == "hunt_crossley" else 0.0
+        ep[K.E_BED_DEPTH] = p["bed_depth_m"]
+        ep[K.E_BED_K] = p["bed_stiffness_npm"]
+        ep[K.E_BED_C] = p["bed_damping_nspm"]
+    ep[K.E_PRELOAD] = effects.value("key_preload", "preload_n", 0.0)
+    if "key_friction" in effects:
+        p = effects.params("key_friction")
+        ep[K.E_FRIC_C] = p["friction_n"]
+        if effects.form("key_friction") == "stribeck":
+            ep[K.E_FRIC_S] = p["static_friction_n"]
+            ep[K.E_FRIC_VS] = p["stribeck_velocity_mps"]
+        ep[K.E_FRIC_ON] = 1.0 if max(ep[K.E_FRIC_C], ep[K.E_FRIC_S]) > 0.0 else 0.0
+    if "finger_stiffening" in effects:
+        form = effects.form("finger_stiffening")
+        ep[K.E_STIFF_FORM] = K.STIFF_CUBIC if form == "cubic" else K.STIFF_EXP
+        ep[K.E_STIFF_BETA] = effects.params("finger_stiffening")["stiffening_per_m"]
+    if "contact" in effects:  # adhesion acts only where the contact can open at all
+        ep[K.E_ADHESION] = effects.value("adhesion", "pull_off_force_n", 0.0)
+    if "letoff" in effects:
+        p = effects.params("letoff")
+        ep[K.E_LETOFF_F] = p["letoff_force_n"]
+        ep[K.E_LETOFF_X] = p["letoff_depth_m"]
+        ep[K.E_LETOFF_W] = p["letoff_width_m"]
+    if "arm_lag" in effects:
+        form = effects.form("arm_lag")
+        ep[K.E_LAG_FORM] = K.LAG_FIRST_ORDER if form == "first_order" else K.LAG_DELAY
+        ep[K.E_LAG_S] = effects.params("arm_lag")["arm_lag_s"]
+    return ep
+
+
+def _model_columns(
+    msd: MSDParams, effects: Effects, vacuum_kpa: FloatArray, block_keys: Sequence[str] | None
+) -> FloatArray:
+    """Per-keystroke physical parameters (drift applied to the finger's k0 and k1)."""
+    n = vacuum_kpa.size
+    kp = np.zeros((n, K.N_KP))
+    drift = effects.value("stiffness_drift", "drift_fraction", 0.0)
+    if block_keys is not None and len(block_keys) != n:
+        raise ValueError(f"block_keys has {len(block_keys)} entries for {n} keystrokes.")
+    cache: dict[tuple[float, str], tuple[float, ...]] = {}
+    for j in range(n):
+        key = "" if block_keys is None else str(block_keys[j])
+        p = float(vacuum_kpa[j])
+        row = cache.get((p, key))
+        if row is None:
+            lp = msd.at(p)
+            scale = drift_factor(f"{key}|{p:g}", drift) if drift > 0.0 else 1.0
+            row = (
+                lp.m1_kg, lp.m2_kg, lp.k0_npm * scale, lp.c0_nspm,
+                lp.k1_npm * scale, lp.c1_nspm, lp.k2_npm, lp.c2_nspm,
+            )
+            cache[(p, key)] = row
+        kp[j, : K.DIST] = row
+    return kp
+
+
+def _grid(out_dt_s: float, step_s: float) -> tuple[float, int]:
+    """Internal step (a divisor of the output step, ≤ step_s ≤ MAX_STEP_S) and outputs per step."""
+    if not out_dt_s > 0.0 or not step_s > 0.0:
+        raise ValueError(f"out_dt_s and step_s should be > 0, got {out_dt_s} and {step_s}.")
+    if step_s > MAX_STEP_S:
+        raise ValueError(f"step_s should be <= {MAX_STEP_S} s for impacts, got {step_s}.")
+    every = max(1, math.ceil(out_dt_s / step_s - 1e-9))
+    return out_dt_s / every, every
+
+
+_KEY_SIDE = (
+    K.E_CONTACT, K.E_BED_ON, K.E_PRELOAD, K.E_FRIC_ON, K.E_STIFF_BETA, K.E_ADHESION, K.E_LETOFF_F,
+)
+
+
+def _is_linear(ep: FloatArray) -> bool:
+    """True when no effect acts on the finger or key: the fast linear kernel applies."""
+    return not any(ep[i] != 0.0 for i in _KEY_SIDE)
+
+
+def _run(
+    kp: FloatArray, ep: FloatArray, mode: int, trace_t: FloatArray, trace_x0: FloatArray,
+    t_start: float, duration_s: float, out_dt_s: float, step_s: float,
+) -> SimBatch:
+    h, every = _grid(out_dt_s, step_s)
+    n_out = int(math.floor(duration_s / out_dt_s + 1e-9)) + 1
+    n_steps = (n_out - 1) * every
+    n = kp.shape[0]
+    outs = [np.empty((n, n_out)) for _ in range(5)]
+    kernel = K.integrate_linear if _is_linear(ep) else K.integrate
+    kernel(kp, ep, mode, trace_t, trace_x0, t_start, h, n_steps, every, *outs)
+    t = t_start + np.arange(n_out) * out_dt_s
+    return SimBatch(t, *outs)
+
+
+def _vacuum(vacuum_kpa: npt.ArrayLike, n: int) -> FloatArray:
+    p = np.asarray(vacuum_kpa, dtype=np.float64)
+    if p.ndim == 0:
+        return np.full(n, float(p))
+    if p.shape != (n,):
+        raise ValueError(f"vacuum_kpa should be a scalar or have {n} entries, got shape {p.shape}.")
+    return p
+
+
+def press_columns(presses: Sequence[Press], profile: str) -> tuple[FloatArray, FloatArray]:
+    """The kernel's arm columns (n, N_KP) for presses, and each press's duration (s)."""
+    kp = np.zeros((len(presses), K.N_KP))
+    ends = np.zeros(len(presses))
+    for j, press in enumerate(presses):
+        tm = press_timing(press, "trapezoid" if profile == "trapezoid" else "ramp")
+        for cols, mv in ((K.D_A, tm.down), (K.U_A, tm.up)):
+            a = mv.acceleration_mps2 if math.isfinite(mv.acceleration_mps2) else 0.0
+            kp[j, cols : cols + 4] = (a, mv.t_accel_s, mv.t_cruise_s, mv.peak_velocity_mps)
+        kp[j, K.T_UP] = tm.t_hold_end_s
+        kp[j, K.DIST] = press.distance_m
+        ends[j] = tm.t_end_s
+    return kp, ends
+
+
+def simulate_presses(
+    presses: Sequence[Press],
+    vacuum_kpa: npt.ArrayLike,
+    model: KeystrokeModel,
+    *,
+    out_dt_s: float = 1e-3,
+    duration_s: float | None = None,
+    step_s: float = 1e-4,
+    block_keys: Sequence[str] | None = None,
+) -> SimBatch:
+    """Simulate keystrokes commanded as presses (time 0 = start of each press's motion).
+
+    Args:
+        presses: the commanded presses.
+        vacuum_kpa: one level for all, or one per press.
+        model: the keystroke model; `arm_acceleration` selects the trapezoid over the ramp,
+            `arm_lag` delays the arm behind its command.
+        duration_s: simulated time (default: the longest press plus 0.3 s to settle).
+        step_s: largest internal step (the step actually used divides `out_dt_s`).
+        block_keys: one label per press for `stiffness_drift` (same label, same drift).
+    """
+    presses = list(presses)
+    n = len(presses)
+    p = _vacuum(vacuum_kpa, n)
+    arm, ends = press_columns(presses, model.arm_profile)
+    kp = _model_columns(model.msd, model.effects, p, block_keys)
+    kp[:, K.DIST :] = arm[:, K.DIST :]
+    if duration_s is None:
+        duration_s = (float(ends.max()) if n else 0.0) + SETTLE_S
+    empty = np.zeros(1)
+    return _run(kp, effect_vector(model.effects), 0, empty, np.zeros((1, n)), 0.0,
+                float(duration_s), out_dt_s, step_s)
+
+
+def simulate_arm(
+    t_s: npt.ArrayLike,
+    x0_m: npt.ArrayLike,
+    vacuum_kpa: npt.ArrayLike,
+    model: KeystrokeModel,
+    *,
+    distance_m: npt.ArrayLike = 0.0,
+    out_dt_s: float = 1e-3,
+    duration_s: float | None = None,
+    step_s: float = 1e-4,
+    block_keys: Sequence[str] | None = None,
+) -> SimBatch:
+    """Simulate keystrokes driven by given arm traces (e.g. measured TCP z, downward positive).
+
+    The traces are the arm's actual motion, so `arm_lag` and `arm_acceleration` do not apply;
+    they are interpolated linearly to the internal step. The fingertip starts at rest at the
+    first arm sample, `distance_m` above the key at rest.
+
+    Args:
+        t_s: shared sample times (T,), increasing; non-uniform grids are resampled.
+        x0_m: arm traces (n, T) or (T,), finite.
+        distance_m: fingertip–key gap at the start, scalar or one per trace.
+        duration_s: simulated time from t_s[0] (default: to the last sample).
+    """
+    t = np.asarray(t_s, dtype=np.float64)
+    x = np.atleast_2d(np.asarray(x0_m, dtype=np.float64))
+    if t.ndim != 1 or t.size < 2 or x.shape[1] != t.size:
+        raise ValueError(f"t_s should be (T,) with T >= 2 and x0_m (n, T); got {t.shape} and {x.shape}.")
+    if not np.all(np.diff(t) > 0.0):
+        raise ValueError("t_s should be strictly increasing.")
+    if not np.all(np.isfinite(x)):
+        raise ValueError("x0_m has NaN or inf samples; fill gaps before simulating.")
+    dt = float(np.min(np.diff(t)))
+    if not np.allclose(np.diff(t), dt, rtol=1e-6, atol=1e-12):
+        grid = np.arange(t[0], t[-1] + 0.5 * dt, dt)
+        x = np.vstack([np.interp(grid, t, row) for row in x])
+        t = grid
+    n = x.shape[0]
+    kp = _model_columns(model.msd, model.effects, _vacuum(vacuum_kpa, n), block_keys)
+    kp[:, K.DIST] = np.broadcast_to(np.asarray(distance_m, dtype=np.float64), (n,))
+    ep = effect_vector(model.effects)
+    ep[K.E_LAG_FORM] = K.LAG_NONE
+    ep[K.E_LAG_S] = 0.0
+    if duration_s is None:
+        duration_s = float(t[-1] - t[0])
+    return _run(kp, ep, 1, np.ascontiguousarray(t), np.ascontiguousarray(x.T), float(t[0]),
+                float(duration_s), out_dt_s, step_s)
