@@ -58,11 +58,11 @@ def probe(host: str, port: int, timeout_s: float, what: str) -> None:
             return
     except TimeoutError as exc:
         raise DeviceUnavailable(
-            f"{what}: no answer from {host}:{port} within {timeout_s:g} s"
+            f"{what} at {host}:{port}: no answer within {timeout_s:g} s"
         ) from exc
     except OSError as exc:
         reason = exc.strerror or str(exc) or type(exc).__name__
-        raise DeviceUnavailable(f"{what}: cannot reach {host}:{port} ({reason})") from exc
+        raise DeviceUnavailable(f"{what} at {host}:{port}: unreachable ({reason})") from exc
 
 
 def _sdk(module: str) -> Any:
@@ -78,7 +78,7 @@ def _construct(what: str, host: str, port: int, factory: Any, *args: Any) -> Any
     try:
         return factory(host, *args)
     except RuntimeError as exc:
-        raise DeviceUnavailable(f"{what}: {host}:{port} refused ur_rtde ({exc})") from exc
+        raise DeviceUnavailable(f"{what} at {host}:{port}: ur_rtde could not connect ({exc})") from exc
 
 
 def open_receive(host: str, frequency_hz: float, timeout_s: float, factory: Any = None) -> Any:
@@ -86,7 +86,7 @@ def open_receive(host: str, frequency_hz: float, timeout_s: float, factory: Any 
 
     `factory` replaces the SDK class (tests pass fakes; then no socket probe is made).
     """
-    what = "arm (RTDE receive)"
+    what = "UR RTDE receive"
     if factory is None:
         factory = _sdk("rtde_receive").RTDEReceiveInterface
         probe(host, RTDE_PORT, timeout_s, what)
@@ -95,7 +95,7 @@ def open_receive(host: str, frequency_hz: float, timeout_s: float, factory: Any 
 
 def open_control(host: str, frequency_hz: float, timeout_s: float, factory: Any = None) -> Any:
     """An `rtde_control.RTDEControlInterface` (uploads the control script: takes the arm)."""
-    what = "arm (RTDE control)"
+    what = "UR RTDE control"
     if factory is None:
         factory = _sdk("rtde_control").RTDEControlInterface
         probe(host, RTDE_PORT, timeout_s, what)
@@ -104,7 +104,7 @@ def open_control(host: str, frequency_hz: float, timeout_s: float, factory: Any 
 
 def open_io(host: str, timeout_s: float, factory: Any = None) -> Any:
     """An `rtde_io.RTDEIOInterface` (analog and digital outputs)."""
-    what = "vacuum I/O (RTDE io)"
+    what = "UR RTDE I/O"
     if factory is None:
         factory = _sdk("rtde_io").RTDEIOInterface
         probe(host, RTDE_PORT, timeout_s, what)
@@ -115,12 +115,14 @@ def open_dashboard(host: str, timeout_s: float, factory: Any = None) -> Any:
     """A connected `dashboard_client.DashboardClient` (versions, safety status, popups)."""
     if factory is None:
         factory = _sdk("dashboard_client").DashboardClient
-        probe(host, DASHBOARD_PORT, timeout_s, "dashboard")
+        probe(host, DASHBOARD_PORT, timeout_s, "UR dashboard server")
     client = factory(host)
     try:
         client.connect(int(timeout_s * 1000))
     except RuntimeError as exc:
-        raise DeviceUnavailable(f"dashboard: {host}:{DASHBOARD_PORT} ({exc})") from exc
+        raise DeviceUnavailable(
+            f"UR dashboard server at {host}:{DASHBOARD_PORT}: connect failed ({exc})"
+        ) from exc
     return client
 
 

@@ -69,8 +69,9 @@ class LinearCalibration:
 class AnalogVacuum:
     """A regulator on a UR analog output, with optional read-back (implements `Vacuum`).
 
-    Without read-back, a change of level waits `settle_timeout_s` (the regulator's documented
-    settling time) and returns the commanded level.
+    With read-back, `set_kpa` waits until the reading stays within `tolerance_kpa` of the level
+    (RigError with the last reading after `settle_timeout_s`). Without it, `set_kpa` returns the
+    commanded level at once; the rig's `settle_s.after_vacuum_change_s` pause covers settling.
     """
 
     def __init__(
@@ -122,11 +123,8 @@ class AnalogVacuum:
 
     def set_kpa(self, vacuum_kpa: float) -> float:
         """Command a level and wait until the read-back settles; return the measured level."""
-        changed = self._commanded_kpa != vacuum_kpa
         self._command(vacuum_kpa)
         if self.input_channel is None:
-            if changed:
-                self._clock.sleep(self.settle_timeout_s)
             return vacuum_kpa
         deadline = self._clock.now() + self.settle_timeout_s
         stable = 0

@@ -280,7 +280,7 @@ def test_connect_to_maps_a_refused_connection(robot: FakeController) -> None:
     def receive_factory(host: str, frequency: float) -> FakeReceive:
         return FakeReceive(robot, host, frequency)
 
-    with pytest.raises(DeviceUnavailable, match=r"192\.0\.2\.10:30004 refused ur_rtde"):
+    with pytest.raises(DeviceUnavailable, match=r"192\.0\.2\.10:30004: ur_rtde could not connect"):
         UR5Arm.connect_to(make_config(), clock=robot.clock, receive_factory=receive_factory)
 
 
