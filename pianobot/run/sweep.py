@@ -17,7 +17,8 @@ from typing import Any
 
 from pianobot.errors import InputError
 from pianobot.plan import PlanSummary, Trial, check_envelope, expand, plan_frame, summarize
-from pianobot.rig import open_rig
+from pianobot.rig import Rig, open_rig
+from pianobot.rig.errors import DeviceUnavailable
 from pianobot.run.progress import ProgressBar
 from pianobot.run.records import Subscriber
 from pianobot.run.runner import RetryPolicy, Runner, SessionResult
@@ -131,21 +132,34 @@ def run_sweep(
     Raises:
         InputError: bad spec, unknown run, a spec that changed since the run started.
     """
+    writer: RunWriter | None = None
+    done_ids: set[str] = set()
     if resume is not None:
         writer, prepared, done_ids = _reopen(Path(data_dir), resume, spec_path, seed, rig_path)
     else:
         if spec_path is None:
             raise InputError("give a spec file (or --resume RUN_ID)", "SPEC")
         prepared = prepare_sweep(spec_path, seed=seed, rig_path=rig_path)
-        writer = _create(Path(data_dir), prepared)
-        done_ids = set()
-    with writer:
+    with ExitStack() as stack:
+        if writer is not None:
+            stack.enter_context(writer)
+            if not any(t.trial_id not in done_ids for t in prepared.trials):
+                _note_resume(writer, writer.meta, done_ids)
+                writer.finish("completed", None)
+                return _outcome(writer, None, resumed=True)
+        # The rig opens before the run folder exists: an unreachable device leaves nothing.
+        try:
+            rig = stack.enter_context(open_rig(prepared.rig, seed=prepared.seed, world=world))
+        except DeviceUnavailable as exc:
+            raise InputError(f"device unavailable: {exc}", "rig") from None
+        if writer is None:
+            writer = stack.enter_context(_create(Path(data_dir), prepared))
         return _session(
-            writer, prepared, done_ids,
+            writer, rig, prepared, done_ids,
             resumed=resume is not None, progress=progress, subscribers=list(subscribers),
             control=control or StopControl(), batch_trials=batch_trials, batch_s=batch_s,
-            world=world,
         )
+    raise AssertionError("unreachable")  # for type checkers: the with block always returns
 
 
 def _create(data_dir: Path, prepared: PreparedSweep) -> RunWriter:
@@ -213,6 +227,7 @@ def _reopen(
 
 def _session(
     writer: RunWriter,
+    rig: Rig,
     prepared: PreparedSweep,
     done_ids: set[str],
     *,
@@ -222,24 +237,19 @@ def _session(
     control: StopControl,
     batch_trials: int,
     batch_s: float,
-    world: Any | None,
 ) -> RunOutcome:
+    """Run the trials not yet done on an open rig; the run folder records how it ended."""
     meta = writer.meta
     todo = [t for t in prepared.trials if t.trial_id not in done_ids]
     if resumed:
         _note_resume(writer, meta, done_ids)
-    if resumed and not todo:
-        writer.finish("completed", None)
-        return _outcome(writer, None, resumed=True)
+    writer.update_meta(rig={**meta.get("rig", {}), "description": rig.describe()})
     sink = StoreSink(writer, batch_trials=batch_trials, batch_s=batch_s)
     retry = prepared.rig.retry
-    result: SessionResult | None = None
     with ExitStack() as stack:
         stack.enter_context(SignalHandlers(control))
         bar = stack.enter_context(ProgressBar()) if progress else None
         try:
-            rig = stack.enter_context(open_rig(prepared.rig, seed=prepared.seed, world=world))
-            writer.update_meta(rig={**meta.get("rig", {}), "description": rig.describe()})
             if any(i.get("kind") == "safety_stop" for i in meta.get("interruptions", [])):
                 # Resuming a run a protective stop ended means the operator cleared it.
                 rig.clear_stop()
@@ -256,7 +266,7 @@ def _session(
                 writer.run_id, todo, planned=len(prepared.trials), done=len(done_ids)
             )
         except BaseException as exc:
-            # A bug or an unreachable device: keep what was measured, say why the run ended.
+            # A bug or a device failure: keep what was measured, say why the run ended.
             _flush_quietly(sink)
             writer.finish("failed", f"{type(exc).__name__}: {exc}")
             raise
