@@ -16,6 +16,7 @@ fast. Every call is recorded in `controller.calls` as (interface, method, args).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -79,6 +80,7 @@ class FakeController:
     regulator_output_channel: int = 1  # the analog output that drives the regulator
     regulator_input_channel: int = 0  # the analog input its monitor output is wired to
     calls: list[tuple[str, str, tuple[Any, ...]]] = field(default_factory=list)
+    on_tick: Callable[[FakeController], None] | None = None  # e.g. a piano watching the TCP
     _move: _Move | None = None
     _moves_started: int = 0
     _progress: int = -1
@@ -111,8 +113,10 @@ class FakeController:
         if t >= move.duration_s:
             self.pose = list(move.target)
             self._finish_move()
-            return
-        self.pose = self._pose_along(move, max(t, 0.0))
+        else:
+            self.pose = self._pose_along(move, max(t, 0.0))
+        if self.on_tick is not None:
+            self.on_tick(self)
 
     def _pose_along(self, move: _Move, t_s: float) -> list[float]:
         travelled = _travelled_m(move.profile, t_s * self.speed_scaling)
