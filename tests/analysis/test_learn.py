@@ -1,0 +1,64 @@
+"""Learned predictors: grouped CV beats the mean, inverse round-trips, files load back."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from _synthetic_runs import sounded_trials
+
+from pianobot.analysis.learn import LearnedPredictor, cross_validate, save_predictor, training_set
+from pianobot.analysis.predictors import StrokePredictor, load_predictor
+from pianobot.errors import InputError
+
+
+def test_cv_table_best_model_beats_mean() -> None:
+    data = training_set(sounded_trials(0))
+    table = cross_validate(data, ["poly", "spline"], folds=4).set_index("model")
+    assert {"rmse", "mae", "r2", "silent_accuracy", "latency_ms"} <= set(table.columns)
+    assert table.loc["mean", "r2"] < 0.1
+    assert max(table.loc["poly", "r2"], table.loc["spline", "r2"]) > 0.9
+    assert table.loc["poly", "silent_accuracy"] > 0.8
+
+
+def test_groups_keep_repeats_together() -> None:
+    data = training_set(sounded_trials(1, n_repeats=3))
+    assert np.unique(data.groups).size == data.n // 3
+
+
+@pytest.mark.parametrize("kind", ["poly", "gp"])
+def test_inverse_round_trips_within_one_midi_unit(kind: str, tmp_path: Path) -> None:
+    model = LearnedPredictor(kind).fit(training_set(sounded_trials(2)))
+    assert isinstance(model, StrokePredictor)
+    fixed = {"vacuum_kpa": -40.0, "acceleration_mps2": 0.5, "depth_m": 0.03, "distance_m": 0.05}
+    lo, hi = model.velocity_range(max_down_velocity_mps=0.08, **fixed)
+    targets = np.linspace(lo + 0.5, hi - 0.5, 9)
+    speeds = model.inverse(targets, **fixed)
+    assert np.isfinite(speeds).all()
+    back = model.predict(pd.DataFrame({"down_velocity_mps": speeds, **fixed}))["on_velocity"]
+    assert np.max(np.abs(back.to_numpy() - targets)) <= 1.0
+    assert np.isnan(model.inverse([200.0], **fixed)).all()
+    path = save_predictor(model, tmp_path / "p.json")
+    loaded = load_predictor(path)
+    again = loaded.predict(pd.DataFrame({"down_velocity_mps": speeds, **fixed}))["on_velocity"]
+    np.testing.assert_allclose(again.to_numpy(), back.to_numpy())
+
+
+def test_all_silent_is_input_error() -> None:
+    trials = sounded_trials(3).assign(status="silent", on_velocity=np.nan)
+    with pytest.raises(InputError, match="silent"):
+        training_set(trials)
+
+
+def test_wrong_schema_and_tampered_file(tmp_path: Path) -> None:
+    other = tmp_path / "other.json"
+    other.write_text('{"schema": "something/9"}')
+    with pytest.raises(InputError, match="schema"):
+        load_predictor(other)
+    model = LearnedPredictor("poly").fit(training_set(sounded_trials(4)))
+    path = save_predictor(model, tmp_path / "p.json")
+    path.with_suffix(".joblib").write_bytes(b"changed")
+    with pytest.raises(InputError, match="sha256"):
+        load_predictor(path)
