@@ -124,7 +124,7 @@ def _outside(
                        f"{(limits.high - KEY_DIP_M) * 1e3:.1f} mm{source}")
         elif limits.low == limits.high:
             message = (f"{name} must be {format_value(limits.low)} {unit} for the {finger} "
-                       f"finger, got {format_value(value)}")
+                       f"finger{source}, got {format_value(value)}")
         out.append(Violation(int(i), trials[int(i)].trial_id, name, value,
                              (limits.low, limits.high), message, "error", rule))
     return out
