@@ -435,3 +435,12 @@ def test_write_rig_calibration_refuses_bad_input(tmp_path: Path) -> None:
     with pytest.raises(InputError, match="6 finite numbers"):
         write_rig_calibration(lab, [0.0] * 5, datetime(2024, 1, 1))
     assert lab.read_text() == before
+
+
+def test_world_overrides_are_validated(tmp_path: Path) -> None:
+    ok = load_rig(write(tmp_path, "world: {preset: linear, vacuum_tau_s: 2.0}\n", "ok.yaml"))
+    assert ok.world == {"preset": "linear", "vacuum_tau_s": 2.0}
+    path = write(tmp_path, "world: {vacum_tau_s: 2.0}\n", "bad.yaml")
+    with pytest.raises(InputError, match="did you mean 'vacuum_tau_s'") as info:
+        load_rig(path)
+    assert info.value.where == f"{path}: world"

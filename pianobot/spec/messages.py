@@ -96,10 +96,13 @@ def _model_types(annotation: Any) -> list[Any]:
     return found
 
 
-def unknown_key_message(path: Location, key: str) -> str:
-    """`unknown key 'depth_mm'; did you mean 'depth_m'?` (with the valid names for parameters)."""
+def unknown_key_message(path: Location, key: str, known: Sequence[str] | None = None) -> str:
+    """`unknown key 'depth_mm'; did you mean 'depth_m'?` (with the valid names for parameters).
+
+    `known` are the valid keys at that place, when the caller knows them.
+    """
     in_parameters = len(path) >= 2 and path[-2] in _PARAMETER_MAPPINGS
-    pool = list(PARAMETER_NAMES) if in_parameters else _known_keys()
+    pool = list(known or (PARAMETER_NAMES if in_parameters else _known_keys()))
     message = f"unknown key {key!r}"
     close = difflib.get_close_matches(key, pool, n=1, cutoff=0.6)
     if close:
@@ -109,14 +112,14 @@ def unknown_key_message(path: Location, key: str) -> str:
     return message
 
 
-def error_message(error: ErrorDetails) -> tuple[Location, str]:
-    """(YAML path, one-line message) for one pydantic error."""
+def error_message(error: ErrorDetails, known: Sequence[str] | None = None) -> tuple[Location, str]:
+    """(YAML path, one-line message) for one pydantic error (`known`: valid keys, if known)."""
     path = clean_location(error["loc"])
     kind, ctx, value = error["type"], error.get("ctx", {}), error.get("input")
     name = _field_name(path)
     got = f", got {_short(value)}"
     if kind == "extra_forbidden":
-        return path, unknown_key_message(path, str(path[-1]))
+        return path, unknown_key_message(path, str(path[-1]), known)
     if kind == "missing":
         if path and isinstance(path[-1], int):
             return path, "missing item: this list has too few values"

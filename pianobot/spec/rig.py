@@ -10,8 +10,9 @@ from __future__ import annotations
 
 from typing import Any, Literal
 
-from pydantic import Field, field_validator, model_validator
+from pydantic import Field, ValidationError, field_validator, model_validator
 
+from pianobot.spec.messages import error_message, format_path
 from pianobot.spec.parameters import FINGER_ENVELOPES, PARAMETERS, Finger, Limits
 from pianobot.spec.sweep import StrictModel
 
@@ -249,6 +250,16 @@ class RigSpec(StrictModel):
         preset = value.get("preset", "default")
         if preset not in WORLD_PRESETS:
             raise ValueError(f"preset must be one of {', '.join(WORLD_PRESETS)}, got {preset!r}")
+        overrides = {k: v for k, v in value.items() if k != "preset"}
+        if overrides:
+            # Imported only when needed: the physics world pulls in the simulator.
+            from pianobot.physics.world import WorldConfig
+
+            try:
+                WorldConfig.model_validate(overrides)
+            except ValidationError as exc:
+                path, message = error_message(exc.errors()[0], list(WorldConfig.model_fields))
+                raise ValueError(f"{format_path(path)}: {message}") from None
         return value
 
     @model_validator(mode="after")
