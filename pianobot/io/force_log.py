@@ -233,7 +233,8 @@ def align_to_note_ons(
     bursts without note-ons. Starting from the nominal rate and each pairing of one of the first
     bursts with one of the first note-ons, notes are matched one-to-one to the nearest predicted
     burst time (within 40 % of the typical burst spacing) and the line t = offset + index/rate is
-    refitted by least squares until the matches stop changing. The fit matching most notes (then
+    refitted by least squares until the matches stop changing, over a span of notes that doubles
+    (8, 16, ...) until it covers them all. The fit matching most notes (then
     the smallest rms) wins. None when fewer than 3 pairs match.
     """
     index = np.asarray(burst_index, dtype=np.float64)
@@ -248,16 +249,24 @@ def align_to_note_ons(
         for i in range(min(max_shift, notes.size)):
             slope, offset = 1.0 / nominal_rate_hz, notes[i] - index[j] / nominal_rate_hz
             pairs: list[tuple[int, int]] = []
-            for _ in range(10):
-                found = _match(offset + slope * index, notes, tolerance)
-                if len(found) < 3 or found == pairs:
+            # Grow the matched span gradually: a wrong nominal rate drifts far from the truth
+            # over a long capture, but barely over the first few presses.
+            horizon = 8
+            while slope > 0:
+                span = notes[: min(horizon, notes.size)]
+                for _ in range(10):
+                    found = _match(offset + slope * index, span, tolerance)
+                    if len(found) < 3 or found == pairs:
+                        break
+                    pairs = found
+                    x = index[[p[0] for p in pairs]]
+                    y = notes[[p[1] for p in pairs]]
+                    slope, offset = (float(c) for c in np.polyfit(x, y, 1))
+                    if slope <= 0:
+                        break
+                if horizon >= notes.size:
                     break
-                pairs = found
-                x = index[[p[0] for p in pairs]]
-                y = notes[[p[1] for p in pairs]]
-                slope, offset = (float(c) for c in np.polyfit(x, y, 1))
-                if slope <= 0:
-                    break
+                horizon *= 2
             if len(pairs) < 3 or slope <= 0:
                 continue
             residual = notes[[p[1] for p in pairs]] - (

@@ -231,9 +231,9 @@ def _data(lines: list[str], n_columns: int, where: str) -> npt.NDArray[np.float6
     except (pd.errors.ParserError, ValueError) as exc:
         raise InputError(f"unreadable data rows ({str(exc).splitlines()[0]})", where) from None
     for column in frame.columns:
-        if frame[column].dtype == object:
-            frame[column] = pd.to_numeric(frame[column], errors="coerce")
-    return frame.to_numpy(dtype=np.float64)
+        if not pd.api.types.is_numeric_dtype(frame[column]):
+            frame[column] = pd.to_numeric(frame[column].astype(object), errors="coerce")
+    return frame.to_numpy(dtype=np.float64, na_value=np.nan)
 
 
 def assign_roles(take: MocapTake, given: dict[str, str], where: str) -> dict[str, str]:
