@@ -3,17 +3,21 @@
 from __future__ import annotations
 
 import json
+import math
+import statistics
 import subprocess
 import sys
 import time
 import uuid
 from collections.abc import Iterator
+from dataclasses import dataclass
 from typing import Any
 
 import pytest
 
 from pianobot.rig.errors import DeviceUnavailable
 from pianobot.rig.midi import MidiKeyboard, resolve_port, to_event
+from pianobot.rig.protocols import MidiEvent
 
 # (offset s, message) — velocity-0 note-ons, a double note-on, active sensing and clock included.
 SCRIPT: list[tuple[float, dict[str, Any]]] = [
@@ -34,6 +38,14 @@ SCRIPT: list[tuple[float, dict[str, Any]]] = [
 ]
 NOTE_TYPES = ("note_on", "note_off")
 
+NOTES = [fields for _, fields in SCRIPT if fields["type"] in NOTE_TYPES]
+TOLERANCE_S = 0.010
+# A non-realtime JACK server on a loaded machine can stall a cycle by tens of milliseconds (the OS
+# scheduler, not pianobot), so the script may be replayed; a timestamping fault in pianobot
+# (stamping on read, by count, or with mido's zero `time`) fails every replay.
+REPLAYS = 3
+DELIVERY_WAIT_S = 5.0
+
 PLAYER = r"""
 import json, sys, time
 import mido
@@ -41,18 +53,16 @@ script = json.loads(sys.argv[2])
 backend = mido.Backend("mido.backends.rtmidi/UNIX_JACK", load=True)
 port = backend.open_output("keys", client_name=sys.argv[1])
 print("READY", flush=True)
-sys.stdin.readline()  # the test connects its input, then says go
-start = time.monotonic() + 0.05
-sent = []
-for offset, fields in script:
-    while (left := start + offset - time.monotonic()) > 0:
-        time.sleep(min(left, 0.0005) if left < 0.002 else left - 0.0015)
-    message = mido.Message(**fields)
-    sent.append(time.monotonic())
-    port.send(message)
-time.sleep(0.1)
-print(json.dumps(sent), flush=True)
-sys.stdin.readline()
+while sys.stdin.readline().strip() == "go":  # the test connects its input, then says go
+    start = time.monotonic() + 0.05
+    sent = []
+    for offset, fields in script:
+        while (left := start + offset - time.monotonic()) > 0:
+            time.sleep(min(left, 0.0005) if left < 0.002 else left - 0.0015)
+        message = mido.Message(**fields)
+        sent.append(time.monotonic())
+        port.send(message)
+    print(json.dumps(sent), flush=True)
 port.close()
 """
 
@@ -88,14 +98,45 @@ def player(jack_server: str) -> Iterator[tuple[subprocess.Popen[str], str]]:
         process.wait()
 
 
-def _play(process: subprocess.Popen[str]) -> list[float]:
+@dataclass(frozen=True)
+class Replay:
+    """One play of the script: when each note message was sent, and what pianobot recorded."""
+
+    sent_s: list[float]  # note messages only
+    events: list[MidiEvent]
+
+    @property
+    def timing_errors_s(self) -> list[float]:
+        """Each event's latency minus the median latency: relative timing errors."""
+        latencies = [e.t_s - t for e, t in zip(self.events, self.sent_s, strict=True)]
+        typical = statistics.median(latencies)
+        return [latency - typical for latency in latencies]
+
+
+def _play_once(process: subprocess.Popen[str], keyboard: MidiKeyboard) -> Replay:
     assert process.stdin is not None and process.stdout is not None
+    t_from = time.monotonic()
     process.stdin.write("go\n")
     process.stdin.flush()
-    sent: list[float] = json.loads(process.stdout.readline())
-    process.stdin.write("done\n")
-    process.stdin.flush()
-    return sent
+    sent_all: list[float] = json.loads(process.stdout.readline())
+    sent = [t for t, (_, f) in zip(sent_all, SCRIPT, strict=True) if f["type"] in NOTE_TYPES]
+    deadline = time.monotonic() + DELIVERY_WAIT_S
+    while True:  # wait for delivery, however slow, before judging
+        events = keyboard.events_between(t_from, math.inf)
+        if len(events) >= len(NOTES) or time.monotonic() > deadline:
+            return Replay(sent, events)
+        time.sleep(0.01)
+
+
+def _play(process: subprocess.Popen[str], keyboard: MidiKeyboard) -> list[Replay]:
+    """Play the script until one replay is on time (at most REPLAYS); every replay returned."""
+    replays = []
+    for _ in range(REPLAYS):
+        replays.append(_play_once(process, keyboard))
+        last = replays[-1]
+        if len(last.events) == len(NOTES) and max(map(abs, last.timing_errors_s)) < TOLERANCE_S:
+            break
+    return replays
 
 
 @pytest.mark.jack
@@ -107,36 +148,26 @@ def test_records_every_note_with_script_timing(
     keyboard.start()
     try:
         assert keyboard.describe()["port"] == f"{client}:keys"
-        sent = _play(process)
-        time.sleep(0.05)  # let the last period be delivered
-        events = keyboard.events_between(-1e9, 1e9)
+        replays = _play(process, keyboard)
     finally:
         keyboard.close()
 
-    expected = [
-        (t, fields) for t, (_, fields) in zip(sent, SCRIPT, strict=True)
-        if fields["type"] in NOTE_TYPES
-    ]
-    assert len(events) == len(expected)
-    for event, (_, fields) in zip(events, expected, strict=True):
-        assert event.note == fields["note"]
-        if fields["velocity"] == 0:
-            assert (event.type, event.velocity) == ("note_off", 0)
-        else:
-            assert (event.type, event.velocity) == (fields["type"], fields["velocity"])
-
-    # Relative timing: every interval matches the script's to within 10 ms.
-    t0_recorded, t0_sent = events[0].t_s, expected[0][0]
-    errors_s = [
-        (event.t_s - t0_recorded) - (t_sent - t0_sent)
-        for event, (t_sent, _) in zip(events, expected, strict=True)
-    ]
-    assert max(abs(e) for e in errors_s) < 0.010, errors_s
-    # Both processes read the same monotonic clock: an event is stamped after it was sent.
-    latencies_s = [event.t_s - t for event, (t, _) in zip(events, expected, strict=True)]
-    assert min(latencies_s) > -0.001, latencies_s
+    for replay in replays:  # every replay: every note, in order, with the right type/velocity
+        assert len(replay.events) == len(NOTES)
+        for event, fields in zip(replay.events, NOTES, strict=True):
+            assert event.note == fields["note"]
+            if fields["velocity"] == 0:
+                assert (event.type, event.velocity) == ("note_off", 0)
+            else:
+                assert (event.type, event.velocity) == (fields["type"], fields["velocity"])
+        # Both processes read the same monotonic clock: an event is stamped after it was sent.
+        assert min(e.t_s - t for e, t in zip(replay.events, replay.sent_s, strict=True)) > -0.001
+    # Relative timing: every event is within 10 ms of the script's timing (on a replay the
+    # scheduler did not stall).
+    worst_s = [max(map(abs, r.timing_errors_s)) for r in replays]
+    assert worst_s[-1] < TOLERANCE_S, f"worst timing error per replay (s): {worst_s}"
     # The clock message reached the callback and was dropped (rtmidi already filters active sensing).
-    assert keyboard.ignored_messages >= 1
+    assert keyboard.ignored_messages >= len(replays)
 
 
 @pytest.mark.jack
@@ -145,14 +176,14 @@ def test_events_are_assigned_by_time_window(player: tuple[subprocess.Popen[str],
     keyboard = MidiKeyboard(f"^{client}:", api="JACK", clock=MonotonicTestClock())
     keyboard.start()
     try:
-        sent = _play(process)
-        time.sleep(0.05)
+        replay = _play(process, keyboard)[-1]
     finally:
         keyboard.close()
-    # The window boundary between the second and third keystroke (offsets 0.25 s and 0.52 s).
-    boundary = sent[0] + 0.46
-    first = keyboard.events_between(sent[0] - 0.01, boundary)
-    second = keyboard.events_between(boundary, sent[-1] + 1.0)
+    # The window boundary between the second and third keystroke (offsets 0.40 s and 0.52 s).
+    start_s = replay.sent_s[0]
+    boundary_s = start_s + 0.46
+    first = keyboard.events_between(start_s - 0.01, boundary_s)
+    second = keyboard.events_between(boundary_s, replay.sent_s[-1] + 1.0)
     assert [e.note for e in first] == [57, 57, 59, 59, 59]
     assert [e.note for e in second] == [60, 60, 62, 64, 62, 64]
 
