@@ -16,7 +16,7 @@ from pianobot.rig.errors import DeviceUnavailable, RigError
 from pianobot.rig.midi import MidiKeyboard, mido_backend
 from pianobot.rig.protocols import Arm, Clock, Keyboard, Mocap, Vacuum
 from pianobot.rig.ur5 import DEFAULT_KEYBOARD_AXIS, UR5Arm
-from pianobot.rig.ur5_link import open_io
+from pianobot.rig.ur5_link import open_dashboard, open_io
 from pianobot.rig.vacuum import AnalogVacuum, CommandedVacuum, LinearCalibration, ManualVacuum
 from pianobot.spec.rig import RigSpec
 
@@ -38,6 +38,7 @@ class SdkFactories(NamedTuple):
     control: Any = None
     io: Any = None
     midi_backend: Any = None
+    dashboard: Any = None
 
 
 def keyboard_geometry(rig_spec: RigSpec) -> KeyboardGeometry:
@@ -77,7 +78,7 @@ def open_lab_devices(
     opened: list[Any] = []
     try:
         keyboard = MidiKeyboard(
-            midi.port, midi.api, clock=run_clock,
+            midi.port, midi.api, clock=run_clock, note=midi.note,
             backend_factory=factories.midi_backend or mido_backend,
         )
         keyboard.start()
@@ -98,6 +99,7 @@ def open_lab_devices(
             travel_acceleration_mps2=rig_spec.travel.acceleration_mps2,
         )
         opened.append(arm)
+        arm.dashboard = _optional_dashboard(ur5.host, ur5.connect_timeout_s, factories.dashboard)
         vacuum: Vacuum
         if io is not None:
             vacuum = AnalogVacuum(
@@ -121,6 +123,14 @@ def open_lab_devices(
             raise
         raise DeviceUnavailable(str(exc)) from exc
     return LabDevices(arm=arm, vacuum=vacuum, keyboard=keyboard, mocap=None, clock=run_clock)
+
+
+def _optional_dashboard(host: str, timeout_s: float, factory: Any) -> Any:
+    """The dashboard client, only for the versions in run metadata: None if it will not answer."""
+    try:
+        return open_dashboard(host, timeout_s, factory)
+    except RigError:
+        return None
 
 
 def _close(device: Any) -> None:

@@ -116,6 +116,7 @@ class MidiKeyboard:
         port_pattern: exact port name, a regex or a substring (case-insensitive) of one port.
         api: "ALSA" (the lab's USB piano), "JACK" (tests), or "auto" (first API with a match).
         clock: the run clock; `now()` is called from the MIDI thread, so it must be thread-safe.
+        note: record only this note (the rig file's `midi.note`); None records every note.
         backend_factory: builds a mido-like backend for an API name (tests inject fakes).
     """
 
@@ -125,6 +126,7 @@ class MidiKeyboard:
         api: MidiApi = "ALSA",
         *,
         clock: Clock,
+        note: int | None = None,
         backend_factory: BackendFactory = mido_backend,
     ) -> None:
         if api not in ("ALSA", "JACK", "auto"):
@@ -132,6 +134,7 @@ class MidiKeyboard:
         self.port_pattern = port_pattern
         self.api: MidiApi = api
         self._clock = clock
+        self.note = note
         self._backend_factory = backend_factory
         self._lock = threading.Lock()
         self._events: list[MidiEvent] = []
@@ -164,6 +167,8 @@ class MidiKeyboard:
         # Stamp first: anything done before reading the clock adds latency to the timestamp.
         t_s = self._clock.now()
         event = to_event(message, t_s)
+        if event is not None and self.note is not None and event.note != self.note:
+            event = None
         with self._lock:
             if event is None:
                 self.ignored_messages += 1
@@ -192,5 +197,6 @@ class MidiKeyboard:
             "kind": "midi",
             "api": self._api_used or self.api,
             "port_pattern": self.port_pattern,
+            "note": self.note,
             "port": self._port.name if self._port is not None else None,
         }

@@ -213,6 +213,19 @@ class UR5Arm:
             raise ConnectionLost(f"{action}: {exc}") from exc
         if not sent:
             raise self._fail(action)
+        try:
+            self._wait_for_move(action, before, expected_s, recorder)
+            reached = self.receive.getActualTCPPose()
+        except RuntimeError as exc:  # a dead link may raise instead of answering
+            raise ConnectionLost(f"{action}: {exc}") from exc
+        if math.dist(reached[:3], target[:3]) > AT_TARGET_M:
+            error = self._fail(f"{action} (stopped {1000 * math.dist(reached[:3], target[:3]):.1f}"
+                               " mm short)")
+            raise error
+
+    def _wait_for_move(self, action: str, before: int, expected_s: float,
+                       recorder: _Recorder | None) -> None:
+        """Sample until the asynchronous move ends; diagnose stops, drops and stalls."""
         t_sent = self.clock.now()
         while True:
             if recorder is not None:
@@ -223,6 +236,7 @@ class UR5Arm:
             status = read_status(self.receive, self.control)
             if status.stopped or status.link_down:
                 raise failure(action, status)
+            # Speed scaling stretches the profile in time; beyond that (plus a margin) it stalled.
             scaling = max(status.speed_scaling or 1.0, 0.05)
             if self.clock.now() - t_sent > expected_s / scaling + STALL_MARGIN_S:
                 _quietly(self.control, "stopL", STOP_DECELERATION_MPS2)
@@ -230,11 +244,6 @@ class UR5Arm:
             self.clock.sleep(self._period_s / 2)
         if recorder is not None:
             recorder.sample()
-        reached = self.receive.getActualTCPPose()
-        if math.dist(reached[:3], target[:3]) > AT_TARGET_M:
-            error = self._fail(f"{action} (stopped {1000 * math.dist(reached[:3], target[:3]):.1f}"
-                               " mm short)")
-            raise error
 
     def _travel(self, target: Pose) -> None:
         """Go to `target`, lifting first when the move is sideways (never drag across keys)."""

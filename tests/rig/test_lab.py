@@ -9,7 +9,14 @@ from typing import Any
 
 import pytest
 from fake_midi import FakeMidiBackend
-from fake_rtde import FakeClock, FakeControl, FakeController, FakeIO, FakeReceive
+from fake_rtde import (
+    FakeClock,
+    FakeControl,
+    FakeController,
+    FakeDashboard,
+    FakeIO,
+    FakeReceive,
+)
 
 from pianobot.physics.trajectory import Press
 from pianobot.rig import lab, open_rig
@@ -57,6 +64,7 @@ def fake_lab() -> Lab:
         control=lambda host, f: FakeControl(robot, host, f),
         io=lambda host: FakeIO(robot, host),
         midi_backend=lambda api: midi,
+        dashboard=lambda host: FakeDashboard(robot, host),
     )
     return Lab(robot, midi, factories)
 
@@ -72,6 +80,18 @@ def test_open_lab_devices_builds_every_device(fake_lab: Lab) -> None:
     assert arm.key_pose(60)[0] == pytest.approx(REFERENCE_POSE[0] + 0.0235 + 0.0005)
     assert vacuum.set_kpa(-30.0) == pytest.approx(-30.0, abs=2.0)  # read back on input 0
     assert fake_lab.robot.analog_out[1] == pytest.approx(0.3)
+    assert arm.describe()["polyscope_version"].startswith("URSoftware")
+
+
+def test_midi_note_filter_from_the_rig_file(fake_lab: Lab) -> None:
+    rig = lab_rig()
+    assert rig.midi is not None
+    rig = rig.model_copy(update={"midi": rig.midi.model_copy(update={"note": 57})})
+    devices = open_lab_devices(rig, clock=fake_lab.robot.clock, factories=fake_lab.factories)
+    fake_lab.midi.play("note_on", note=60, velocity=40)
+    fake_lab.midi.play("note_on", note=57, velocity=50)
+    events = devices.keyboard.events_between(0.0, 1.0)
+    assert [(e.note, e.velocity) for e in events] == [(57, 50)]
 
 
 @pytest.mark.parametrize(("mode", "kind"), [("manual", ManualVacuum), ("sim", CommandedVacuum)])
