@@ -199,20 +199,22 @@ def integrate(
     f_s = ep[E_FRIC_S] if stribeck else f_c
     inv_vs = 1.0 / ep[E_FRIC_VS] if stribeck else 0.0
     beta = ep[E_STIFF_BETA] if ep[E_STIFF_FORM] != STIFF_NONE else 0.0
-    exp_on = ep[E_STIFF_FORM] == STIFF_EXP and beta > 0.0
+    exp_on = 1.0 if ep[E_STIFF_FORM] == STIFF_EXP and beta > 0.0 else 0.0
     cubic_on = 1.0 if ep[E_STIFF_FORM] == STIFF_CUBIC and beta > 0.0 else 0.0
-    inv_beta = 1.0 / beta if exp_on else 0.0
+    inv_beta = 1.0 / beta if exp_on > 0.0 else 0.0
     pull_off = ep[E_ADHESION]
+    glued = 1.0 if pull_off > 0.0 else 0.0
     f_let, x_let = ep[E_LETOFF_F], ep[E_LETOFF_X]
     inv_w_let = 1.0 / ep[E_LETOFF_W] if f_let > 0.0 else 0.0
     delay, alpha = arm_lag(ep[E_LAG_FORM], ep[E_LAG_S], h)
     half_h = 0.5 * h
     inv_h = 1.0 / h
     inv_2h = 0.5 / h
-    w = np.zeros((N_W, BLOCK))
+    block = min(BLOCK, (n + 3) // 4 * 4)  # a lone keystroke should not pay for 16 lanes
+    w = np.zeros((N_W, block))
 
-    for b0 in range(0, n, BLOCK):
-        nb = min(BLOCK, n - b0)
+    for b0 in range(0, n, block):
+        nb = min(block, n - b0)
         _load_block(w, kp, b0, nb, mode, trace_t, trace_x0, t_start - delay)
         k_out = 0
         for i in range(n_steps + 1):
@@ -220,7 +222,7 @@ def integrate(
             if record:
                 _record(w, b0, nb, k_out, outs, 0)
             _arm_positions(mode, w, S_X0N, trace_t, trace_x0, b0, nb, t_start + (i + 1) * h - delay)
-            for jj in range(BLOCK):
+            for jj in range(block):
                 x0_j = w[S_X0, jj]
                 x0_n = x0_j + alpha * (w[S_X0N, jj] - x0_j)
                 v0 = (x0_n - w[S_X0P, jj]) * inv_2h
@@ -237,21 +239,17 @@ def integrate(
                 # (same slope k1 at touch, then stiffer); both vanish for β = 0.
                 bp = beta * pos
                 spring = k1 * pen + k1 * pos * (cubic_on * bp * bp)
-                if exp_on:
-                    spring += k1 * ((_exp(bp) - 1.0) * inv_beta - pos)
+                spring += exp_on * k1 * ((_exp(bp) - 1.0) * inv_beta - pos)
                 raw = spring + w[C1, jj] * (v1e - v2e)
-                if contact:
-                    # Unilateral: pushes only; an adhesive skin pulls until the pull-off force.
-                    touching = pen > 0.0
-                    holds = min(w[S_ATT, jj], 1.0 if raw >= -pull_off else 0.0)
-                    fc = max(raw, -pull_off) if touching else holds * raw
-                    glued = 1.0 if pull_off > 0.0 else 0.0
-                    w[S_ATT, jj] = glued if touching else holds
-                else:
-                    # The study's bilateral spring, engaged at first touch (then it also pulls).
-                    eng = max(w[S_ENG, jj], 1.0 if pen >= 0.0 else 0.0)
-                    w[S_ENG, jj] = eng
-                    fc = eng * raw
+                # Unilateral (pushes only; an adhesive skin pulls until the pull-off force) ...
+                touching = pen > 0.0
+                holds = min(w[S_ATT, jj], 1.0 if raw >= -pull_off else 0.0)
+                fc_uni = max(raw, -pull_off) if touching else holds * raw
+                w[S_ATT, jj] = glued if touching else holds
+                # ... or the study's bilateral spring, engaged at first touch (then it also pulls).
+                eng = max(w[S_ENG, jj], 1.0 if pen >= 0.0 else 0.0)
+                w[S_ENG, jj] = eng
+                fc = fc_uni if contact else eng * raw
                 w[S_FC, jj] = fc
                 w[S_V2E, jj] = v2e
 
@@ -263,23 +261,19 @@ def integrate(
                 # grow with indentation, so there is no force jump on impact); it never pulls.
                 pen_bed = max(x2_j - x_bed, 0.0)
                 fb = k_bed * pen_bed + c_bed * v2e
-                if bed_hc:
-                    fb *= math.sqrt(pen_bed * (1.0 / _HC_REF_M))
+                fb *= math.sqrt(pen_bed * (1.0 / _HC_REF_M)) if bed_hc else 1.0
                 f2 -= bed_on * max(fb, 0.0) if pen_bed > 0.0 else 0.0
-                if f_let > 0.0:
-                    # Let-off: a bump that resists the key on its way down only.
-                    z = (x2_j - x_let) * inv_w_let
-                    f2 -= f_let * _exp(-z * z) if v2e > 0.0 else 0.0
+                # Let-off: a bump that resists the key on its way down only.
+                z = (x2_j - x_let) * inv_w_let
+                f2 -= f_let * _exp(-z * z) if v2e > 0.0 else 0.0
 
                 a1_j = f1 * w[M1, jj]
                 v1_j = w[S_V1, jj] + h * a1_j
                 v2_free = v2_j + h * f2 * w[M2, jj]
                 # Dry friction as an impulse bounded by h·F/m: if it can stop the key within the
                 # step the key sticks (exact Coulomb), else it slides against the motion.
-                f_fric = f_c
-                if stribeck:
-                    r = v2_j * inv_vs
-                    f_fric += (f_s - f_c) * _exp(-r * r)
+                r = v2_j * inv_vs
+                f_fric = f_c + (f_s - f_c) * _exp(-r * r)
                 dv = h * f_fric * w[M2, jj]
                 v2_new = math.copysign(max(abs(v2_free) - dv, 0.0), v2_free)
                 x1_j += h * v1_j
@@ -329,9 +323,10 @@ def integrate_linear(
     delay, alpha = arm_lag(ep[E_LAG_FORM], ep[E_LAG_S], h)
     half_h = 0.5 * h
     inv_2h = 0.5 / h
-    w = np.zeros((N_W, BLOCK))
-    for b0 in range(0, n, BLOCK):
-        nb = min(BLOCK, n - b0)
+    block = min(BLOCK, (n + 3) // 4 * 4)  # a lone keystroke should not pay for 16 lanes
+    w = np.zeros((N_W, block))
+    for b0 in range(0, n, block):
+        nb = min(block, n - b0)
         _load_block(w, kp, b0, nb, mode, trace_t, trace_x0, t_start - delay)
         k_out = 0
         for i in range(n_steps + 1):
@@ -339,7 +334,7 @@ def integrate_linear(
             if record:
                 _record(w, b0, nb, k_out, outs, 0)
             _arm_positions(mode, w, S_X0N, trace_t, trace_x0, b0, nb, t_start + (i + 1) * h - delay)
-            for jj in range(BLOCK):
+            for jj in range(block):
                 x0_j = w[S_X0, jj]
                 x0_n = x0_j + alpha * (w[S_X0N, jj] - x0_j)
                 v0 = (x0_n - w[S_X0P, jj]) * inv_2h

@@ -41,10 +41,10 @@ class PianoParams:
     when curve_saturation β > 0, g(u) = tanh(β·u^γ) / tanh(β): monotone, saturating near 127.
     """
 
-    upper_sensor_m: float = 0.0015
-    lower_sensor_m: float = 0.0035
+    upper_sensor_m: float = 0.0018
+    lower_sensor_m: float = 0.0038
     release_m: float = 0.0010
-    full_scale_speed_mps: float = 0.25
+    full_scale_speed_mps: float = 0.06
     curve_exponent: float = 1.0
     curve_saturation: float = 0.0
     timestamp_resolution_s: float = 1e-3

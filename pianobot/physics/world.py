@@ -1,0 +1,259 @@
+"""The simulated lab: true keystroke physics plus what the instruments would report.
+
+`World(config, seed)` holds a true `KeystrokeModel` (by default richer than the study's model:
+unilateral contact, keybed, preload, friction, stiffening, let-off, ... see
+`Effects.default_world`) and observation models: the arm's controller-rate TCP trace, 120 Hz
+motion capture with µm noise, dropped frames and a clock offset, and the digital piano's MIDI.
+
+Every keystroke is a pure function of (config, seed, press, vacuum, note, key): its noise comes
+from an RNG seeded by (seed, key), and stiffness drift is a hash of (seed, block), so a resumed
+run reproduces an uninterrupted one exactly.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+import numpy.typing as npt
+from pydantic import BaseModel, ConfigDict, Field
+
+from pianobot.physics.effects import Effects
+from pianobot.physics.model import KeystrokeModel
+from pianobot.physics.msd import MSDParams
+from pianobot.physics.piano import PianoEvent, PianoParams, key_events
+from pianobot.physics.simulate import SimBatch, simulate_presses
+from pianobot.physics.trajectory import Press, press_duration_s
+
+FloatArray = npt.NDArray[np.float64]
+
+# The default world's piano (PianoParams' defaults: sensors at 1.8 and 3.8 mm of the 10 mm dip)
+# with a velocity curve that maps the soft finger's key speeds between the sensors (a few mm/s
+# to a few cm/s) onto the velocities the real Kawai reported for it: 1-2 for slow presses,
+# 10-20 for fast ones, up to ~60 for the fastest approaches.
+DEFAULT_CURVE: dict[str, float] = {"curve_exponent": 2.0, "curve_saturation": 1.0}
+
+
+class MocapConfig(BaseModel):
+    """Motion capture observation model."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    rate_hz: float = Field(120.0, gt=0, description="frame rate")
+    noise_m: float = Field(3e-6, ge=0, description="position noise (standard deviation)")
+    drop_prob: float = Field(0.002, ge=0, le=1, description="probability a frame is lost")
+    clock_offset_s: float = Field(0.0, description="mocap clock minus true time")
+
+
+class WorldConfig(BaseModel):
+    """Everything that defines a simulated world (YAML-able; unknown keys are refused)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    msd: dict[str, Any] = Field(default_factory=dict, description="MSDParams overrides")
+    effects: dict[str, dict[str, Any] | None] | None = Field(
+        None, description="effect -> {form, params}; null = the default world's effects"
+    )
+    piano: dict[str, float] = Field(default_factory=dict, description="PianoParams overrides")
+    mocap: MocapConfig = Field(default_factory=MocapConfig)
+    arm_rate_hz: Literal[125, 500] = Field(500, description="UR controller (RTDE) rate")
+    arm_noise_m: float = Field(1e-6, ge=0, description="TCP position noise")
+    midi_jitter_s: float = Field(5e-4, ge=0, description="MIDI timestamp jitter (uniform)")
+    vacuum_tau_s: float = Field(1.5, gt=0, description="vacuum regulator time constant")
+    vacuum_tolerance_kpa: float = Field(0.5, gt=0, description="settled when this close")
+    step_s: float = Field(2e-4, gt=0, le=2e-4, description="internal integration step")
+    out_dt_s: float = Field(1e-3, gt=0, description="truth sample interval")
+    settle_s: float = Field(0.4, ge=0, description="simulated time after the arm is back up")
+
+    def build_model(self) -> KeystrokeModel:
+        """The true keystroke model this config describes."""
+        effects = Effects.default_world() if self.effects is None else Effects.from_dict(self.effects)
+        piano = PianoParams.from_dict({**DEFAULT_CURVE, **self.piano})
+        piano = piano.replace(jitter_s=self.midi_jitter_s)
+        if "velocity_curve" in effects and self.effects is None:
+            effects = effects.with_effect("velocity_curve", **DEFAULT_CURVE)
+        return KeystrokeModel(MSDParams.from_dict(self.msd), effects, piano)
+
+
+@dataclass(frozen=True)
+class WorldKeystroke:
+    """One simulated keystroke as truth and as the instruments saw it (absolute times)."""
+
+    t0_s: float
+    duration_s: float
+    truth_t_s: FloatArray
+    truth_x0_m: FloatArray
+    truth_x1_m: FloatArray
+    truth_x2_m: FloatArray
+    arm_t_s: FloatArray
+    arm_x0_m: FloatArray
+    mocap_t_s: FloatArray
+    mocap_x0_m: FloatArray
+    mocap_x1_m: FloatArray
+    mocap_x2_m: FloatArray
+    midi: tuple[PianoEvent, ...]
+    key_speed_at_trigger_mps: float
+    max_key_travel_m: float
+
+    @property
+    def silent(self) -> bool:
+        return not any(e.type == "note_on" for e in self.midi)
+
+    @property
+    def on_velocity(self) -> int | None:
+        """Velocity of the first note-on, None if silent."""
+        for e in self.midi:
+            if e.type == "note_on":
+                return e.velocity
+        return None
+
+
+def _seed_of(text: str) -> int:
+    return int.from_bytes(hashlib.sha256(text.encode("utf-8")).digest()[:8], "big")
+
+
+class World:
+    """A simulated lab with a known true model and noisy instruments."""
+
+    def __init__(self, config: WorldConfig | None = None, seed: int = 0) -> None:
+        self.config = config if config is not None else WorldConfig()
+        self.seed = int(seed)
+        self.model = self.config.build_model()
+        self._readout = self.model.readout_params()
+        self._mocap_offset_s = self.config.mocap.clock_offset_s + self.model.mocap_delay_s
+
+    @classmethod
+    def default(cls, seed: int = 0) -> World:
+        """Several effects on with realistic values (see `Effects.default_world`)."""
+        return cls(WorldConfig(), seed)
+
+    @classmethod
+    def linear(cls, seed: int = 0) -> World:
+        """Only the study's linear model (ramp arm, linear readout) plus observation noise."""
+        return cls(WorldConfig(effects={}), seed)
+
+    def describe(self) -> dict[str, Any]:
+        return {"seed": self.seed, "config": self.config.model_dump(), "model": self.model.to_dict()}
+
+    def vacuum_settle_s(self, from_kpa: float, to_kpa: float) -> float:
+        """Time for the regulator (first order) to get within tolerance of a new level."""
+        step = abs(float(to_kpa) - float(from_kpa))
+        tol = self.config.vacuum_tolerance_kpa
+        if step <= tol:
+            return 0.0
+        return self.config.vacuum_tau_s * math.log(step / tol)
+
+    def _block_key(self, vacuum_kpa: float, block: str | None) -> str:
+        return f"{self.seed}|{block if block is not None else f'{float(vacuum_kpa):g}'}"
+
+    def simulate(
+        self, presses: Sequence[Press], vacuum_kpa: npt.ArrayLike, blocks: Sequence[str | None] | None = None
+    ) -> SimBatch:
+        """True trajectories of many presses at once (no observation noise)."""
+        p = np.broadcast_to(np.asarray(vacuum_kpa, dtype=np.float64), (len(presses),))
+        bl = list(blocks) if blocks is not None else [None] * len(presses)
+        keys = [self._block_key(float(v), b) for v, b in zip(p, bl, strict=True)]
+        cfg = self.config
+        dur = max((press_duration_s(pr, "trapezoid") for pr in presses), default=0.0) + cfg.settle_s
+        return simulate_presses(presses, p, self.model, out_dt_s=cfg.out_dt_s, duration_s=dur,
+                                step_s=cfg.step_s, block_keys=keys)
+
+    def keystroke(
+        self,
+        press: Press,
+        vacuum_kpa: float,
+        *,
+        note: int = 57,
+        t0_s: float = 0.0,
+        key: str = "",
+        block: str | None = None,
+    ) -> WorldKeystroke:
+        """One keystroke from motion start to rest, as truth and as observed.
+
+        `key` seeds the observation noise (use the trial id); `block` labels the stiffness-drift
+        block (default: the vacuum level, i.e. one drift per level and world).
+        """
+        batch = self.simulate([press], vacuum_kpa, [block])
+        return self._observe(batch, 0, press, note, t0_s, key)
+
+    def keystrokes(
+        self,
+        presses: Sequence[Press],
+        vacuum_kpa: npt.ArrayLike,
+        *,
+        note: int = 57,
+        t0_s: npt.ArrayLike = 0.0,
+        keys: Sequence[str] | None = None,
+        blocks: Sequence[str | None] | None = None,
+    ) -> list[WorldKeystroke]:
+        """Many keystrokes in one batch (the same results as calling `keystroke` for each)."""
+        n = len(presses)
+        batch = self.simulate(presses, vacuum_kpa, blocks)
+        t0 = np.broadcast_to(np.asarray(t0_s, dtype=np.float64), (n,))
+        ks = list(keys) if keys is not None else [""] * n
+        return [self._observe(batch, j, presses[j], note, float(t0[j]), ks[j]) for j in range(n)]
+
+    def _observe(
+        self, batch: SimBatch, j: int, press: Press, note: int, t0_s: float, key: str
+    ) -> WorldKeystroke:
+        cfg = self.config
+        rng = np.random.default_rng([self.seed, _seed_of(key)])
+        t_end = press_duration_s(press, self.model.arm_profile)
+        duration = _rest_time(batch, j, t_end)
+        keep = batch.t_s <= duration + 1e-9
+        t = batch.t_s[keep]
+        x0, x1, x2 = batch.x0_m[j, keep], batch.x1_m[j, keep], batch.x2_m[j, keep]
+        v2 = batch.v2_mps[j, keep]
+
+        midi, _ = key_events(t, x2, self._readout, note=note, rng=rng)
+        midi = [PianoEvent(round(t0_s + e.t_s, 9), e.type, e.note, e.velocity) for e in midi]
+
+        t_arm = np.arange(0.0, duration + 1e-9, 1.0 / cfg.arm_rate_hz)
+        arm = np.interp(t_arm, t, x0) + rng.normal(0.0, cfg.arm_noise_m, t_arm.size)
+
+        # Mocap frames fall at true times τ; the mocap clock stamps them τ + offset.
+        frame = 1.0 / cfg.mocap.rate_hz
+        tau = np.arange(rng.uniform(0.0, frame), duration, frame)
+        lost = rng.random(tau.size) < cfg.mocap.drop_prob
+        mocap = []
+        for x in (x0, x1, x2):
+            m = np.interp(tau, t, x) + rng.normal(0.0, cfg.mocap.noise_m, tau.size)
+            m[lost] = np.nan  # a lost frame loses every marker at once
+            mocap.append(m)
+
+        lower = self._readout.lower_sensor_m
+        hit = np.nonzero((x2[:-1] < lower) & (x2[1:] >= lower))[0]
+        speed = math.nan
+        if hit.size:
+            k = int(hit[0])
+            f = (lower - x2[k]) / (x2[k + 1] - x2[k])
+            speed = float(v2[k] + f * (v2[k + 1] - v2[k]))
+        return WorldKeystroke(
+            t0_s=t0_s,
+            duration_s=float(duration),
+            truth_t_s=t0_s + t,
+            truth_x0_m=x0.copy(),
+            truth_x1_m=x1.copy(),
+            truth_x2_m=x2.copy(),
+            arm_t_s=t0_s + t_arm,
+            arm_x0_m=arm,
+            mocap_t_s=t0_s + tau + self._mocap_offset_s,
+            mocap_x0_m=mocap[0],
+            mocap_x1_m=mocap[1],
+            mocap_x2_m=mocap[2],
+            midi=tuple(midi),
+            key_speed_at_trigger_mps=speed,
+            max_key_travel_m=float(np.max(x2)),
+        )
+
+
+def _rest_time(batch: SimBatch, j: int, t_end_s: float, tol_m: float = 2e-5) -> float:
+    """Motion start → arm back up and the key at rest (within `tol_m` of rest from then on)."""
+    t = batch.t_s
+    moving = np.nonzero((np.abs(batch.x2_m[j]) > tol_m) | (np.abs(batch.x1_m[j]) > tol_m))[0]
+    last = float(t[moving[-1]]) if moving.size else 0.0
+    return float(min(max(t_end_s, last + 1e-3), t[-1]))

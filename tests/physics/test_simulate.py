@@ -1,0 +1,149 @@
+"""Batch simulator: exact for the linear model, and each effect does what physics says."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from pianobot.physics.effects import Effects
+from pianobot.physics.model import KeystrokeModel
+from pianobot.physics.msd import MSDParams, simulate_linear
+from pianobot.physics.piano import PianoParams, piano_events
+from pianobot.physics.simulate import SimBatch, simulate_arm, simulate_presses
+from pianobot.physics.trajectory import Press, sample_presses
+
+STUDY = KeystrokeModel.study()
+
+
+def test_linear_model_matches_the_exact_state_space_solution() -> None:
+    presses = [Press(0.0, 0.03, 0.04, 0.04, 1.0, 0.2), Press(0.0, 0.02, 0.08, 0.02, 1.0, 0.0)]
+    batch = simulate_presses(presses, [-60.0, -20.0], STUDY, duration_s=1.5)
+    x0, _ = sample_presses(presses, batch.t_s, profile="ramp")
+    for j, p in enumerate((-60.0, -20.0)):
+        x1, x2 = simulate_linear(MSDParams().at(p), batch.t_s, x0[j])
+        assert np.max(np.abs(batch.x0_m[j] - x0[j])) < 1e-12
+        assert np.max(np.abs(batch.x2_m[j] - x2)) < 1e-3 * np.max(np.abs(x2))
+        assert np.max(np.abs(batch.x1_m[j] - x1)) < 1e-3 * np.max(np.abs(x1))
+
+
+def test_error_shrinks_with_the_step() -> None:
+    press = [Press(0.0, 0.03, 0.06, 0.06, 1.0, 0.0)]
+    ref = simulate_presses(press, -60, STUDY, duration_s=1.2, step_s=1e-5)
+    err = [
+        np.max(np.abs(simulate_presses(press, -60, STUDY, duration_s=1.2, step_s=h).x2_m - ref.x2_m))
+        for h in (2e-4, 1e-4)
+    ]
+    assert err[1] < err[0] < 1e-6
+
+
+def test_step_limit_and_shapes() -> None:
+    with pytest.raises(ValueError, match="step_s"):
+        simulate_presses([Press(0.0, 0.03, 0.04, 0.04, 1.0)], -60, STUDY, step_s=5e-4)
+    b = simulate_presses([Press(0.05, 0.03, 0.04, 0.04, 1.0)] * 3, -60, STUDY, out_dt_s=2e-3)
+    assert isinstance(b, SimBatch)
+    assert b.x2_m.shape == (3, b.t_s.size) and b.contact_force_n.shape == b.x2_m.shape
+    assert np.allclose(np.diff(b.t_s), 2e-3)
+    df = b.to_pandas()
+    assert len(df) == 3 * b.t_s.size and {"keystroke", "t_s", "x2_m"} <= set(df.columns)
+
+
+def test_simulate_arm_reproduces_the_press_simulation() -> None:
+    model = STUDY.with_effect("contact").with_effect("keybed").with_effect("arm_acceleration")
+    presses = [Press(0.01, 0.03, 0.05, 0.05, 1.0, 0.1)] * 2
+    ref = simulate_presses(presses, -60, model, duration_s=1.0)
+    t = np.arange(0.0, 1.0 + 1e-9, 1e-4)
+    x0, _ = sample_presses(presses, t, profile="trapezoid")
+    got = simulate_arm(t, x0, -60, model, distance_m=0.01)
+    assert np.allclose(got.t_s, ref.t_s)
+    assert np.max(np.abs(got.x2_m - ref.x2_m)) < 5e-6
+
+
+def test_simulate_arm_rejects_gaps() -> None:
+    t = np.linspace(0.0, 1.0, 11)
+    x = np.zeros(11)
+    x[3] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        simulate_arm(t, x, -60, STUDY)
+
+
+def test_keybed_caps_key_travel() -> None:
+    press = [Press(0.0, 0.04, 0.08, 0.08, 1.0, 0.2)]
+    model = STUDY.with_effect("contact")
+    free = simulate_presses(press, -80, model)
+    assert free.x2_m.max() > 0.008
+    for form in ("linear", "hunt_crossley"):
+        capped = simulate_presses(press, -80, model.with_effect("keybed", form=form, bed_depth_m=0.006))
+        assert 0.006 < capped.x2_m.max() < 0.0068
+
+
+def test_preload_makes_slow_shallow_presses_silent() -> None:
+    press = [Press(0.01, 0.025, 0.01, 0.01, 1.0, 0.0)]
+    piano = PianoParams(jitter_s=0.0)
+    loose = simulate_presses(press, -60, STUDY.with_effect("contact"))
+    held = simulate_presses(press, -60, STUDY.with_effect("contact").with_effect("key_preload"))
+    assert piano_events(loose.t_s, loose.x2_m, piano)[0], "sounds without preload"
+    assert piano_events(held.t_s, held.x2_m, piano) == [[]]
+    assert held.x2_m.min() >= 0.0  # the rest stop holds the key
+
+
+def test_contact_lets_the_key_lag_a_fast_retracting_finger() -> None:
+    press = [Press(0.0, 0.03, 0.05, 0.7, 5.0, 0.3)]
+    glued = simulate_presses(press, -60, STUDY.with_effect("arm_acceleration"))
+    free = simulate_presses(press, -60, STUDY.with_effect("arm_acceleration").with_effect("contact"))
+    assert glued.contact_force_n.min() < -0.05  # the bilateral spring pulls the key up
+    assert free.contact_force_n.min() >= 0.0  # a finger only pushes
+    gap = free.x1_m[0] - free.x2_m[0]  # distance 0: negative gap = separated
+    assert gap.min() < -1e-3
+    assert np.max(free.x2_m[0] - glued.x2_m[0]) > 5e-4  # the key is left behind
+
+
+def test_friction_shortens_ringing() -> None:
+    press = [Press(0.0, 0.02, 0.05, 0.2, 2.0, 0.2)]
+    model = STUDY.with_effect("arm_acceleration")
+    plain = simulate_presses(press, -60, model, duration_s=2.0)
+    rubbed = simulate_presses(press, -60, model.with_effect("key_friction"), duration_s=2.0)
+    tail = plain.t_s > 1.0
+
+    def ringing(b: SimBatch) -> float:
+        return float(np.sum(np.abs(np.diff(b.x2_m[0, tail]))))
+
+    assert ringing(rubbed) < 0.5 * ringing(plain)
+    assert ringing(plain) > 1e-4
+
+
+@pytest.mark.parametrize("acc", [0.1, 0.3])
+def test_arm_acceleration_caps_contact_speed(acc: float) -> None:
+    distance = 0.01
+    press = [Press(distance, 0.03, 0.08, 0.08, acc, 0.0)]
+    cap = math.sqrt(2 * acc * distance)
+    speeds = {}
+    for name, model in (("ramp", STUDY), ("trapezoid", STUDY.with_effect("arm_acceleration"))):
+        b = simulate_presses(press, -60, model, out_dt_s=1e-4)
+        k = int(np.argmax(b.x1_m[0] - b.x2_m[0] >= distance))
+        speeds[name] = (b.x0_m[0, k + 1] - b.x0_m[0, k - 1]) / 2e-4  # arm speed at touch
+    assert speeds["ramp"] > 0.07
+    assert speeds["trapezoid"] <= 1.05 * cap
+
+
+def test_arm_lag_delays_the_arm_and_drift_follows_blocks() -> None:
+    press = [Press(0.05, 0.03, 0.05, 0.05, 1.0)]
+    prompt = simulate_presses(press, -60, STUDY)
+    for form in ("first_order", "delay"):
+        lagged = simulate_presses(press, -60, STUDY.with_effect("arm_lag", form=form, arm_lag_s=0.02))
+        i = np.searchsorted(prompt.t_s, 0.5)
+        assert lagged.x0_m[0, i] < prompt.x0_m[0, i] - 5e-4
+    drift = STUDY.with_effect("stiffness_drift", drift_fraction=0.2)
+    b = simulate_presses(press * 3, -60, drift, block_keys=["a", "b", "a"])
+    assert np.array_equal(b.x2_m[0], b.x2_m[2])
+    assert not np.allclose(b.x2_m[0], b.x2_m[1])
+
+
+def test_all_effects_together_stay_finite_and_bounded() -> None:
+    presses = [Press(0.05, d, v, v, a, 0.1) for d in (0.02, 0.04) for v in (0.01, 0.08) for a in (0.1, 2.0)]
+    for effects in (Effects.all(), Effects.default_world()):
+        b = simulate_presses(presses, -80, KeystrokeModel(effects=effects))
+        assert np.all(np.isfinite(b.x2_m))
+        assert b.x2_m.max() < 0.012 and b.x2_m.min() >= 0.0
+        assert np.all(np.abs(b.x2_m[:, -1]) < 1e-4)  # back at rest
