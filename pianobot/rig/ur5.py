@@ -30,8 +30,9 @@ import numpy as np
 from pianobot.physics.keyboard import KeyboardGeometry
 from pianobot.physics.trajectory import Press, move_profile
 from pianobot.rig.errors import ConnectionLost, DeviceUnavailable, RigError, SafetyViolation
-from pianobot.rig.protocols import Clock, PressRecord, Trace
+from pianobot.rig.protocols import Clock, PressRecord
 from pianobot.rig.ur5_link import failure, open_control, open_receive, read_status
+from pianobot.rig.ur5_trace import TcpRecorder
 from pianobot.spec.rig import UR5Config
 
 Pose = list[float]
@@ -42,48 +43,6 @@ STOP_DECELERATION_MPS2 = 2.0
 AT_TARGET_M = 0.0005  # a move that ends further than this from its target stopped short
 LATERAL_MOVE_M = 0.0005  # closer than this the arm is already over the key
 STALL_MARGIN_S = 2.0  # beyond the profile duration (stretched by speed scaling) a move stalled
-
-
-def _offset_z(pose: Sequence[float], dz_m: float) -> Pose:
-    return [pose[0], pose[1], pose[2] + dz_m, *pose[3:6]]
-
-
-class _Recorder:
-    """TCP z samples with controller timestamps, and the run-clock time each was read."""
-
-    def __init__(self, receive: Any, clock: Clock) -> None:
-        self._receive = receive
-        self._clock = clock
-        self._last_ts: float | None = None
-        self.ctrl_s: list[float] = []
-        self.read_s: list[float] = []
-        self.z_m: list[float] = []
-        self.min_scaling = math.inf
-
-    def sample(self) -> None:
-        ts = float(self._receive.getTimestamp())
-        if ts == self._last_ts:
-            return
-        read_s = self._clock.now()
-        pose = self._receive.getActualTCPPose()
-        self._last_ts = ts
-        self.ctrl_s.append(ts)
-        self.read_s.append(read_s)
-        self.z_m.append(float(pose[2]))
-        scaling = self._receive.getSpeedScaling()
-        if scaling is not None:
-            self.min_scaling = min(self.min_scaling, float(scaling))
-
-    def trace(self, z_start_m: float) -> Trace | None:
-        """Downward displacement from the hover height, on the run clock."""
-        if not self.ctrl_s:
-            return None
-        ctrl = np.asarray(self.ctrl_s, dtype=np.float64)
-        # A read can only come after the controller produced the sample: the least-delayed read
-        # gives the best controller → run clock offset.
-        offset_s = float(np.min(np.asarray(self.read_s) - ctrl))
-        x0_m = z_start_m - np.asarray(self.z_m, dtype=np.float64)
-        return Trace(t_s=ctrl + offset_s, x0_m=x0_m, source="arm")
 
 
 class UR5Arm:
@@ -199,7 +158,7 @@ class UR5Arm:
         return failure(action, read_status(self.receive, self.control))
 
     def _move(self, target: Pose, speed_mps: float, acceleration_mps2: float,
-              recorder: _Recorder | None = None) -> None:
+              recorder: TcpRecorder | None = None) -> None:
         """One guarded asynchronous moveL; returns when the arm is at the target."""
         self.check_target(target)
         action = f"moveL to {_fmt(target)}"
@@ -224,7 +183,7 @@ class UR5Arm:
             raise error
 
     def _wait_for_move(self, action: str, before: int, expected_s: float,
-                       recorder: _Recorder | None) -> None:
+                       recorder: TcpRecorder | None) -> None:
         """Sample until the asynchronous move ends; diagnose stops, drops and stalls."""
         t_sent = self.clock.now()
         while True:
@@ -277,7 +236,7 @@ class UR5Arm:
         self.check_target(hover)
         self.check_target(bottom)
         self._travel(hover)
-        recorder = _Recorder(self.receive, self.clock)
+        recorder = TcpRecorder(self.receive, self.clock)
         t_start_s = self.clock.now()
         try:
             self._move(bottom, press.down_velocity_mps, press.acceleration_mps2, recorder)
