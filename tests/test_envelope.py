@@ -5,13 +5,14 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
+import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pianobot.errors import InputError
 from pianobot.physics.trajectory import contact_speed_mps
-from pianobot.plan import Trial, Violation, check_envelope, raise_for_errors
+from pianobot.plan import Trial, Violation, check_envelope, contact_speeds_mps, raise_for_errors
 from pianobot.spec import FINGER_ENVELOPES, RigSpec, load_rig
 
 SOFT = Trial(
@@ -166,3 +167,14 @@ def test_anything_inside_the_envelope_has_no_errors(data: st.DataObject) -> None
     values = {name: data.draw(inside(finger, name)) for name in FINGER_ENVELOPES[finger]}  # type: ignore[index]
     trial = replace(SOFT, **values)
     assert errors(check_envelope([trial], finger)) == []  # type: ignore[arg-type]
+
+
+@settings(max_examples=200, deadline=None)
+@given(distance=st.floats(0.0, 0.2), depth=st.floats(0.0, 0.05), v=st.floats(0.001, 1.0),
+       a=st.floats(0.01, 5.0))
+def test_vectorised_contact_speed_matches_the_physics(
+    distance: float, depth: float, v: float, a: float
+) -> None:
+    trial = replace(SOFT, distance_m=distance, depth_m=depth, down_velocity_mps=v, acceleration_mps2=a)
+    ours = contact_speeds_mps(np.array([distance]), np.array([depth]), np.array([v]), np.array([a]))
+    assert ours[0] == pytest.approx(contact_speed_mps(trial.press()), rel=1e-9, abs=1e-12)

@@ -8,6 +8,7 @@ from collections import Counter
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 import yaml
 from hypothesis import given, settings
@@ -22,6 +23,7 @@ from pianobot.plan import (
     estimate_lab_time_s,
     expand,
     lab_time,
+    move_durations_s,
     plan_frame,
     summarize,
 )
@@ -354,3 +356,32 @@ def test_grid_properties(speeds: list[int], depths: list[int], repeats: int, ord
     assert expand(make_spec(sweep)) == trials
     assert sorted(t.repeat for t in trials) == sorted(list(range(repeats)) * len(speeds) * len(depths))
     assert all(math.isfinite(t.down_velocity_mps) for t in trials)
+
+
+def test_sampled_blocks_follow_the_listed_choices() -> None:
+    sweep = {"mode": "lhs", "samples": 30, "seed": 11, "order": "blocked-shuffle",
+             "params": {"vacuum_kpa": [-40, 0, -80], "down_velocity_mps": {"low": 0.01, "high": 0.06}},
+             "fixed": {"depth_m": 0.03}}
+    trials = expand(make_spec(sweep))
+    assert _runs([t.vacuum_kpa for t in trials]) == [-40.0, 0.0, -80.0]
+
+
+def test_blocked_shuffle_without_block_parameters_is_a_shuffle() -> None:
+    trials = expand(make_spec(with_(GRID, order="blocked-shuffle", block_by=[])))
+    listed = expand(make_spec(GRID))
+    assert len(trials) == len(listed)
+    assert Counter(map(_key, trials)) == Counter(map(_key, listed))
+    assert list(map(_key, trials)) != list(map(_key, listed))
+
+
+@settings(max_examples=200, deadline=None)
+@given(distance=st.floats(0.0, 0.2), v=st.floats(0.001, 1.0), a=st.floats(0.01, 5.0),
+       hold=st.floats(0.0, 2.0), up=st.floats(0.001, 1.0), depth=st.floats(0.0, 0.05))
+def test_vectorised_durations_match_the_physics(distance: float, v: float, a: float, hold: float,
+                                                up: float, depth: float) -> None:
+    trial = Trial("x", 0, 0, 57, 0.0, v, up, a, depth, distance, hold, 0.0)
+    travel = np.array([distance + depth])
+    ours = (move_durations_s(travel, np.array([v]), np.array([a]))[0] + hold
+            + move_durations_s(travel, np.array([up]), np.array([a]))[0])
+    assert ours == pytest.approx(press_duration_s(trial.press()), rel=1e-9, abs=1e-12)
+    assert estimate_lab_time_s([trial], QUIET) == pytest.approx(ours, rel=1e-12)

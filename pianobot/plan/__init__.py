@@ -7,10 +7,17 @@
 
 from __future__ import annotations
 
-from pianobot.plan.envelope import Violation, check_envelope, raise_for_errors
-from pianobot.plan.labtime import LabTime, estimate_lab_time_s, key_change_s, lab_time
+from pianobot.plan.envelope import Violation, check_envelope, contact_speeds_mps, raise_for_errors
+from pianobot.plan.expand import expand
+from pianobot.plan.labtime import (
+    LabTime,
+    estimate_lab_time_s,
+    key_change_s,
+    lab_time,
+    move_durations_s,
+)
 from pianobot.plan.summary import Coverage, PlanSummary, ViolationGroup, format_duration, summarize
-from pianobot.plan.trials import PLAN_COLUMNS, Trial, expand, plan_frame
+from pianobot.plan.trial import PLAN_COLUMNS, Trial, plan_frame, trial_columns
 from pianobot.spec import resolved_spec_dict, spec_sha256
 
 __all__ = [
@@ -22,14 +29,17 @@ __all__ = [
     "Violation",
     "ViolationGroup",
     "check_envelope",
+    "contact_speeds_mps",
     "estimate_lab_time_s",
     "expand",
     "format_duration",
     "key_change_s",
     "lab_time",
+    "move_durations_s",
     "plan_frame",
     "raise_for_errors",
     "resolved_spec_dict",
     "spec_sha256",
     "summarize",
+    "trial_columns",
 ]

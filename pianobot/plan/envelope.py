@@ -10,12 +10,12 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Literal
+from typing import Literal
 
 import numpy as np
 
 from pianobot.errors import InputError
-from pianobot.physics.trajectory import Press, contact_speed_mps
+from pianobot.plan.trial import FloatArray, Trial, trial_columns
 from pianobot.spec import (
     KEY_DIP_M,
     PARAMETER_NAMES,
@@ -25,9 +25,6 @@ from pianobot.spec import (
     RigSpec,
 )
 from pianobot.spec.parameters import format_value
-
-if TYPE_CHECKING:
-    from pianobot.plan.trials import Trial
 
 Severity = Literal["error", "warning"]
 # A commanded speed counts as reached when the arm gets within this fraction of it at contact.
@@ -71,14 +68,13 @@ def check_envelope(
     """Every envelope violation of `trials` for `finger` on `rig`, ordered by trial index."""
     rig = rig if rig is not None else RigSpec()
     envelope = rig.envelope_for(finger, rig_label)
+    columns = trial_columns(trials)
     found: list[Violation] = []
-    columns = {name: np.array([getattr(t, name) for t in trials], dtype=float)
-               for name in PARAMETER_NAMES}
     for name in PARAMETER_NAMES:
         found += _bounds(trials, name, columns[name])
         if name in envelope:
             found += _outside(trials, finger, name, columns[name], envelope[name])
-    found += _reach(trials)
+    found += _reach(trials, columns)
     found += _workspace(trials, rig)
     return sorted(found, key=lambda v: (v.index, v.severity != "error", v.parameter))
 
@@ -93,24 +89,40 @@ def raise_for_errors(violations: Sequence[Violation], label: str) -> None:
     raise InputError(first.message + more, f"{label}: trial {first.index} ({first.parameter})")
 
 
-def _bounds(trials: Sequence[Trial], name: str, values: np.ndarray) -> list[Violation]:
+def contact_speeds_mps(
+    distance_m: FloatArray, depth_m: FloatArray, velocity_mps: FloatArray, accel_mps2: FloatArray
+) -> FloatArray:
+    """Arm speed where the fingertip meets the resting key, for many trapezoid down moves.
+
+    The vectorised form of `physics.trajectory.contact_speed_mps`: the move of distance + depth
+    peaks at min(v, √(a·(distance + depth))) (a triangle when too short to cruise); after the
+    run-up it has at most √(2·a·distance), and braking for the end caps it at √(2·a·depth).
+    """
+    with np.errstate(invalid="ignore"):
+        peak = np.minimum(velocity_mps, np.sqrt(accel_mps2 * (distance_m + depth_m)))
+        run_up = np.sqrt(2 * accel_mps2 * distance_m)
+        braking = np.sqrt(2 * accel_mps2 * depth_m)
+        speed: FloatArray = np.minimum(peak, np.minimum(run_up, braking))
+    return speed
+
+
+def _bounds(trials: Sequence[Trial], name: str, values: FloatArray) -> list[Violation]:
     p = PARAMETERS[name]
-    bad = [i for i, v in enumerate(values) if not p.within_bounds(float(v))]
     return [
         Violation(i, trials[i].trial_id, name, float(values[i]), (p.minimum, p.maximum),
-                  f"{name} {format_value(values[i])} is not a valid value {p.bounds_text()}",
+                  f"{name} {format_value(float(values[i]))} is not a valid value {p.bounds_text()}",
                   "error", "bounds")
-        for i in bad
+        for i in np.flatnonzero(~p.bounds_mask(values)).tolist()
     ]
 
 
 def _outside(
-    trials: Sequence[Trial], finger: Finger, name: str, values: np.ndarray, limits: Limits
+    trials: Sequence[Trial], finger: Finger, name: str, values: FloatArray, limits: Limits
 ) -> list[Violation]:
     unit = PARAMETERS[name].unit
     source = f" ({limits.source})" if limits.source else ""
     out = []
-    for i in np.flatnonzero(~np.array([limits.contains(float(v)) for v in values], dtype=bool)):
+    for i in np.flatnonzero(~limits.mask(values)):
         value = float(values[i])
         rule = "envelope"
         message = (f"{name} {format_value(value)} {unit} is outside {limits.text(unit)} "
@@ -130,38 +142,29 @@ def _outside(
     return out
 
 
-def _reach(trials: Sequence[Trial]) -> list[Violation]:
+def _reach(trials: Sequence[Trial], columns: dict[str, FloatArray]) -> list[Violation]:
     """Warn where the arm meets the key slower than commanded (the study did this often).
 
-    Accelerating at a from rest, the arm has √(2·a·distance) after the run-up; braking for the
-    end of the move caps it at √(2·a·depth); a short move peaks at √(a·(distance + depth)).
+    A trial that starts in contact (distance 0) has no impact speed to reach and is skipped.
     """
-    cache: dict[tuple[float, float, float, float], float] = {}
+    distance, depth = columns["distance_m"], columns["depth_m"]
+    v, a = columns["down_velocity_mps"], columns["acceleration_mps2"]
+    reached = contact_speeds_mps(distance, depth, v, a)
+    with np.errstate(invalid="ignore"):
+        slow = (distance > 0) & (reached < v * (1 - REACH_TOLERANCE))
     out = []
-    for i, t in enumerate(trials):
-        key = (t.distance_m, t.depth_m, t.down_velocity_mps, t.acceleration_mps2)
-        if key not in cache:
-            cache[key] = _contact_speed(*key)
-        reached = cache[key]
-        if not np.isfinite(reached) or reached >= t.down_velocity_mps * (1 - REACH_TOLERANCE):
-            continue
-        a, v = t.acceleration_mps2, t.down_velocity_mps
-        if np.sqrt(2 * a * t.distance_m) < v:
+    for i in np.flatnonzero(slow):
+        t = trials[int(i)]
+        if np.sqrt(2 * t.acceleration_mps2 * t.distance_m) < t.down_velocity_mps:
             why = f"still accelerating after the {format_value(t.distance_m)} m run-up"
         else:
             why = f"already braking {format_value(t.depth_m)} m before the end of the move"
         out.append(Violation(
-            i, t.trial_id, "down_velocity_mps", v, (0.0, reached),
-            f"the arm meets the key at {reached:.3g} m/s, not the commanded {format_value(v)} "
-            f"m/s: at {format_value(a)} m/s² it is {why}", "warning", "reach"))
+            int(i), t.trial_id, "down_velocity_mps", t.down_velocity_mps, (0.0, float(reached[i])),
+            f"the arm meets the key at {reached[i]:.3g} m/s, not the commanded "
+            f"{format_value(t.down_velocity_mps)} m/s: at {format_value(t.acceleration_mps2)} "
+            f"m/s² it is {why}", "warning", "reach"))
     return out
-
-
-def _contact_speed(distance_m: float, depth_m: float, velocity_mps: float, accel: float) -> float:
-    if not (velocity_mps > 0 and accel > 0 and distance_m >= 0 and depth_m >= 0):
-        return float("nan")  # already reported as a bounds error
-    press = Press(distance_m, depth_m, velocity_mps, velocity_mps, accel)
-    return contact_speed_mps(press)
 
 
 def _workspace(trials: Sequence[Trial], rig: RigSpec) -> list[Violation]:

@@ -9,16 +9,16 @@ not the wall time of a simulated run.
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+
+import numpy as np
 
 from pianobot.physics.keyboard import REFERENCE_NOTE, key_center_m
-from pianobot.physics.trajectory import move_profile, press_duration_s
+from pianobot.physics.trajectory import move_profile
+from pianobot.plan.trial import FloatArray, Trial, trial_columns
 from pianobot.spec import RigSpec
-
-if TYPE_CHECKING:
-    from pianobot.plan.trials import Trial
 
 # Vacuum levels closer than this are the same setting (the regulator's tolerance is ~2 kPa).
 SAME_VACUUM_KPA = 1e-6
@@ -56,34 +56,45 @@ class LabTime:
 def lab_time(trials: Sequence[Trial], rig: RigSpec | None = None) -> LabTime:
     """The lab-time estimate of running `trials` in their order on `rig`."""
     rig = rig if rig is not None else RigSpec()
-    durations: dict[tuple[float, ...], float] = {}
-    presses_s = 0.0
-    vacuum_changes = key_changes = 0
-    travel_s = 0.0
-    vacuum_kpa = 0.0  # every run starts vented
-    note: int | None = None
-    for trial in trials:
-        press = trial.press()
-        key = (press.distance_m, press.depth_m, press.down_velocity_mps, press.up_velocity_mps,
-               press.acceleration_mps2, press.hold_s)
-        if key not in durations:
-            durations[key] = press_duration_s(press)
-        presses_s += durations[key]
-        if abs(trial.vacuum_kpa - vacuum_kpa) > SAME_VACUUM_KPA:
-            vacuum_changes += 1
-            vacuum_kpa = trial.vacuum_kpa
-        if note is not None and trial.note != note:
-            key_changes += 1
-            travel_s += key_change_s(note, trial.note, rig)
-        note = trial.note
+    c = trial_columns(trials)
+    travel_m = c["distance_m"] + c["depth_m"]
+    presses_s = float(np.sum(
+        move_durations_s(travel_m, c["down_velocity_mps"], c["acceleration_mps2"])
+        + c["hold_s"]
+        + move_durations_s(travel_m, c["up_velocity_mps"], c["acceleration_mps2"])
+    ))
+    # Every run starts vented; each change of level in run order waits for the regulator.
+    previous_kpa = np.concatenate([[0.0], c["vacuum_kpa"][:-1]])
+    vacuum_changes = int(np.count_nonzero(np.abs(c["vacuum_kpa"] - previous_kpa) > SAME_VACUUM_KPA))
+    notes = [t.note for t in trials]
+    moves = Counter((a, b) for a, b in zip(notes, notes[1:], strict=False) if a != b)
+    travel_s = sum(count * key_change_s(a, b, rig) for (a, b), count in moves.items())
     return LabTime(
         presses_s=presses_s,
         pauses_s=len(trials) * rig.settle_s.between_presses_s,
         vacuum_s=vacuum_changes * rig.settle_s.after_vacuum_change_s,
         travel_s=travel_s,
         vacuum_changes=vacuum_changes,
-        key_changes=key_changes,
+        key_changes=sum(moves.values()),
     )
+
+
+def move_durations_s(
+    distance_m: FloatArray, velocity_mps: FloatArray, accel_mps2: FloatArray
+) -> FloatArray:
+    """Durations of many moveL moves: the vectorised `physics.trajectory.move_profile`.
+
+    A trapezoid spends v/a accelerating and v/a braking, covering v²/a, and cruises the rest:
+    d/v + v/a in all. A move shorter than v²/a never reaches v: a triangle of 2·√(d/a).
+    """
+    with np.errstate(divide="ignore", invalid="ignore"):
+        triangle = distance_m < velocity_mps**2 / accel_mps2
+        duration: FloatArray = np.where(
+            triangle,
+            2 * np.sqrt(distance_m / accel_mps2),
+            distance_m / velocity_mps + velocity_mps / accel_mps2,
+        )
+    return duration
 
 
 def estimate_lab_time_s(trials: Sequence[Trial], rig: RigSpec | None = None) -> float:

@@ -4,14 +4,14 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
+
+import numpy as np
 
 from pianobot.plan.envelope import Violation
 from pianobot.plan.labtime import LabTime, lab_time
-from pianobot.spec import PARAMETER_NAMES, PARAMETERS, ExperimentSpec, RigSpec, load_rig_for
-
-if TYPE_CHECKING:
-    from pianobot.plan.trials import Trial
+from pianobot.plan.trial import Trial, trial_columns
+from pianobot.spec import PARAMETERS, ExperimentSpec, RigSpec, load_rig_for
 
 _SHOWN_INDICES = 8
 
@@ -131,11 +131,10 @@ def summarize(
     """The dry-run summary of a plan (`rig` defaults to the one the spec names)."""
     rig = rig if rig is not None else load_rig_for(spec)
     coverage = {}
-    for name in PARAMETER_NAMES:
-        values = [float(getattr(t, name)) for t in trials]
-        if values:
-            coverage[name] = Coverage(min(values), max(values),
-                                      len({round(v, 9) for v in values}))
+    if trials:
+        for name, values in trial_columns(trials).items():
+            levels = len(np.unique(np.round(values, 9)))
+            coverage[name] = Coverage(float(values.min()), float(values.max()), levels)
     return PlanSummary(
         name=spec.name,
         finger=spec.finger,

@@ -7,10 +7,14 @@ outside it is refused unless a rig file widens it explicitly.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Literal
 
+import numpy as np
+import numpy.typing as npt
+
+FloatArray = npt.NDArray[np.float64]
+BoolArray = npt.NDArray[np.bool_]
 Finger = Literal["soft", "rigid"]
 FINGERS: tuple[Finger, ...] = ("soft", "rigid")
 
@@ -51,12 +55,16 @@ class Parameter:
 
     def within_bounds(self, value: float) -> bool:
         """Whether `value` is physically meaningful for this parameter."""
-        if not math.isfinite(value):
-            return False
-        if self.integer and value != int(value):
-            return False
-        low_ok = value > self.minimum if self.exclusive_minimum else value >= self.minimum
-        return low_ok and value <= self.maximum
+        return bool(self.bounds_mask(np.array([value], dtype=np.float64))[0])
+
+    def bounds_mask(self, values: FloatArray) -> BoolArray:
+        """Elementwise `within_bounds` of an array."""
+        with np.errstate(invalid="ignore"):
+            low_ok = values > self.minimum if self.exclusive_minimum else values >= self.minimum
+            ok: BoolArray = np.isfinite(values) & low_ok & (values <= self.maximum)
+            if self.integer:
+                ok &= np.floor(values) == values
+        return ok
 
 
 PARAMETERS: dict[str, Parameter] = {
@@ -129,6 +137,13 @@ class Limits:
     def contains(self, value: float) -> bool:
         """Whether `value` lies in [low, high] (up to float repr noise)."""
         return self.low - RANGE_TOLERANCE <= value <= self.high + RANGE_TOLERANCE
+
+    def mask(self, values: FloatArray) -> BoolArray:
+        """Elementwise `contains` of an array."""
+        inside: BoolArray = (values >= self.low - RANGE_TOLERANCE) & (
+            values <= self.high + RANGE_TOLERANCE
+        )
+        return inside
 
     def text(self, unit: str) -> str:
         """The range as text, e.g. `[0.02, 0.035] m`."""
