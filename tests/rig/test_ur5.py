@@ -308,3 +308,14 @@ def test_unknown_failures_are_not_mislabelled() -> None:
     assert isinstance(failure("moveL", powered_off), SafetyStop)
     script_dead = ArmStatus(True, True, False, False, False, 1, 7, 1, 1.0)
     assert isinstance(failure("moveL", script_dead), ConnectionLost)
+
+
+def test_a_dead_control_script_is_a_connection_loss(robot: FakeController) -> None:
+    arm = make_arm(robot)
+    robot.program_running = False  # moveL answers False, as ur_rtde does
+    with pytest.raises(ConnectionLost, match="control script not running"):
+        arm.move_to_key(59, 0.02)
+    arm.connect()  # reconnecting re-uploads the script
+    assert robot.calls_to("reconnect") and robot.program_running
+    arm.move_to_key(59, 0.02)
+    assert robot.pose == pytest.approx(arm.key_pose(59, 0.02))
