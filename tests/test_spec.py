@@ -444,3 +444,12 @@ def test_world_overrides_are_validated(tmp_path: Path) -> None:
     with pytest.raises(InputError, match="did you mean 'vacuum_tau_s'") as info:
         load_rig(path)
     assert info.value.where == f"{path}: world"
+
+
+def test_a_rig_given_instead_of_the_specs_own(tmp_path: Path) -> None:
+    fast = GOOD.replace("stop: 0.06", "stop: 0.08")
+    wide = write(tmp_path, "kind: sim\nenvelope:\n  soft:\n    down_velocity_mps: [0, 0.08]\n", "w.yaml")
+    assert load_spec(write(tmp_path, fast), rig=wide).rig == "sim"
+    narrow = write(tmp_path, "kind: sim\nenvelope:\n  soft:\n    depth_m: [0.02, 0.025]\n", "n.yaml")
+    with pytest.raises(InputError, match=r"\[0.02, 0.025\] m for the soft finger \(set by .*n.yaml\)"):
+        load_spec(write(tmp_path, GOOD), rig=narrow)

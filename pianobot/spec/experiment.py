@@ -94,7 +94,7 @@ def resolved_spec_dict(spec: ExperimentSpec) -> dict[str, Any]:
 
     It validates again as the same experiment (resolving is idempotent), and it is what the
     trial ids are hashed from, so `{start: 0.01, stop: 0.08, num: 15}` and the 15 listed levels
-    give the same ids.
+    give the same ids. The free-text `description` is left out: it does not change what runs.
     """
     data = spec.model_dump(mode="json", exclude={"description"})
     sweep = spec.sweep

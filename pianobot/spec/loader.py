@@ -135,18 +135,19 @@ def load_rig_for(spec: ExperimentSpec) -> RigSpec:
     return load_rig(rig_path)
 
 
-def load_spec(path: str | Path) -> ExperimentSpec:
+def load_spec(path: str | Path, rig: str | Path | None = None) -> ExperimentSpec:
     """Read, validate and envelope-check an experiment spec.
 
     Raises InputError naming the file and YAML path for an unreadable file, a YAML syntax
     error, an unknown key, a wrong type, an empty grid or a value outside the finger's
-    safety envelope (as the spec's rig file sets it).
+    safety envelope (as the spec's rig file sets it, or `rig`, a rig file used instead).
     """
     label = str(path)
     data, root = _read_yaml(Path(path))
     spec = _validate(ExperimentSpec, data, label, root).with_source(Path(path))
-    rig = load_rig_for(spec)
-    problems: list[Problem] = spec_problems(spec, rig, spec.rig)
+    rig_spec = load_rig_for(spec) if rig is None else load_rig(rig)
+    rig_label = spec.rig if rig is None else str(rig)
+    problems: list[Problem] = spec_problems(spec, rig_spec, rig_label)
     if problems:
         first = problems[0]
         message = first.message
