@@ -138,6 +138,10 @@ def register(app: typer.Typer) -> None:
         seed: Annotated[int | None, typer.Option("--seed", help="Seed of the simulated world (overrides the rig file).")] = None,
         rig: Annotated[Path | None, typer.Option("--rig", help="Rig file to use instead of the spec's.")] = None,
         no_progress: Annotated[bool, typer.Option("--no-progress", help="No progress bar.")] = False,
+        batch_trials: Annotated[int, typer.Option(
+            "--batch-trials", min=1,
+            help="Trials per Parquet part (also flushed every 2 s); a crash loses at most one batch.",
+        )] = 50,
     ) -> None:
         """Run an experiment spec on its rig into data/runs/<run_id>/ (or --dry-run it)."""
         if dry_run_flag:
@@ -157,7 +161,7 @@ def register(app: typer.Typer) -> None:
             return
         outcome = run_sweep(
             spec, data_dir=data, resume=resume, seed=seed, rig_path=rig,
-            progress=not no_progress and not json_out and sys.stderr.isatty(),
+            progress=not no_progress and not json_out and sys.stderr.isatty(), batch_trials=batch_trials,
         )
         if json_out:
             emit_json(outcome.to_dict())

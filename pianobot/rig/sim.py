@@ -244,14 +244,13 @@ def _f64(values: Any) -> FloatArray:
 
 def make_world(world: dict[str, Any], seed: int) -> Any:
     """The physics World a rig file's `world:` section describes (`preset` plus overrides)."""
-    from pianobot.physics.world import World
+    from pianobot.physics.world import World, WorldConfig
 
     settings = dict(world)
     preset = settings.pop("preset", "default")
-    base = World.linear(seed) if preset == "linear" else World.default(seed)
-    if not settings:
-        return base
-    return World(base.config.with_overrides(settings), seed)
+    if preset == "linear":
+        settings.setdefault("effects", {})  # the study's linear model: no extra effects
+    return World(WorldConfig.model_validate(settings), seed)
 
 
 def build_sim_rig(rig_spec: Any, seed: int, *, world: Any | None = None) -> Rig:

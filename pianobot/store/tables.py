@@ -22,13 +22,19 @@ def committed_batches(paths: RunPaths) -> set[int]:
 
 
 def drop_orphan_parts(paths: RunPaths) -> list[Path]:
-    """Remove samples/midi parts of a batch whose trials part never landed (a killed writer).
+    """Remove what a killed writer left half-done: temp files, and samples/midi parts of a batch
+    whose trials part never landed.
 
-    Only the run's writer calls this; readers simply skip such parts.
+    Only the run's writer calls this (it holds the run lock, so no temp file is still being
+    written); readers simply skip such files.
     """
+    removed: list[Path] = []
+    for folder in (paths.root, paths.parts):
+        for temp in folder.glob(".*.tmp"):
+            temp.unlink(missing_ok=True)
+            removed.append(temp)
     parts = paths.part_batches()
     committed = set(parts["trials"])
-    removed: list[Path] = []
     for name in ("samples", "midi"):
         for batch, path in parts[name].items():
             if batch not in committed:
