@@ -1,0 +1,100 @@
+"""Test songs built in code from note lists: what `experiments/songs/make_songs.py` writes.
+
+Each song is a list of (pitch, beats, velocity) with a tempo; `to_notes` puts it on a seconds
+axis. Notes are detached: each sounds for `articulation` of its beat length, the rest of the
+beat is silence (a single finger needs that gap to release the key and strike the next one).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from pianobot.io.midifile import Note
+
+C4, D4, E4, F4, G4, A4, B4, C5 = 60, 62, 64, 65, 67, 69, 71, 72
+
+
+@dataclass(frozen=True)
+class SongSpec:
+    """A melody as (pitch, beats, velocity) triples with a tempo in quarter-note beats/min."""
+
+    name: str
+    tempo_bpm: float
+    notes: tuple[tuple[int, float, int], ...]
+    articulation: float = 0.9  # fraction of each note's beats that sounds
+
+    def to_notes(self) -> list[Note]:
+        """The melody on a seconds axis (onsets at the beat grid)."""
+        beat_s = 60.0 / self.tempo_bpm
+        out, t_beats = [], 0.0
+        for pitch, beats, velocity in self.notes:
+            onset = t_beats * beat_s
+            out.append(Note(pitch, onset, onset + beats * beat_s * self.articulation, velocity))
+            t_beats += beats
+        return out
+
+
+def _phrase(pitches: Sequence[int], beats: Sequence[float], velocities: Sequence[int]) -> list[tuple[int, float, int]]:
+    return list(zip(pitches, beats, velocities, strict=True))
+
+
+def _ramp(start: int, stop: int, n: int) -> list[int]:
+    """n velocities from start to stop (a crescendo or diminuendo)."""
+    if n == 1:
+        return [start]
+    return [round(start + (stop - start) * i / (n - 1)) for i in range(n)]
+
+
+def scale_crescendo(tempo_bpm: float = 60.0) -> SongSpec:
+    """C major up and down over two octaves' worth of steps, one crescendo from pp to ff."""
+    up = [C4, D4, E4, F4, G4, A4, B4, C5]
+    pitches = up + up[-2::-1]
+    beats = [1.0] * (len(pitches) - 1) + [2.0]
+    return SongSpec("scale_crescendo", tempo_bpm, tuple(_phrase(pitches, beats, _ramp(25, 115, len(pitches)))))
+
+
+_TWINKLE_A = [C4, C4, G4, G4, A4, A4, G4, F4, F4, E4, E4, D4, D4, C4]
+_TWINKLE_B = [G4, G4, F4, F4, E4, E4, D4]
+_PHRASE_BEATS = [1.0] * 6 + [2.0]
+
+
+def twinkle(tempo_bpm: float = 90.0, beat: float = 1.0) -> SongSpec:
+    """Twinkle Twinkle Little Star (42 notes, A B B A) with phrase dynamics.
+
+    `beat` is how many quarter notes one syllable lasts (1: the usual notation).
+    """
+    beats = [b * beat for b in _PHRASE_BEATS * 2]
+    half = [b * beat for b in _PHRASE_BEATS]
+    notes = (
+        _phrase(_TWINKLE_A, beats, [72, 72, 84, 84, 92, 92, 84] + _ramp(70, 58, 7))
+        + _phrase(_TWINKLE_B, half, _ramp(50, 66, 7))
+        + _phrase(_TWINKLE_B, half, _ramp(66, 88, 7))
+        + _phrase(_TWINKLE_A, beats, [96, 96, 104, 104, 110, 110, 100] + _ramp(90, 40, 7))
+    )
+    return SongSpec("twinkle", tempo_bpm, tuple(notes))
+
+
+def mary(tempo_bpm: float = 90.0, beat: float = 1.0) -> SongSpec:
+    """Mary Had a Little Lamb (26 notes): soft verse, louder answer, fading close."""
+    pitches = [E4, D4, C4, D4, E4, E4, E4, D4, D4, D4, E4, G4, G4,
+               E4, D4, C4, D4, E4, E4, E4, E4, D4, D4, E4, D4, C4]
+    beats = [1, 1, 1, 1, 1, 1, 2, 1, 1, 2, 1, 1, 2,
+             1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 4]
+    velocities = _ramp(45, 60, 7) + [64, 64, 64, 90, 100, 100] + _ramp(80, 60, 9) + _ramp(55, 30, 4)
+    return SongSpec("mary", tempo_bpm, tuple(_phrase(pitches, [b * beat for b in beats], velocities)))
+
+
+def etude(n_notes: int = 60, tempo_bpm: float = 60.0, seed_pitch: int = C4) -> SongSpec:
+    """A long exercise for adaptation: stepwise C-major walk with swelling dynamics.
+
+    Pitches climb and fall through a fifth; velocities cycle through pp–ff every 12 notes so
+    every stretch of the piece asks for the whole dynamic range.
+    """
+    steps = [0, 2, 4, 5, 7, 5, 4, 2]
+    cycle = [30, 45, 60, 75, 90, 105, 115, 100, 85, 70, 55, 40]
+    notes = [(seed_pitch + steps[i % len(steps)], 1.0, cycle[i % len(cycle)]) for i in range(n_notes)]
+    return SongSpec(f"etude{n_notes}", tempo_bpm, tuple(notes))
+
+
+SONGS = {"scale_crescendo": scale_crescendo, "twinkle": twinkle, "mary": mary}

@@ -1,0 +1,142 @@
+"""A model's keystroke outcomes tabulated over down velocity, for fast per-note inverses.
+
+For one stroke configuration (vacuum, acceleration, depth, run-up, up velocity) the planner
+asks the model once for on-velocity, silence, lead (motion start → note-on) and MIDI hold at a
+grid of down velocities and two holds, then answers every note by interpolation. The loudness
+curve is made monotone (running maximum over sounding speeds) so the inverse is single-valued
+and picks the slowest speed that reaches a loudness.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+import pandas as pd
+
+from pianobot.analysis.predictors import StrokePredictor
+from pianobot.physics.trajectory import Press, press_duration_s
+from pianobot.play.settings import PlaySettings
+
+FloatArray = npt.NDArray[np.float64]
+
+# When the model's hold does not respond to the commanded hold (a learned model trained at one
+# hold), holding the arm down longer keeps the key down just as much longer.
+FALLBACK_HOLD_SLOPE = 1.0
+
+
+@dataclass(frozen=True)
+class StrokeTable:
+    """Outcomes of one stroke configuration over a grid of down velocities."""
+
+    vacuum_kpa: float
+    settings: PlaySettings
+    speeds_mps: FloatArray
+    velocity: FloatArray  # monotone envelope of the predicted on-velocity (NaN where silent)
+    lead_s: FloatArray
+    hold0_s: FloatArray  # MIDI hold at zero arm hold
+    hold_slope: FloatArray  # d(MIDI hold)/d(arm hold)
+
+    @classmethod
+    def build(cls, predictor: StrokePredictor, vacuum_kpa: float, settings: PlaySettings,
+              max_down_velocity_mps: float) -> StrokeTable:
+        """Ask `predictor` for the outcomes at `settings.speeds` down velocities up to the cap."""
+        lo = min(settings.min_down_velocity_mps, max_down_velocity_mps)
+        speeds = np.linspace(lo, max_down_velocity_mps, settings.speeds)
+        h1 = settings.tabulate_hold_s
+        frame = pd.DataFrame({
+            "down_velocity_mps": np.r_[speeds, speeds],
+            "hold_s": np.r_[np.zeros(speeds.size), np.full(speeds.size, h1)],
+            "vacuum_kpa": vacuum_kpa,
+            "acceleration_mps2": settings.acceleration_mps2,
+            "depth_m": settings.depth_m,
+            "distance_m": settings.distance_m,
+            "up_velocity_mps": settings.up_velocity_mps,
+        })
+        out = predictor.predict(frame)
+        n = speeds.size
+        on = out["on_velocity"].to_numpy(float)[:n].copy()
+        silent = out["p_silent"].to_numpy(float)[:n] >= settings.silent_p
+        on[silent | ~np.isfinite(on)] = np.nan
+        lead = out["lead_s"].to_numpy(float)[:n]
+        hold = out["midi_hold_s"].to_numpy(float)
+        slope = (hold[n:] - hold[:n]) / h1
+        slope = np.where(np.isfinite(slope) & (slope > 0.2) & (slope < 3.0), slope, FALLBACK_HOLD_SLOPE)
+        velocity = _monotone(on)
+        return cls(float(vacuum_kpa), settings, speeds, velocity, _filled(lead), _filled(hold[:n]), slope)
+
+    @property
+    def sounding(self) -> npt.NDArray[np.bool_]:
+        return np.isfinite(self.velocity)
+
+    @property
+    def velocity_range(self) -> tuple[float, float]:
+        """(quietest, loudest) predicted on-velocity; NaNs when nothing sounds."""
+        v = self.velocity[self.sounding]
+        return (float(v[0]), float(v[-1])) if v.size else (float("nan"), float("nan"))
+
+    def inverse(self, target: npt.ArrayLike) -> FloatArray:
+        """Down velocity giving each target on-velocity (clipped to the reachable range)."""
+        t = np.asarray(target, dtype=np.float64)
+        ok = self.sounding
+        if ok.sum() < 2:
+            return np.full(t.shape, np.nan)
+        v, s = self.velocity[ok], self.speeds_mps[ok]
+        keep = np.r_[True, np.diff(v) > 1e-9]
+        return np.asarray(np.interp(t, v[keep], s[keep]), dtype=np.float64)
+
+    def predict_velocity(self, speed_mps: npt.ArrayLike) -> FloatArray:
+        """Predicted on-velocity at down velocities (the monotone envelope)."""
+        ok = self.sounding
+        return np.asarray(np.interp(speed_mps, self.speeds_mps[ok], self.velocity[ok]), dtype=np.float64)
+
+    def lead(self, speed_mps: npt.ArrayLike) -> FloatArray:
+        return np.asarray(np.interp(speed_mps, self.speeds_mps, self.lead_s), dtype=np.float64)
+
+    def midi_hold(self, speed_mps: npt.ArrayLike, hold_s: npt.ArrayLike) -> FloatArray:
+        """Predicted MIDI hold (note-on → note-off) for a down velocity and an arm hold."""
+        h0 = np.interp(speed_mps, self.speeds_mps, self.hold0_s)
+        slope = np.interp(speed_mps, self.speeds_mps, self.hold_slope)
+        return np.asarray(h0 + slope * np.asarray(hold_s, dtype=np.float64), dtype=np.float64)
+
+    def arm_hold_for(self, speed_mps: npt.ArrayLike, midi_hold_s: npt.ArrayLike) -> FloatArray:
+        """Arm hold so the predicted MIDI hold equals the wanted one (≥ 0, uncapped)."""
+        h0 = np.interp(speed_mps, self.speeds_mps, self.hold0_s)
+        slope = np.interp(speed_mps, self.speeds_mps, self.hold_slope)
+        return np.asarray(np.maximum(0.0, (np.asarray(midi_hold_s) - h0) / slope), dtype=np.float64)
+
+    def busy_s(self, speed_mps: float, hold_s: float) -> float:
+        """Motion start → the next press may start: the press itself plus the recovery."""
+        return busy_s(self.settings, speed_mps, hold_s)
+
+
+def make_press(settings: PlaySettings, speed_mps: float, hold_s: float) -> Press:
+    """The press of a note: the song's fixed geometry with this down velocity and hold."""
+    s = settings
+    return Press(s.distance_m, s.depth_m, float(speed_mps), s.up_velocity_mps, s.acceleration_mps2, float(hold_s))
+
+
+def busy_s(settings: PlaySettings, speed_mps: float, hold_s: float) -> float:
+    """Motion start → the next press may start: the press itself plus the recovery."""
+    return press_duration_s(make_press(settings, speed_mps, hold_s)) + settings.recovery_s
+
+
+def _monotone(velocity: FloatArray) -> FloatArray:
+    """Running maximum over the sounding part; NaN stays NaN (silent speeds)."""
+    out = np.full(velocity.shape, np.nan)
+    best = -np.inf
+    for i, v in enumerate(velocity):
+        if np.isfinite(v):
+            best = max(best, float(v))
+            out[i] = best
+    return out
+
+
+def _filled(values: FloatArray) -> FloatArray:
+    """NaNs (silent speeds) filled from the nearest predicted value, so timing is defined."""
+    ok = np.isfinite(values)
+    if not ok.any():  # a level where nothing sounds: it will not be chosen
+        return np.full(values.shape, np.nan)
+    idx = np.arange(values.size)
+    return np.asarray(np.interp(idx, idx[ok], values[ok]), dtype=np.float64)
