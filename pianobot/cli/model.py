@@ -1,0 +1,176 @@
+"""`pianobot model bode | simulate`: the keystroke model's resonance and one simulated keystroke."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Any
+
+import numpy as np
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from pianobot.cli.common import DEFAULT_DATA, DataDir, JsonFlag, emit_json
+from pianobot.errors import InputError
+from pianobot.physics.model import KeystrokeModel, load_model
+from pianobot.physics.msd import frequency_response, peak_response
+from pianobot.physics.trajectory import Press, press_timing
+from pianobot.physics.world import World, WorldKeystroke
+
+model_app = typer.Typer(help="Inspect the keystroke model: resonance, one simulated keystroke.",
+                        no_args_is_help=True)
+
+VacuumOpt = Annotated[float, typer.Option("--vacuum-kpa", help="Vacuum, gauge kPa (<= 0).")]
+PlotOpt = Annotated[Path | None, typer.Option("--plot", help="Write a PNG figure here.")]
+
+
+def register(app: typer.Typer) -> None:
+    app.add_typer(model_app, name="model")
+
+
+def _vacuum(vacuum_kpa: float) -> float:
+    if not -200.0 <= vacuum_kpa <= 0.0:
+        raise InputError(f"vacuum is gauge pressure in [-200, 0] kPa, got {vacuum_kpa}", "--vacuum-kpa")
+    return vacuum_kpa
+
+
+@model_app.command("bode")
+def bode(
+    vacuum_kpa: VacuumOpt = -60.0,
+    model_file: Annotated[Path | None, typer.Option("--model", help="A model file (default: the study's).")] = None,
+    plot: PlotOpt = None,
+    data: DataDir = DEFAULT_DATA,
+    json: JsonFlag = False,
+) -> None:
+    """Peak frequency and gain of the key's response to the arm, |X2/X0|."""
+    model = load_model(model_file) if model_file is not None else KeystrokeModel.study()
+    lp = model.msd.at(_vacuum(vacuum_kpa))
+    peak_hz, gain = peak_response(lp)
+    if plot is not None:
+        _plot_bode(lp, vacuum_kpa, peak_hz, plot)
+    payload = {"vacuum_kpa": vacuum_kpa, "peak_hz": peak_hz, "peak_gain": gain,
+               "model": str(model_file) if model_file else "study", "plot": str(plot) if plot else None}
+    if json:
+        emit_json(payload)
+        return
+    Console().print(f"|X2/X0| at {vacuum_kpa:g} kPa: peak {peak_hz:.2f} Hz, gain {gain:.3f}")
+
+
+@model_app.command("simulate")
+def simulate(
+    vacuum_kpa: VacuumOpt = -60.0,
+    down_velocity_mps: Annotated[float, typer.Option("--down-velocity-mps")] = 0.04,
+    depth_m: Annotated[float, typer.Option("--depth-m")] = 0.03,
+    acceleration_mps2: Annotated[float, typer.Option("--acceleration-mps2")] = 1.0,
+    up_velocity_mps: Annotated[float | None, typer.Option("--up-velocity-mps", help="Default: the down velocity.")] = None,
+    distance_m: Annotated[float, typer.Option("--distance-m")] = 0.05,
+    hold_s: Annotated[float, typer.Option("--hold-s")] = 0.0,
+    world: Annotated[str, typer.Option("--world", help="default | linear")] = "default",
+    seed: Annotated[int, typer.Option("--seed")] = 0,
+    plot: PlotOpt = None,
+    data: DataDir = DEFAULT_DATA,
+    json: JsonFlag = False,
+) -> None:
+    """Simulate one keystroke in the simulated world; print its MIDI outcome, optionally plot it."""
+    if world not in ("default", "linear"):
+        raise InputError(f"expected 'default' or 'linear', got {world!r}", "--world")
+    press = Press(distance_m, depth_m, down_velocity_mps,
+                  up_velocity_mps if up_velocity_mps is not None else down_velocity_mps,
+                  acceleration_mps2, hold_s)
+    try:
+        press_timing(press)
+    except ValueError as exc:
+        raise InputError(str(exc), "press") from None
+    sim = World.default(seed) if world == "default" else World.linear(seed)
+    k = sim.keystroke(press, _vacuum(vacuum_kpa), key="cli")
+    if plot is not None:
+        _plot_keystroke(k, press, vacuum_kpa, plot)
+    payload = _summary(k, world, vacuum_kpa, press)
+    payload["plot"] = str(plot) if plot else None
+    if json:
+        emit_json(payload)
+        return
+    table = Table(title=f"{world} world, {vacuum_kpa:g} kPa, {down_velocity_mps:g} m/s, depth {depth_m:g} m")
+    table.add_column("quantity")
+    table.add_column("value", justify="right")
+    for name in ("silent", "on_velocity", "t_on_s", "t_off_s", "key_speed_at_trigger_mps",
+                 "max_key_travel_m", "duration_s"):
+        value = payload[name]
+        table.add_row(name, f"{value:.4g}" if isinstance(value, float) else str(value))
+    Console().print(table)
+
+
+def _summary(k: WorldKeystroke, world: str, vacuum_kpa: float, press: Press) -> dict[str, Any]:
+    ons = [e for e in k.midi if e.type == "note_on"]
+    offs = [e for e in k.midi if e.type == "note_off"]
+    return {
+        "world": world,
+        "vacuum_kpa": vacuum_kpa,
+        "press": press.__dict__,
+        "silent": not ons,
+        "on_velocity": ons[0].velocity if ons else None,
+        "off_velocity": offs[0].velocity if offs else None,
+        "t_on_s": ons[0].t_s - k.t0_s if ons else None,
+        "t_off_s": offs[0].t_s - k.t0_s if offs else None,
+        "key_speed_at_trigger_mps": k.key_speed_at_trigger_mps,
+        "max_key_travel_m": k.max_key_travel_m,
+        "duration_s": k.duration_s,
+        "midi": [e.__dict__ for e in k.midi],
+    }
+
+
+def _plot_bode(lp: Any, vacuum_kpa: float, peak_hz: float, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    f = np.geomspace(0.1, 200.0, 800)
+    g2, _ = frequency_response(lp, f)
+    g1, _ = frequency_response(lp, f, output="x1")
+    fig, ax = plt.subplots(figsize=(6, 4))
+    ax.loglog(f, g2, label="|X2/X0| key")
+    ax.loglog(f, g1, label="|X1/X0| fingertip", alpha=0.7)
+    if peak_hz > 0:
+        ax.axvline(peak_hz, color="k", ls=":", label=f"peak {peak_hz:.2f} Hz")
+    ax.set(xlabel="frequency (Hz)", ylabel="gain", title=f"Arm-to-key response at {vacuum_kpa:g} kPa")
+    ax.legend()
+    ax.grid(True, which="both", alpha=0.3)
+    _save(fig, path)
+
+
+def _plot_keystroke(k: WorldKeystroke, press: Press, vacuum_kpa: float, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    t = k.truth_t_s - k.t0_s
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    ax.plot(t, k.truth_x0_m * 1e3, label="x0 arm")
+    ax.plot(t, k.truth_x1_m * 1e3, label="x1 fingertip")
+    ax.plot(t, (k.truth_x2_m + press.distance_m) * 1e3, label="x2 key (+ distance)")
+    for e in k.midi:
+        color = "tab:green" if e.type == "note_on" else "tab:red"
+        ax.axvline(e.t_s - k.t0_s, color=color, ls="--", alpha=0.8)
+        ax.text(e.t_s - k.t0_s, 0.97, f"{e.type} {e.velocity}", transform=ax.get_xaxis_transform(),
+                color=color, rotation=90, va="top", ha="right", fontsize=8)
+    ax.invert_yaxis()  # downward positive: draw "down" downwards
+    ax.set(xlabel="time since motion start (s)", ylabel="displacement, down (mm)",
+           title=f"Keystroke at {vacuum_kpa:g} kPa, {press.down_velocity_mps:g} m/s, depth {press.depth_m * 1e3:g} mm")
+    ax.legend(loc="lower right")
+    ax.grid(True, alpha=0.3)
+    _save(fig, path)
+
+
+def _save(fig: Any, path: Path) -> None:
+    import matplotlib.pyplot as plt
+
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fig.tight_layout()
+        fig.savefig(path, dpi=120)
+    except OSError as exc:
+        raise InputError(f"cannot write the figure ({exc.strerror})", str(path)) from None
+    finally:
+        plt.close(fig)
