@@ -453,3 +453,11 @@ def test_a_rig_given_instead_of_the_specs_own(tmp_path: Path) -> None:
     narrow = write(tmp_path, "kind: sim\nenvelope:\n  soft:\n    depth_m: [0.02, 0.025]\n", "n.yaml")
     with pytest.raises(InputError, match=r"\[0.02, 0.025\] m for the soft finger \(set by .*n.yaml\)"):
         load_spec(write(tmp_path, GOOD), rig=narrow)
+
+
+def test_world_model_names_are_checked(tmp_path: Path) -> None:
+    rigid = load_rig(EXPERIMENTS / "rigs" / "sim-rigid.yaml")
+    assert rigid.world["msd"]["k1_a_npm"] > 1000
+    path = write(tmp_path, "world: {msd: {k1_a: 2000}}\n", "bad.yaml")
+    with pytest.raises(InputError, match=r"unknown MSD parameter\(s\) \['k1_a'\]"):
+        load_rig(path)

@@ -256,10 +256,13 @@ class RigSpec(StrictModel):
             from pianobot.physics.world import WorldConfig
 
             try:
-                WorldConfig.model_validate(overrides)
+                # Building the model also checks the MSD parameter and effect names.
+                WorldConfig.model_validate(overrides).build_model()
             except ValidationError as exc:
                 path, message = error_message(exc.errors()[0], list(WorldConfig.model_fields))
                 raise ValueError(f"{format_path(path)}: {message}") from None
+            except (TypeError, ValueError) as exc:
+                raise ValueError(" ".join(str(exc).split())) from None
         return value
 
     @model_validator(mode="after")
