@@ -177,4 +177,6 @@ def test_vectorised_contact_speed_matches_the_physics(
 ) -> None:
     trial = replace(SOFT, distance_m=distance, depth_m=depth, down_velocity_mps=v, acceleration_mps2=a)
     ours = contact_speeds_mps(np.array([distance]), np.array([depth]), np.array([v]), np.array([a]))
-    assert ours[0] == pytest.approx(contact_speed_mps(trial.press()), rel=1e-9, abs=1e-12)
+    # abs: physics forms (distance + depth) - distance, which loses a tiny depth to rounding
+    # (√(2·a·ε·travel) ≈ 1e-8 m/s); ours uses the depth itself.
+    assert ours[0] == pytest.approx(contact_speed_mps(trial.press()), rel=1e-9, abs=1e-7)
