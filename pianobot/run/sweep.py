@@ -83,7 +83,7 @@ def prepare_sweep(
     `rig_path` replaces the rig file the spec names (e.g. the faulty sim rig for a drill).
     """
     path = Path(spec_path)
-    spec = load_spec(path)
+    spec = load_spec(path, rig=rig_path)
     rig = load_rig_for(spec) if rig_path is None else load_rig(rig_path)
     trials = expand(spec, rig)
     if not trials:
@@ -330,7 +330,7 @@ def dry_run(spec_path: Path, *, rig_path: Path | None = None) -> PlanSummary:
     Spec-level problems (unknown key, wrong type, a written value outside the envelope) raise
     InputError; trial-level envelope violations are listed in the summary, not raised.
     """
-    spec = load_spec(Path(spec_path))
+    spec = load_spec(Path(spec_path), rig=rig_path)
     rig = load_rig_for(spec) if rig_path is None else load_rig(rig_path)
     trials = expand(spec)
     label = spec.rig if rig_path is None else str(rig_path)

@@ -18,6 +18,7 @@ from pianobot.store.layout import (
     RunPaths,
     git_commit,
     new_run_id,
+    parquet_options,
     read_json,
     resolve_run,
     runs_dir,
@@ -246,7 +247,7 @@ def _compact_table(paths: RunPaths, name: str, committed: list[int], parts: dict
     schema = with_metadata(TABLE_SCHEMAS[name].empty_table(), name, batches).schema
     temp = target.with_name(f".{target.name}.{os.getpid()}.compact.tmp")
     try:
-        with pq.ParquetWriter(temp, schema, compression="zstd") as out:
+        with pq.ParquetWriter(temp, schema, **parquet_options(schema)) as out:
             for source in sources:
                 parquet = pq.ParquetFile(source)
                 for group in range(parquet.num_row_groups):
