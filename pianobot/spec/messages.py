@@ -154,9 +154,12 @@ def error_message(error: ErrorDetails, known: Sequence[str] | None = None) -> tu
         return path, f"must be a slug (lowercase letters, digits, - and _){got}"
     if kind in ("list_type", "tuple_type"):
         if path[:2] == ("sweep", "params") and name in PARAMETERS:
-            shape = "{low, high} or a list of choices" if "choices" in error["loc"] else (
-                "a list of levels or {start, stop, num}"
-            )
+            if "choices" in error["loc"]:
+                shape = "{low, high} or a list of choices"
+            elif PARAMETERS[name].integer:
+                shape = "a list of whole numbers"
+            else:
+                shape = "a list of levels or {start, stop, num}"
             return path, f"must be {shape}{_in_unit(name)}{got}"
         return path, f"must be a list{got}"
     if kind in ("model_type", "dict_type", "model_attributes_type"):
