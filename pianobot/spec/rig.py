@@ -133,6 +133,11 @@ class UR5Config(StrictModel):
         "resting on the reference key; null until `pianobot rig calibrate` writes it.",
     )
     reference_note: int = Field(59, ge=21, le=108, description="MIDI note of the reference key.")
+    keyboard_axis: Vector3 = Field(
+        (1.0, 0.0, 0.0),
+        description="Horizontal unit vector [x, y, z] in the base frame pointing from bass to "
+        "treble along the keyboard; key poses are the reference pose shifted along it.",
+    )
     calibrated_utc: str | None = Field(
         None, description="When the reference pose was calibrated (ISO 8601, UTC)."
     )
