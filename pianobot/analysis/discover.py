@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -24,9 +25,11 @@ from pianobot.analysis import discover_model as dm
 from pianobot.analysis.discover_data import Keystroke, Prediction, stratified_split
 from pianobot.analysis.discover_decide import Candidate, DecisionRule, choose, family_of
 from pianobot.analysis.discover_fit import FitResult, bic, fit
+from pianobot.analysis.discover_load import load_keystrokes, resolve_model
 from pianobot.analysis.discover_localise import Localisation, localise
 from pianobot.analysis.sparse_terms import Proposal
-from pianobot.physics.model import KeystrokeModel
+from pianobot.errors import InputError
+from pianobot.physics.model import KeystrokeModel, save_model
 
 
 @dataclass(frozen=True)
@@ -38,6 +41,7 @@ class DiscoverySettings:
     max_iterations: int = 4
     bootstrap_samples: int = 2
     max_nfev: int = 20
+    screen_nfev: int = 12  # screening fits (effect parameters only) stop earlier
     joint_refits: int = 2  # candidates refit jointly with the base after screening
     seed: int = 0
     # Lag-1 autocorrelation of the held-out residual below which it "looks like noise".
@@ -185,7 +189,7 @@ def _bootstrap(
     for _ in range(settings.bootstrap_samples):
         synthetic = dm.synthesise(train, predictions, weights, rng)
         _, null_base = _fit_model(base, None, synthetic, weights, settings.max_nfev)
-        screened, _ = _screen(base, effect, synthetic, weights, settings.max_nfev)
+        screened, _ = _screen(base, effect, synthetic, weights, settings.screen_nfev)
         _, null_cand = _fit_model(screened, effect, synthetic, weights, settings.max_nfev)
         out.append(null_base.bic - null_cand.bic)
     return tuple(out)
@@ -222,13 +226,13 @@ def _decision_line(iterations: Sequence[Iteration]) -> str:
             for name in c.effect_params
         )
         b, a = it.before.gap, it.after.gap
-        ratio = b.primary / a.primary if a.primary > 0 else float("inf")
+        shrink = f"{b.primary / a.primary:.1f}×" if a.primary > 0 else "down to the noise floor"
         unit, scale = ("mm", 1e3) if b.primary_name == "position_m" else ("", 1.0)
         text = f"Missing effect: {c.effect}" + (f", {params}" if params else "")
         text += (
             f"; held-out systematic {'RMS' if unit else 'velocity RMS'} "
             f"{b.primary * scale:.3g} → {a.primary * scale:.3g}{(' ' + unit) if unit else ''} "
-            f"({ratio:.1f}×)"
+            f"({shrink})"
         )
         if np.isfinite(b.on_velocity) and np.isfinite(a.on_velocity) and unit:
             text += f"; MIDI velocity RMS {b.on_velocity:.2g} → {a.on_velocity:.2g}"
@@ -266,7 +270,7 @@ def discover(
         fitted: dict[str, KeystrokeModel] = {}
         screened: dict[str, tuple[KeystrokeModel, FitResult]] = {}
         for effect in dm.candidate_effects(current, train, proposals):
-            screened[effect] = _screen(current, effect, train, weights, settings.max_nfev)
+            screened[effect] = _screen(current, effect, train, weights, settings.screen_nfev)
         # Joint refits (base + effect) for the most promising candidates only: screening with
         # the base fixed already ranks them, and the decision uses the joint fit.
         ranked = sorted(screened, key=lambda e: screened[e][1].bic)
@@ -328,3 +332,47 @@ def discover(
         predictions_after=held_after,
         held_out=tuple(held),
     )
+
+
+def discover_runs(
+    run_ids: Sequence[str],
+    data_dir: Path,
+    model: str = "study",
+    *,
+    seed: int = 0,
+    model_out: Path | None = None,
+) -> DiscoveryResult:
+    """Load runs, run discovery from `model` ("study" or a model file), save the final model.
+
+    Raises:
+        InputError: unknown runs, runs without mocap or MIDI, a bad model file.
+    """
+    keystrokes = load_keystrokes(run_ids, data_dir)
+    if len(keystrokes) < 6:
+        raise InputError(f"discovery needs at least 6 keystrokes, got {len(keystrokes)}", "RUN_ID")
+    result = discover(keystrokes, resolve_model(model), DiscoverySettings(seed=seed))
+    if model_out is not None:
+        intervals = {
+            name: [lo, hi]
+            for it in result.iterations
+            if it.accepted
+            for name, lo, hi in zip(
+                it.accepted.fit.names,
+                it.accepted.fit.lower_ci,
+                it.accepted.fit.upper_ci,
+                strict=True,
+            )
+        }
+        save_model(
+            result.final_model,
+            model_out,
+            intervals=intervals,
+            provenance={
+                "command": "discover",
+                "runs": list(run_ids),
+                "start_model": model,
+                "accepted_effects": list(result.accepted_effects),
+                "verdict": result.verdict,
+            },
+        )
+    return result

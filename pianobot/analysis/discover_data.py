@@ -119,7 +119,7 @@ def stratified_split(
     held: list[int] = []
     vacua = np.array([round(k.vacuum_kpa, 1) for k in keystrokes])
     for level in np.unique(vacua):
-        group = [i for i in np.flatnonzero(vacua == level)]
+        group = [int(i) for i in np.flatnonzero(vacua == level)]
         group.sort(key=lambda i: (keystrokes[i].press.down_velocity_mps, keystrokes[i].key_id))
         start = int(rng.integers(step))
         held.extend(group[start::step])

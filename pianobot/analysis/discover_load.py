@@ -16,17 +16,23 @@ import pandas as pd
 
 from pianobot.analysis.discover_data import Keystroke
 from pianobot.errors import InputError
+from pianobot.physics.model import KeystrokeModel, load_model
 from pianobot.physics.trajectory import Press
 from pianobot.store import Run, load_run
 
 _REST_SAMPLES = 6
 
 
-def _rest_referenced(values: np.ndarray) -> np.ndarray:
-    finite = values[np.isfinite(values)]
-    if finite.size == 0:
+def _rest_referenced(t_s: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """Values relative to their level before motion start (t_s ≤ 0), when such samples exist.
+
+    The store's convention already puts the start pose at 0; an importer that keeps a marker's
+    absolute height still records samples before the motion, which give the rest level.
+    """
+    rest = values[(t_s <= 0.0) & np.isfinite(values)]
+    if rest.size == 0:
         return values
-    return values - float(np.median(finite[:_REST_SAMPLES]))
+    return values - float(np.median(rest[-_REST_SAMPLES:]))
 
 
 def _float(row: pd.Series, name: str, default: float = float("nan")) -> float:
@@ -74,7 +80,7 @@ def keystrokes_from_run(run: Run) -> list[Keystroke]:
             group = group.sort_values("t_s")
             t = group["t_s"].to_numpy(np.float64)
             x = np.vstack(
-                [_rest_referenced(group[c].to_numpy(np.float64)) for c in ("x0_m", "x1_m", "x2_m")]
+                [_rest_referenced(t, group[c].to_numpy(np.float64)) for c in ("x0_m", "x1_m", "x2_m")]
             )
         else:
             t, x = np.empty(0), np.empty((3, 0))
@@ -117,3 +123,14 @@ def load_keystrokes(run_ids: Sequence[str], data_dir: Path) -> list[Keystroke]:
     ):
         raise InputError("the runs have neither mocap samples nor MIDI outcomes", ",".join(run_ids))
     return keystrokes
+
+
+def resolve_model(spec: str) -> KeystrokeModel:
+    """`study` (the study's linear model with its constant-speed ramp) or a model file path.
+
+    Raises:
+        InputError: the file is missing or not a model file.
+    """
+    if spec == "study":
+        return KeystrokeModel.study()
+    return load_model(Path(spec))

@@ -1,0 +1,76 @@
+"""Command `discover`: name the physical effect a model is missing, show the gap shrink."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from pianobot.analysis.discover import DiscoveryResult, discover_runs
+from pianobot.cli.common import DEFAULT_DATA, DataDir, JsonFlag, emit_json
+from pianobot.reports.discover_report import build_discover_report
+
+RunIds = Annotated[
+    list[str], typer.Argument(help="Run ids (or unique prefixes) with mocap and/or MIDI.")
+]
+
+
+def _print(result: DiscoveryResult, report: Path | None, model_out: Path | None) -> None:
+    console = Console()
+    for line in result.decision_line.splitlines():
+        console.print(f"[bold]{line}[/bold]")
+    console.print(f"Verdict: {result.verdict}")
+    for it in result.iterations:
+        table = Table(title=f"Iteration {it.index + 1} (ΔBIC threshold {it.threshold:.1f})")
+        for column in ("effect", "ΔBIC", "gap before", "gap after", "status"):
+            table.add_column(column)
+        for c in it.candidates:
+            table.add_row(
+                c.effect,
+                f"{c.delta_bic:.1f}",
+                f"{c.gap_before:.3g}",
+                f"{c.gap_after:.3g}",
+                c.status,
+            )
+        console.print(table)
+    if model_out is not None:
+        console.print(f"Model: {model_out}")
+    if report is not None:
+        console.print(f"Report: {report}")
+
+
+def register(app: typer.Typer) -> None:
+    """Add `discover` to the app."""
+
+    @app.command()
+    def discover(
+        runs: RunIds,
+        data: DataDir = DEFAULT_DATA,
+        json_out: JsonFlag = False,
+        model: Annotated[
+            str, typer.Option("--model", help="Start model: a model file or 'study'.")
+        ] = "study",
+        out: Annotated[Path | None, typer.Option("--out", help="HTML report to write.")] = None,
+        model_out: Annotated[
+            Path | None, typer.Option("--model-out", help="Where to write the updated model file.")
+        ] = None,
+        seed: Annotated[
+            int, typer.Option("--seed", help="Seed of the split and the bootstrap.")
+        ] = 0,
+    ) -> None:
+        """Localise where the model and the measurements disagree, name the missing effect, refit."""
+        if model_out is None and out is not None:
+            model_out = out.with_suffix(".model.json")
+        result = discover_runs(runs, data, model, seed=seed, model_out=model_out)
+        if out is not None:
+            build_discover_report(result, out, model_path=model_out)
+        if json_out:
+            payload = result.to_dict()
+            payload["report"] = None if out is None else str(out)
+            payload["model_file"] = None if model_out is None else str(model_out)
+            emit_json(payload)
+        else:
+            _print(result, out, model_out)
