@@ -24,6 +24,12 @@ from pianobot.store.tables import trial_status_counts
 EXIT_CODES = {"completed": 0, "failed": 1, "stopped": 3, "interrupted": 130}
 
 
+def _console() -> Console:
+    """A console; piped output gets wide lines instead of rich's 80-column default."""
+    console = Console()
+    return console if console.is_terminal else Console(width=200)
+
+
 def _duration(seconds: float) -> str:
     if not math.isfinite(seconds):
         return "-"
@@ -51,7 +57,7 @@ def _how_to_look(outcome: RunOutcome, data: Path, spec: Path | None) -> list[str
 
 
 def _print_outcome(outcome: RunOutcome, data: Path, spec: Path | None) -> None:
-    console = Console()
+    console = _console()
     style = {"completed": "green", "stopped": "yellow", "interrupted": "yellow"}.get(outcome.status, "red")
     console.print(
         f"run [bold]{outcome.run_id}[/]: [{style}]{outcome.status}[/] — "
@@ -67,13 +73,15 @@ def _print_outcome(outcome: RunOutcome, data: Path, spec: Path | None) -> None:
 
 def _print_summaries(summaries: list[RunSummary]) -> None:
     table = Table(title=None)
-    for column in ("run id", "name", "kind", "status", "trials", "silent", "lab time"):
+    # The run id is what people copy into the next command: never truncate it.
+    table.add_column("run id", no_wrap=True, min_width=max(len(s.run_id) for s in summaries))
+    for column in ("name", "kind", "status", "trials", "silent", "lab time"):
         table.add_column(column, justify="right" if column in ("trials", "silent", "lab time") else "left")
     for s in summaries:
         planned = "?" if s.trials_planned is None else str(s.trials_planned)
         silent = "-" if math.isnan(s.silent_pct) else f"{s.silent_pct:.0f}%"
         table.add_row(s.run_id, s.name, s.kind, s.status, f"{s.trials_done}/{planned}", silent, _duration(s.lab_time_s))
-    Console().print(table)
+    _console().print(table)
 
 
 def _run_details(run_id: str, data: Path) -> dict[str, Any]:
@@ -100,7 +108,7 @@ def _run_details(run_id: str, data: Path) -> dict[str, Any]:
 
 
 def _print_details(details: dict[str, Any]) -> None:
-    console = Console()
+    console = _console()
     table = Table(show_header=False, box=None)
     table.add_column(style="bold")
     table.add_column()
