@@ -158,3 +158,34 @@ def test_kill_9_at_five_points_and_resume_loses_and_duplicates_nothing(tmp_path:
     assert not list((run.path / "parts").iterdir())
     assert not (run.path / "run.lock").exists()
     assert os.listdir(run.path) and all(not name.startswith(".") for name in os.listdir(run.path))
+
+
+@pytest.mark.slow
+def test_sigterm_finishes_the_trial_marks_the_run_interrupted_and_resume_completes(tmp_path: Path) -> None:
+    spec = tmp_path / "crash.yaml"
+    spec.write_text(SPEC)
+    data_dir = tmp_path / "data"
+    process = _start(spec, data_dir, None)
+    while process.poll() is None:
+        folder = _run_folder(data_dir)
+        if folder is not None and _journal_lines(folder / "journal.jsonl") >= 6:
+            process.send_signal(signal.SIGTERM)
+            break
+        time.sleep(0.0005)
+    out, err = process.communicate(timeout=600)
+    if process.returncode == 0:
+        pytest.skip("the sweep finished before the signal landed")  # a very fast machine
+    assert process.returncode == 130, err.decode()
+    result = json.loads(out)
+    assert result["status"] == "interrupted" and "SIGTERM" in result["reason"]
+    run = load_run(result["run_id"], data_dir)
+    journal = run.journal
+    started = [e["trial_id"] for e in journal if e["event"] == "started"]
+    done = [e["trial_id"] for e in journal if e["event"] == "done"]
+    assert started == done  # the trial in flight was finished, not abandoned
+    assert run.meta["interruptions"][0]["kind"] == "signal"
+    process = _start(spec, data_dir, result["run_id"])
+    out, err = process.communicate(timeout=600)
+    assert process.returncode == 0, err.decode()
+    final = load_run(result["run_id"], data_dir).trials
+    assert len(final) == 36 and final["trial_id"].is_unique
