@@ -266,9 +266,11 @@ def _session(
                 writer.run_id, todo, planned=len(prepared.trials), done=len(done_ids)
             )
         except BaseException as exc:
-            # A bug or a device failure: keep what was measured, say why the run ended.
+            # A bug, a device failure or a Ctrl-C outside the trial loop: keep what was
+            # measured and say why the run ended.
             _flush_quietly(sink)
-            writer.finish("failed", f"{type(exc).__name__}: {exc}")
+            status = "interrupted" if isinstance(exc, KeyboardInterrupt) else "failed"
+            writer.finish(status, f"{type(exc).__name__}: {exc}")
             raise
     _record_end(writer, result)
     writer.finish(result.status, result.reason, lab_time_s=result.lab_time_s)
