@@ -289,9 +289,16 @@ def write_song(
     return _write(Path(path), notes, ticks_per_beat, tempo_us, ticks_per_s)
 
 
-def write_performance(path: str | Path, notes: Sequence[Note]) -> Path:
-    """Write played notes as a type-0 MIDI file with 1 tick = 1 ms (1000 ticks/beat at 60 bpm)."""
-    return _write(Path(path), notes, PERFORMANCE_TICKS_PER_BEAT, PERFORMANCE_TEMPO_US, 1000.0)
+def write_performance(path: str | Path, notes: Sequence[Note], *, start_s: float | None = None) -> Path:
+    """Write played notes as a type-0 MIDI file with 1 tick = 1 ms (1000 ticks/beat at 60 bpm).
+
+    Tick 0 is `start_s` on the notes' axis (default: 0, or the earliest onset if a note was
+    played before zero — a MIDI file has no negative times).
+    """
+    if start_s is None:
+        start_s = min([0.0] + [n.onset_s for n in notes])
+    shifted = [replace(n, onset_s=n.onset_s - start_s, offset_s=n.offset_s - start_s) for n in notes]
+    return _write(Path(path), shifted, PERFORMANCE_TICKS_PER_BEAT, PERFORMANCE_TEMPO_US, 1000.0)
 
 
 def _write(
@@ -301,7 +308,7 @@ def _write(
 
     events: list[tuple[int, int, mido.Message]] = []
     for n in notes:
-        on = round(n.onset_s * ticks_per_s)
+        on = max(0, round(n.onset_s * ticks_per_s))
         off = max(on + 1, round(n.offset_s * ticks_per_s))
         channel = n.channel if 0 <= n.channel <= 15 else 0
         velocity = min(127, max(1, int(n.velocity)))

@@ -3,6 +3,12 @@
 Each song is a list of (pitch, beats, velocity) with a tempo; `to_notes` puts it on a seconds
 axis. Notes are detached: each sounds for `articulation` of its beat length, the rest of the
 beat is silence (a single finger needs that gap to release the key and strike the next one).
+
+Robot notation: one finger inside the soft envelope needs about two seconds per keystroke with
+a key change (lead ≈ 0.4–1.2 s from motion start to note-on, press ≈ 0.7–1.5 s, the finger's
+recovery, a lateral move of 0.3–0.5 s), so the songs give each syllable a whole note
+(`ROBOT_BEAT` quarter notes) at ♩ = 90. `beat=1` gives the usual notation, which a single soft
+finger cannot keep up with: the planner then skips and reports the notes it has no time for.
 """
 
 from __future__ import annotations
@@ -13,6 +19,7 @@ from dataclasses import dataclass
 from pianobot.io.midifile import Note
 
 C4, D4, E4, F4, G4, A4, B4, C5 = 60, 62, 64, 65, 67, 69, 71, 72
+ROBOT_BEAT = 4.0  # quarter notes per syllable in robot notation (a whole note)
 
 
 @dataclass(frozen=True)
@@ -46,11 +53,11 @@ def _ramp(start: int, stop: int, n: int) -> list[int]:
     return [round(start + (stop - start) * i / (n - 1)) for i in range(n)]
 
 
-def scale_crescendo(tempo_bpm: float = 60.0) -> SongSpec:
-    """C major up and down over two octaves' worth of steps, one crescendo from pp to ff."""
+def scale_crescendo(tempo_bpm: float = 90.0, beat: float = ROBOT_BEAT) -> SongSpec:
+    """C major up and down (15 notes), one crescendo from pp to ff."""
     up = [C4, D4, E4, F4, G4, A4, B4, C5]
     pitches = up + up[-2::-1]
-    beats = [1.0] * (len(pitches) - 1) + [2.0]
+    beats = [beat] * (len(pitches) - 1) + [2.0 * beat]
     return SongSpec("scale_crescendo", tempo_bpm, tuple(_phrase(pitches, beats, _ramp(25, 115, len(pitches)))))
 
 
@@ -59,10 +66,11 @@ _TWINKLE_B = [G4, G4, F4, F4, E4, E4, D4]
 _PHRASE_BEATS = [1.0] * 6 + [2.0]
 
 
-def twinkle(tempo_bpm: float = 90.0, beat: float = 1.0) -> SongSpec:
+def twinkle(tempo_bpm: float = 90.0, beat: float = ROBOT_BEAT) -> SongSpec:
     """Twinkle Twinkle Little Star (42 notes, A B B A) with phrase dynamics.
 
-    `beat` is how many quarter notes one syllable lasts (1: the usual notation).
+    `beat` is how many quarter notes one syllable lasts (1: the usual notation; the default is
+    robot notation, see the module doc).
     """
     beats = [b * beat for b in _PHRASE_BEATS * 2]
     half = [b * beat for b in _PHRASE_BEATS]
@@ -75,7 +83,7 @@ def twinkle(tempo_bpm: float = 90.0, beat: float = 1.0) -> SongSpec:
     return SongSpec("twinkle", tempo_bpm, tuple(notes))
 
 
-def mary(tempo_bpm: float = 90.0, beat: float = 1.0) -> SongSpec:
+def mary(tempo_bpm: float = 90.0, beat: float = ROBOT_BEAT) -> SongSpec:
     """Mary Had a Little Lamb (26 notes): soft verse, louder answer, fading close."""
     pitches = [E4, D4, C4, D4, E4, E4, E4, D4, D4, D4, E4, G4, G4,
                E4, D4, C4, D4, E4, E4, E4, E4, D4, D4, E4, D4, C4]
@@ -85,15 +93,15 @@ def mary(tempo_bpm: float = 90.0, beat: float = 1.0) -> SongSpec:
     return SongSpec("mary", tempo_bpm, tuple(_phrase(pitches, [b * beat for b in beats], velocities)))
 
 
-def etude(n_notes: int = 60, tempo_bpm: float = 60.0, seed_pitch: int = C4) -> SongSpec:
+def etude(n_notes: int = 60, tempo_bpm: float = 90.0, beat: float = ROBOT_BEAT, seed_pitch: int = C4) -> SongSpec:
     """A long exercise for adaptation: stepwise C-major walk with swelling dynamics.
 
-    Pitches climb and fall through a fifth; velocities cycle through pp–ff every 12 notes so
+    Pitches climb and fall through a fifth; velocities cycle from ff through pp and back every 12 notes so
     every stretch of the piece asks for the whole dynamic range.
     """
     steps = [0, 2, 4, 5, 7, 5, 4, 2]
-    cycle = [30, 45, 60, 75, 90, 105, 115, 100, 85, 70, 55, 40]
-    notes = [(seed_pitch + steps[i % len(steps)], 1.0, cycle[i % len(cycle)]) for i in range(n_notes)]
+    cycle = [115, 100, 85, 70, 55, 40, 30, 45, 60, 75, 90, 105]
+    notes = [(seed_pitch + steps[i % len(steps)], beat, cycle[i % len(cycle)]) for i in range(n_notes)]
     return SongSpec(f"etude{n_notes}", tempo_bpm, tuple(notes))
 
 

@@ -18,12 +18,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pandas as pd
 
 from pianobot.io.midifile import Note
 from pianobot.physics.trajectory import Press, press_duration_s
 from pianobot.play.adapt import OnlineAdapter
 from pianobot.play.plan import Plan
+from pianobot.play.strokes import busy_s
 from pianobot.rig import Station, StationSettings, open_rig
 from pianobot.rig.errors import ConnectionLost, SafetyStop, SafetyViolation
 from pianobot.rig.protocols import MidiEvent
@@ -33,6 +35,7 @@ from pianobot.spec import RigSpec
 from pianobot.store import RunWriter
 
 BATCH_NOTES = 16
+FEASIBILITY_GRID = 200  # down velocities checked for an on-time start when adapting
 TAIL_S = 1.0  # listen this long after the last press for a late note-off
 
 
@@ -163,16 +166,18 @@ class _Loop:
     def _note(self, row: pd.Series) -> None:
         settings = self.plan.settings
         speed, predicted, lead_model = float(row.down_velocity_mps), float(row.predicted_velocity), float(row.predicted_lead_s)
-        lead = lead_model
+        lead, hold = lead_model, float(row.hold_s)
+        move = float(row.move_s) if self.pitch is not None and int(row.pitch) != self.pitch else 0.0
+        changes_vacuum = self.vacuum_kpa is None or abs(float(row.vacuum_kpa) - self.vacuum_kpa) > 1e-9
         if self.adapter is not None:
+            earliest = self.clock.now() + move + (float(row.vacuum_change_s) if changes_vacuum else 0.0)
+            speed, hold = self._adapted_stroke(row, earliest)
             table = self.plan.tables[float(row.vacuum_kpa)]
-            speed = float(table.inverse(self.adapter.model_target(float(row.target_velocity))))
             predicted = float(table.predict_velocity(speed))
             lead_model = float(table.lead(speed))
             lead = self.adapter.corrected_lead(lead_model)
         start = self.origin_s + float(row.onset_s) - lead
-        move = float(row.move_s) if self.pitch is not None and int(row.pitch) != self.pitch else 0.0
-        if self.vacuum_kpa is None or abs(float(row.vacuum_kpa) - self.vacuum_kpa) > 1e-9:
+        if changes_vacuum:
             self._sleep_until(start - move - float(row.vacuum_change_s))
             self._set_vacuum(float(row.vacuum_kpa))
         self._sleep_until(start - move)
@@ -181,7 +186,7 @@ class _Loop:
         gap = self._collect_gap()
         stroke = NoteStroke(str(row.trial_id), int(row.note_index), int(row.pitch), float(row.vacuum_kpa),
                             speed, settings.up_velocity_mps, settings.acceleration_mps2, settings.depth_m,
-                            settings.distance_m, float(row.hold_s))
+                            settings.distance_m, hold)
         data = self._keystroke(stroke)
         data = dataclasses.replace(data, midi=tuple(gap) + data.midi)
         on_velocity = data.row.get("on_velocity", math.nan)
@@ -203,6 +208,28 @@ class _Loop:
         self.batch.append(data)
         if self.adapter is not None and data.status != "failed":
             self.adapter.observe(int(row.note_index), predicted, lead_model, played, observed_lead)
+
+    def _adapted_stroke(self, row: pd.Series, earliest_s: float) -> tuple[float, float]:
+        """Down velocity and hold for a note under the corrected model, keeping the schedule.
+
+        The corrected inverse may ask for a slower (longer-lead) stroke than planned; the
+        slowest stroke that can still start by `earliest_s` bounds it, and the hold is cut so the
+        arm is free when the plan expects it (the next notes keep their timing).
+        """
+        assert self.adapter is not None
+        table = self.plan.tables[float(row.vacuum_kpa)]
+        settings = self.plan.settings
+        wanted = float(table.inverse(self.adapter.model_target(float(row.target_velocity))))
+        grid = np.linspace(table.speeds_mps[0], table.speeds_mps[-1], FEASIBILITY_GRID)
+        leads = np.array([self.adapter.corrected_lead(float(v)) for v in table.lead(grid)])
+        on_time = self.origin_s + float(row.onset_s) - leads >= earliest_s - settings.max_late_s
+        slowest = float(grid[np.argmax(on_time)]) if on_time.any() else float(grid[-1])
+        speed = max(wanted, slowest)
+        lead = self.adapter.corrected_lead(float(table.lead(speed)))
+        start = self.origin_s + float(row.onset_s) - lead
+        planned_free = self.origin_s + float(row.start_s) + float(row.busy_s)
+        room = planned_free - start - busy_s(settings, speed, 0.0)
+        return speed, float(min(float(row.hold_s), max(0.0, room)))
 
     def _keystroke(self, stroke: NoteStroke) -> TrialData:
         """One keystroke; a dropped link is re-opened and the note tried once more."""

@@ -58,10 +58,11 @@ class Score:
         return float(part.mean()) if part.notna().any() else math.nan
 
 
-def _arrays(notes: Sequence[Note]) -> tuple[FloatArray, FloatArray]:
+def _arrays(notes: Sequence[Note], shift_s: float) -> tuple[FloatArray, FloatArray]:
     import mir_eval
 
-    intervals = np.array([[n.onset_s, max(n.offset_s, n.onset_s + 1e-3)] for n in notes], dtype=np.float64).reshape(-1, 2)
+    intervals = np.array([[n.onset_s + shift_s, max(n.offset_s, n.onset_s + 1e-3) + shift_s] for n in notes],
+                         dtype=np.float64).reshape(-1, 2)
     pitches = mir_eval.util.midi_to_hz(np.array([n.pitch for n in notes], dtype=np.float64))
     return intervals, np.asarray(pitches, dtype=np.float64)
 
@@ -72,8 +73,10 @@ def score_performance(
     """Score played notes against target notes (`target_velocity`: mapped target per note)."""
     import mir_eval.transcription as tr
 
-    ref_i, ref_p = _arrays(target)
-    est_i, est_p = _arrays(played)
+    # mir_eval wants non-negative times; a note played before the song's zero is shifted with all.
+    shift = -min([0.0] + [n.onset_s for n in (*target, *played)])
+    ref_i, ref_p = _arrays(target, shift)
+    est_i, est_p = _arrays(played, shift)
     targets = np.asarray(target_velocity, dtype=np.float64)
     if len(target) and len(played):
         p, r, f, _ = tr.precision_recall_f1_overlap(ref_i, ref_p, est_i, est_p,
