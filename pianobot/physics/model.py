@@ -21,6 +21,7 @@ from pianobot.errors import InputError
 from pianobot.physics.effects import Effects
 from pianobot.physics.msd import MSDParams
 from pianobot.physics.piano import PianoParams
+from pianobot.physics.trajectory import ProfileKind
 
 MODEL_SCHEMA = "pianobot.model/1"
 MODEL_KIND = "keystroke_model"
@@ -57,7 +58,7 @@ class KeystrokeModel:
         return dataclasses.replace(self, **changes)
 
     @property
-    def arm_profile(self) -> str:
+    def arm_profile(self) -> ProfileKind:
         """"trapezoid" when `arm_acceleration` is on, else the study's constant-speed "ramp"."""
         return "trapezoid" if "arm_acceleration" in self.effects else "ramp"
 

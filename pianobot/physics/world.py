@@ -75,7 +75,11 @@ class WorldConfig(BaseModel):
         piano = PianoParams.from_dict({**DEFAULT_CURVE, **self.piano})
         piano = piano.replace(jitter_s=self.midi_jitter_s)
         if "velocity_curve" in effects and self.effects is None:
-            effects = effects.with_effect("velocity_curve", **DEFAULT_CURVE)
+            effects = effects.with_effect(
+                "velocity_curve",
+                curve_exponent=DEFAULT_CURVE["curve_exponent"],
+                curve_saturation=DEFAULT_CURVE["curve_saturation"],
+            )
         return KeystrokeModel(MSDParams.from_dict(self.msd), effects, piano)
 
 
