@@ -74,12 +74,6 @@ class WorldConfig(BaseModel):
         effects = Effects.default_world() if self.effects is None else Effects.from_dict(self.effects)
         piano = PianoParams.from_dict({**DEFAULT_CURVE, **self.piano})
         piano = piano.replace(jitter_s=self.midi_jitter_s)
-        if "velocity_curve" in effects and self.effects is None:
-            effects = effects.with_effect(
-                "velocity_curve",
-                curve_exponent=DEFAULT_CURVE["curve_exponent"],
-                curve_saturation=DEFAULT_CURVE["curve_saturation"],
-            )
         return KeystrokeModel(MSDParams.from_dict(self.msd), effects, piano)
 
 
@@ -213,8 +207,8 @@ class World:
         x0, x1, x2 = batch.x0_m[j, keep], batch.x1_m[j, keep], batch.x2_m[j, keep]
         v2 = batch.v2_mps[j, keep]
 
-        midi, _ = key_events(t, x2, self._readout, note=note, rng=rng)
-        midi = [PianoEvent(round(t0_s + e.t_s, 9), e.type, e.note, e.velocity) for e in midi]
+        # Read on the run clock, so timestamps fall on its 1 ms MIDI ticks.
+        midi, _ = key_events(t0_s + t, x2, self._readout, note=note, rng=rng)
 
         t_arm = np.arange(0.0, duration + 1e-9, 1.0 / cfg.arm_rate_hz)
         arm = np.interp(t_arm, t, x0) + rng.normal(0.0, cfg.arm_noise_m, t_arm.size)

@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+import yaml
 from pydantic import ValidationError
 
 from pianobot.physics.effects import Effects
@@ -49,6 +50,20 @@ def test_observations_have_the_configured_form() -> None:
     assert [e.type for e in k.midi] == ["note_on", "note_off"]
     assert 0.0038 < k.max_key_travel_m < 0.011
     assert k.key_speed_at_trigger_mps > 0
+
+
+def test_config_is_yaml_able() -> None:
+    cfg = WorldConfig(effects=Effects.default_world().to_dict(), mocap={"noise_m": 1e-5})
+    again = WorldConfig.model_validate(yaml.safe_load(yaml.safe_dump(cfg.model_dump())))
+    assert again == cfg
+    assert World(again).model == World(cfg).model
+
+
+def test_midi_times_sit_on_the_run_clock_ticks() -> None:
+    k = World.default().keystroke(PRESS, -60.0, t0_s=3.0004, key="tick")
+    assert k.midi
+    for e in k.midi:
+        assert abs(e.t_s * 1000 - round(e.t_s * 1000)) < 1e-6
 
 
 def test_linear_world_and_config_validation() -> None:
