@@ -147,3 +147,19 @@ def test_all_effects_together_stay_finite_and_bounded() -> None:
         assert np.all(np.isfinite(b.x2_m))
         assert b.x2_m.max() < 0.012 and b.x2_m.min() >= 0.0
         assert np.all(np.abs(b.x2_m[:, -1]) < 1e-4)  # back at rest
+
+
+def test_adhesion_pulls_up_to_the_pull_off_force_and_letoff_resists_descent() -> None:
+    press = [Press(0.0, 0.03, 0.05, 0.7, 5.0, 0.3)]
+    sticky = STUDY.with_effect("arm_acceleration").with_effect("contact").with_effect("adhesion", pull_off_force_n=0.1)
+    b = simulate_presses(press, -60, sticky)
+    assert -0.1 - 1e-9 <= b.contact_force_n.min() < -0.05
+    slow = [Press(0.0, 0.04, 0.05, 0.05, 1.0, 0.2)]
+    base = STUDY.with_effect("contact")
+    bumped = base.with_effect("letoff", letoff_force_n=0.6, letoff_depth_m=0.004)
+    a, c = simulate_presses(slow, -80, base), simulate_presses(slow, -80, bumped)
+
+    def time_to(b: SimBatch, depth: float) -> float:
+        return float(b.t_s[np.argmax(b.x2_m[0] >= depth)])
+
+    assert time_to(c, 0.005) > time_to(a, 0.005) + 0.01
