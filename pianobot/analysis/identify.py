@@ -148,13 +148,20 @@ class _Problem:
 
     def residuals(self, theta: FloatArray) -> FloatArray:
         ss = _systems(theta, self.layout, self.prior, self.level_idx)
-        y = lsim_uniform(ss, self.batch.t_s, self.batch.x0_m[:, None, :])
-        return np.asarray(y[self.mask] / RESIDUAL_SCALE_M - self.measured, dtype=np.float64)
+        with np.errstate(over="ignore", invalid="ignore"):  # trial steps may be unstable
+            y = lsim_uniform(ss, self.batch.t_s, self.batch.x0_m[:, None, :])
+        r = np.asarray(y[self.mask] / RESIDUAL_SCALE_M - self.measured, dtype=np.float64)
+        return np.where(np.isfinite(r), r, 1e6)
 
     def fit(self, theta0: FloatArray, loss: str = "soft_l1") -> FloatArray:
         # f_scale: residuals beyond ~0.1 mm are treated as outliers (mocap glitches, ghost frames).
-        res = least_squares(self.residuals, theta0, loss=loss, f_scale=0.1, x_scale=1.0,
-                            method="trf", diff_step=1e-4, max_nfev=200)
+        # Bounds: within a factor 1e3 of the prior model either way (in log space), so a
+        # parameter the data cannot see stays finite instead of drifting to 0 or infinity.
+        centre = self.layout.initial(self.prior)
+        lo, hi = centre - math.log(1e3), centre + math.log(1e3)
+        start = np.clip(theta0, lo + 1e-9, hi - 1e-9)
+        res = least_squares(self.residuals, start, loss=loss, f_scale=0.1, x_scale=1.0,
+                            method="trf", diff_step=1e-4, max_nfev=200, bounds=(lo, hi))
         return np.asarray(res.x, dtype=np.float64)
 
 
@@ -295,7 +302,9 @@ def identify_trajectories(
     for i, n in enumerate(names):
         if n in layout.names:  # log-parameterised: multiplicative interval
             sd = math.sqrt(max(cov[layout.names.index(n), layout.names.index(n)], 0.0))
-            jac_ci[n] = (point[n] * math.exp(-Z95 * sd), point[n] * math.exp(Z95 * sd))
+            half = Z95 * sd
+            # An unidentified parameter (flat cost) gets an unbounded interval, not an overflow.
+            jac_ci[n] = (point[n] * math.exp(-half), point[n] * math.exp(half)) if half < 50 else (0.0, math.inf)
         else:
             sd = math.sqrt(max(float(grads[i] @ cov @ grads[i]), 0.0))
             jac_ci[n] = (point[n] - Z95 * sd, point[n] + Z95 * sd)

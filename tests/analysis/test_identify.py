@@ -103,3 +103,13 @@ def test_static_stiffness_on_study_force_logs(zhang2022: Path) -> None:
     assert law.ci_a[0] <= 75.41 * 1.03 and law.ci_a[1] >= 75.41 * 0.97
     assert law.ci_b[0] <= 1.19 * 1.03
     assert 0.9 < law.k1_b_npm_per_kpa < 2.0
+
+
+def test_zzz40_identified_model_beats_published(zhang2022: Path, data_dir: Path) -> None:
+    from pianobot.analysis.identify_run import identify_runs
+    from pianobot.io.importers import import_mocap
+
+    run = import_mocap(zhang2022 / "zzz" / "zzz40.csv", data_dir).run_id
+    result = identify_runs([run], data_dir, out=None, bootstrap=0, vacuum_kpa=-40.0)
+    assert result.holdout_rms_identified_m < result.holdout_rms_published_m
+    assert 7.0 <= result.peak_hz["-40"] <= 11.0
