@@ -96,7 +96,7 @@ def _run_details(run_id: str, data: Path) -> dict[str, Any]:
         "spec_path": spec.get("path"),
         "spec_sha256": meta.get("spec_sha256"),
         "seed": meta.get("seed"),
-        "rig_kind": (meta.get("rig") or {}).get("spec", {}).get("kind"),
+        "rig_kind": _rig_kind(meta.get("rig")),
         "pianobot_version": meta.get("pianobot_version"),
         "git_commit": meta.get("git_commit"),
         "end_utc": meta.get("end_utc"),
@@ -105,6 +105,17 @@ def _run_details(run_id: str, data: Path) -> dict[str, Any]:
         "journal_events": len(run.journal),
         "meta": meta,
     }
+
+
+def _rig_kind(rig: Any) -> str | None:
+    """The rig kind recorded by a sweep (`rig.spec.kind`); importers may record other shapes."""
+    if isinstance(rig, dict):
+        spec = rig.get("spec")
+        if isinstance(spec, dict) and spec.get("kind"):
+            return str(spec["kind"])
+        if rig.get("kind"):
+            return str(rig["kind"])
+    return None if rig is None else str(rig)
 
 
 def _print_details(details: dict[str, Any]) -> None:
