@@ -78,6 +78,17 @@ def _rate(rows: list[dict[str, Any]], kind: str, key: str = "hit", suffix: str =
     return f"{sum(bool(r.get(key)) for r in chosen)}/{len(chosen)}"
 
 
+def _finite(value: Any) -> Any:
+    """JSON has no inf/NaN: a gap shrunk to the noise floor (÷0) is written as null."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_finite(v) for v in value]
+    return value
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--only", nargs="*", default=None, help="scenario names to run")
@@ -97,7 +108,10 @@ def main() -> None:
         row["seconds"] = elapsed
         row["n_keystrokes"] = len(keystrokes)
         rows.append(row)
-        print(f"{scenario.name:32s} {elapsed:6.1f}s found={row['found']} hit={row['hit']} shrink={row['shrink']:.3g}", flush=True)
+        print(
+            f"{scenario.name:32s} {elapsed:6.1f}s found={row['found']} hit={row['hit']} shrink={row['shrink']:.3g}",
+            flush=True,
+        )
     summary = {
         "seconds_per_dataset_median": float(np.median(times)) if times else float("nan"),
         "seconds_per_dataset_max": float(np.max(times)) if times else float("nan"),
@@ -114,7 +128,7 @@ def main() -> None:
     }
     payload = {"benchmark": "discover", "summary": summary, "scenarios": rows}
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    text = json.dumps(payload, indent=2, default=lambda v: None if isinstance(v, float) and not math.isfinite(v) else str(v))
+    text = json.dumps(_finite(payload), indent=2, default=str)
     args.out.write_text(text + "\n", encoding="utf-8")
     print(json.dumps(summary, indent=2))
 

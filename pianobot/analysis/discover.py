@@ -101,6 +101,7 @@ class DiscoveryResult:
     predictions_before: tuple[Prediction, ...] = ()  # held-out, base model
     predictions_after: tuple[Prediction, ...] = ()  # held-out, final model
     held_out: tuple[Keystroke, ...] = ()
+    notes: tuple[str, ...] = ()  # assumptions made for parameters the data do not record
 
     @property
     def accepted_effects(self) -> tuple[str, ...]:
@@ -116,6 +117,7 @@ class DiscoveryResult:
             "accepted_effects": list(self.accepted_effects),
             "n_train": self.n_train,
             "n_held_out": self.n_held_out,
+            "notes": list(self.notes),
             "iterations": [it.to_dict() for it in self.iterations],
             "final_model": dm.model_to_dict(self.final_model),
         }
@@ -341,16 +343,19 @@ def discover_runs(
     *,
     seed: int = 0,
     model_out: Path | None = None,
+    vacuum_kpa: float | None = None,
 ) -> DiscoveryResult:
     """Load runs, run discovery from `model` ("study" or a model file), save the final model.
 
     Raises:
         InputError: unknown runs, runs without mocap or MIDI, a bad model file.
     """
-    keystrokes = load_keystrokes(run_ids, data_dir)
+    notes: set[str] = set()
+    keystrokes = load_keystrokes(run_ids, data_dir, vacuum_kpa, notes)
     if len(keystrokes) < 6:
         raise InputError(f"discovery needs at least 6 keystrokes, got {len(keystrokes)}", "RUN_ID")
     result = discover(keystrokes, resolve_model(model), DiscoverySettings(seed=seed))
+    result = replace(result, notes=tuple(sorted(notes)))
     if model_out is not None:
         intervals = {
             name: [lo, hi]

@@ -44,30 +44,61 @@ def _float(row: pd.Series, name: str, default: float = float("nan")) -> float:
     return out if math.isfinite(out) else default
 
 
-def _press(row: pd.Series) -> Press:
+# UR moveL's default tool acceleration: assumed when a run (an imported mocap take) does not
+# record the acceleration it was played with.
+DEFAULT_ACCELERATION_MPS2 = 1.2
+
+
+def _press(row: pd.Series, notes: set[str]) -> Press | None:
+    """The commanded press of a trial; missing parameters are derived and noted, or None."""
     down = _float(row, "down_velocity_mps")
-    up = _float(row, "up_velocity_mps", down)
+    if not math.isfinite(down) or down <= 0:
+        down = _float(row, "arm_speed_mps")  # an imported take's arm speed estimate
+        notes.add("down velocity taken from the measured arm speed")
+    if not math.isfinite(down) or down <= 0:
+        return None
+    distance = _float(row, "distance_m")
+    if not math.isfinite(distance):
+        distance = 0.0
+        notes.add("distance 0 assumed (finger starts on the key)")
+    depth = _float(row, "depth_m")
+    if not math.isfinite(depth):
+        depth = _float(row, "arm_travel_m") - distance  # measured arm travel = distance + depth
+        notes.add("depth taken from the measured arm travel")
+    if not math.isfinite(depth) or depth <= 0:
+        return None
+    accel = _float(row, "acceleration_mps2")
+    if not math.isfinite(accel) or accel <= 0:
+        accel = DEFAULT_ACCELERATION_MPS2
+        notes.add(f"acceleration {DEFAULT_ACCELERATION_MPS2} m/s² assumed (UR moveL default)")
+    up = _float(row, "up_velocity_mps")
     return Press(
-        distance_m=_float(row, "distance_m", 0.0),
-        depth_m=_float(row, "depth_m"),
+        distance_m=distance,
+        depth_m=depth,
         down_velocity_mps=down,
-        up_velocity_mps=up if math.isfinite(up) else down,
-        acceleration_mps2=_float(row, "acceleration_mps2", 1.0),
+        up_velocity_mps=up if math.isfinite(up) and up > 0 else down,
+        acceleration_mps2=accel,
         hold_s=_float(row, "hold_s", 0.0),
     )
 
 
-def keystrokes_from_run(run: Run) -> list[Keystroke]:
+def keystrokes_from_run(
+    run: Run, vacuum_kpa: float | None = None, notes: set[str] | None = None
+) -> list[Keystroke]:
     """Every ok or silent trial of a run as a measured keystroke.
+
+    Args:
+        vacuum_kpa: the vacuum of trials that do not record one (an imported mocap take).
+        notes: collects the assumptions made for parameters the run does not record.
 
     Raises:
         InputError: when the run has no usable trial (no press parameters).
     """
+    notes = set() if notes is None else notes
     trials = run.trials
     if trials.empty:
         raise InputError("the run has no trials", run.run_id)
     trials = trials[trials["status"].isin(["ok", "silent"])]
-    trials = trials[np.isfinite(trials["depth_m"]) & np.isfinite(trials["down_velocity_mps"])]
     samples = run.samples
     mocap = samples[samples["source"] == "mocap"] if not samples.empty else samples
     by_trial = dict(tuple(mocap.groupby("trial_id", sort=False))) if not mocap.empty else {}
@@ -75,12 +106,26 @@ def keystrokes_from_run(run: Run) -> list[Keystroke]:
     out: list[Keystroke] = []
     for _, row in trials.iterrows():
         trial_id = str(row["trial_id"])
+        press = _press(row, notes)
+        if press is None:
+            continue
+        vacuum = _float(row, "vacuum_kpa")
+        if not math.isfinite(vacuum):
+            if vacuum_kpa is None:
+                raise InputError(
+                    "trials do not record their vacuum level; give it with --vacuum-kpa",
+                    run.run_id,
+                )
+            vacuum = vacuum_kpa
         group = by_trial.get(trial_id)
         if group is not None and len(group) > 8:
             group = group.sort_values("t_s")
             t = group["t_s"].to_numpy(np.float64)
             x = np.vstack(
-                [_rest_referenced(t, group[c].to_numpy(np.float64)) for c in ("x0_m", "x1_m", "x2_m")]
+                [
+                    _rest_referenced(t, group[c].to_numpy(np.float64))
+                    for c in ("x0_m", "x1_m", "x2_m")
+                ]
             )
         else:
             t, x = np.empty(0), np.empty((3, 0))
@@ -92,8 +137,8 @@ def keystrokes_from_run(run: Run) -> list[Keystroke]:
         out.append(
             Keystroke(
                 key_id=f"{run.run_id}/{trial_id}",
-                press=_press(row),
-                vacuum_kpa=_float(row, "vacuum_kpa", 0.0),
+                press=press,
+                vacuum_kpa=vacuum,
                 t_s=t,
                 x_m=x,
                 on_velocity=_float(row, "on_velocity"),
@@ -107,8 +152,13 @@ def keystrokes_from_run(run: Run) -> list[Keystroke]:
     return out
 
 
-def load_keystrokes(run_ids: Sequence[str], data_dir: Path) -> list[Keystroke]:
-    """Keystrokes of several runs, in run order.
+def load_keystrokes(
+    run_ids: Sequence[str],
+    data_dir: Path,
+    vacuum_kpa: float | None = None,
+    notes: set[str] | None = None,
+) -> list[Keystroke]:
+    """Keystrokes of several runs, in run order (see `keystrokes_from_run`).
 
     Raises:
         InputError: no run id given, an unknown run, or a run without usable trials.
@@ -117,7 +167,7 @@ def load_keystrokes(run_ids: Sequence[str], data_dir: Path) -> list[Keystroke]:
         raise InputError("give at least one run id", "RUN_ID")
     keystrokes: list[Keystroke] = []
     for run_id in run_ids:
-        keystrokes.extend(keystrokes_from_run(load_run(run_id, data_dir)))
+        keystrokes.extend(keystrokes_from_run(load_run(run_id, data_dir), vacuum_kpa, notes))
     if not any(k.has_motion for k in keystrokes) and not any(
         k.sounded is not None for k in keystrokes
     ):

@@ -11,7 +11,7 @@ full one.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -41,6 +41,7 @@ class Scenario:
     noise_m: float = MOCAP_NOISE_M
     mocap: bool = True
     acceleration_mps2: float = 1.0
+    n_speeds: int = 8  # keystrokes = n_speeds × 3 vacuum levels (tests use fewer)
 
     @property
     def expected_families(self) -> tuple[str | None, ...]:
@@ -48,10 +49,10 @@ class Scenario:
         return tuple(family_of(e) for e in self.expected)
 
 
-def presses(acceleration_mps2: float = 1.0) -> list[tuple[Press, float]]:
-    """24 keystrokes: 8 speeds × 3 vacuum levels, 40 mm depth from 3 mm above the key."""
+def presses(acceleration_mps2: float = 1.0, n_speeds: int = 8) -> list[tuple[Press, float]]:
+    """n_speeds × 3 vacuum levels (24 by default), 40 mm depth from 3 mm above the key."""
     out = []
-    for speed in np.linspace(0.02, 0.08, 8):
+    for speed in np.linspace(0.02, 0.08, n_speeds):
         for vacuum in (-20.0, -40.0, -60.0):
             out.append((Press(0.003, 0.040, float(speed), float(speed), acceleration_mps2), vacuum))
     return out
@@ -71,7 +72,7 @@ def world_of(scenario: Scenario) -> World:
 
 def generate(scenario: Scenario) -> list[Keystroke]:
     """Simulate and observe the scenario's dataset with the simulated world (seeded)."""
-    plan = presses(scenario.acceleration_mps2)
+    plan = presses(scenario.acceleration_mps2, scenario.n_speeds)
     world = world_of(scenario)
     keys = [f"{scenario.name}/{j:02d}" for j in range(len(plan))]
     observed = world.keystrokes([p for p, _ in plan], np.array([v for _, v in plan]), keys=keys)
@@ -222,6 +223,11 @@ def full_suite() -> list[Scenario]:
     suite += [control("k2-off", 40), control("c1-off", 41), control("noise-x2", 42)]
     suite += [midi_only(50), several(60)]
     return suite
+
+
+def reduced(scenario: Scenario, n_speeds: int = 4) -> Scenario:
+    """The same scenario with fewer keystrokes (for fast tests)."""
+    return replace(scenario, n_speeds=n_speeds)
 
 
 def named(scenarios: Sequence[Scenario], name: str) -> Scenario:

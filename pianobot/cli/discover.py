@@ -23,6 +23,8 @@ def _print(result: DiscoveryResult, report: Path | None, model_out: Path | None)
     for line in result.decision_line.splitlines():
         console.print(f"[bold]{line}[/bold]")
     console.print(f"Verdict: {result.verdict}")
+    for note in result.notes:
+        console.print(f"[dim]Assumed: {note}[/dim]")
     for it in result.iterations:
         table = Table(title=f"Iteration {it.index + 1} (ΔBIC threshold {it.threshold:.1f})")
         for column in ("effect", "ΔBIC", "gap before", "gap after", "status"):
@@ -60,11 +62,16 @@ def register(app: typer.Typer) -> None:
         seed: Annotated[
             int, typer.Option("--seed", help="Seed of the split and the bootstrap.")
         ] = 0,
+        vacuum_kpa: Annotated[
+            float | None, typer.Option("--vacuum-kpa", help="Vacuum of runs that do not record it.")
+        ] = None,
     ) -> None:
         """Localise where the model and the measurements disagree, name the missing effect, refit."""
         if model_out is None and out is not None:
             model_out = out.with_suffix(".model.json")
-        result = discover_runs(runs, data, model, seed=seed, model_out=model_out)
+        result = discover_runs(
+            runs, data, model, seed=seed, model_out=model_out, vacuum_kpa=vacuum_kpa
+        )
         if out is not None:
             build_discover_report(result, out, model_path=model_out)
         if json_out:

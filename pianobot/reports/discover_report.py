@@ -121,6 +121,8 @@ def build_discover_report(
             note=True,
         )
     )
+    for note in result.notes:
+        summary.add(paragraph(f"Assumed: {note}", note=True))
     if model_path is not None:
         summary.add(paragraph(f"Updated model file: {model_path.name}"))
     sections = [summary, Section("Gap").add(_gap_figure(result))]

@@ -30,7 +30,17 @@ def test_discover_json_names_the_hidden_keybed(cli: CliRunner, tmp_path: Path) -
     report = tmp_path / "discover.html"
     result = cli.invoke(
         app,
-        ["discover", run_id, "--data", str(data), "--model", str(start), "--json", "--out", str(report)],
+        [
+            "discover",
+            run_id,
+            "--data",
+            str(data),
+            "--model",
+            str(start),
+            "--json",
+            "--out",
+            str(report),
+        ],
     )
     assert result.exit_code == 0, result.output
     payload = json.loads(result.stdout)

@@ -5,7 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pianobot.analysis.discover_data import PHASES, Keystroke, Prediction, phase_labels, stratified_split
+from pianobot.analysis.discover_data import (
+    PHASES,
+    Keystroke,
+    Prediction,
+    phase_labels,
+    stratified_split,
+)
 from pianobot.analysis.discover_decide import Candidate, DecisionRule, choose, family_of
 from pianobot.analysis.discover_fit import ParamSpec, fit
 from pianobot.analysis.discover_localise import gap, localise
@@ -110,7 +116,9 @@ def _synthetic(n: int, misfit_m: float, seed: int) -> tuple[list[Keystroke], lis
         press = Press(0.01, 0.01, speed, speed, 1.0)
         ks.append(Keystroke(f"k{i}", press, -40.0 * (i % 2), t, meas, 40.0, 0.5, 0.7, True))
         phase = phase_labels(t, x0, comp)
-        ps.append(Prediction(pred, np.gradient(x2, t), comp, comp * 100, phase, 38.0, 0.5, 0.7, True))
+        ps.append(
+            Prediction(pred, np.gradient(x2, t), comp, comp * 100, phase, 38.0, 0.5, 0.7, True)
+        )
     return ks, ps
 
 
