@@ -131,7 +131,7 @@ def keystroke_batch(
     dt = float(np.median(np.diff(np.sort(outs[outs["trial_id"] == ids[0]]["t_s"].to_numpy()))))
     t_end = float(outs["t_s"].max()) if max_duration_s is None else max_duration_s
     t_start = float(outs["t_s"].min())
-    grid = t_start + dt * np.arange(int(np.floor((t_end - t_start) / dt)) + 1)
+    grid: FloatArray = t_start + dt * np.arange(int(np.floor((t_end - t_start) / dt)) + 1, dtype=np.float64)
 
     by_out = dict(tuple(outs.groupby("trial_id", sort=False)))
     by_in = dict(tuple(ins.groupby("trial_id", sort=False)))
@@ -153,6 +153,6 @@ def keystroke_batch(
         raise InputError("no arm trace could be put on a uniform grid", "identify")
     idx = np.flatnonzero(keep)
     return KeystrokeBatch(
-        tuple(str(ids[i]) for i in idx), vac.loc[[ids[i] for i in idx]].to_numpy(float),
+        tuple(str(ids[i]) for i in idx), np.asarray(vac.loc[[ids[i] for i in idx]].to_numpy(float), dtype=np.float64),
         grid, x0[idx], x1[idx], x2[idx],
     )

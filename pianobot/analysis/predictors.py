@@ -193,10 +193,8 @@ class PhysicsPredictor:
         out = pd.DataFrame(index=frame.index, columns=list(OUTPUT_COLUMNS), dtype=float)
         if full.empty:
             return out
-        presses = [
-            Press(r.distance_m, r.depth_m, r.down_velocity_mps, r.up_velocity_mps, r.acceleration_mps2, r.hold_s)
-            for r in full.itertuples()
-        ]
+        cols = ("distance_m", "depth_m", "down_velocity_mps", "up_velocity_mps", "acceleration_mps2", "hold_s")
+        presses = [Press(*(float(x) for x in row)) for row in full[list(cols)].to_numpy(float)]
         vacuum = full["vacuum_kpa"].to_numpy(float)
         piano = self.model.readout_params()
         values = np.full((len(presses), 4), np.nan)
