@@ -28,6 +28,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+import pyarrow.parquet as pq
+
 REPO = Path(__file__).resolve().parents[1]
 RESULTS = REPO / "benchmarks" / "results" / "sweep.json"
 GRID = REPO / "experiments" / "soft_finger_grid.yaml"
@@ -107,8 +109,10 @@ def scenario_grid(fraction: float) -> dict[str, Any]:
         start = time.perf_counter()
         outcome = run_sweep(spec, data_dir=Path(tmp) / "data", progress=False, subscribers=[sample])
         wall_s = time.perf_counter() - start
+        peak_rss_mb = _peak_rss_mb()  # before this script reads the results back
         run = load_run(outcome.run_id, Path(tmp) / "data")
-        samples = run.table("samples", columns=["source"])
+        sources = pq.read_table(run.path / "samples.parquet", columns=["source"], read_dictionary=["source"])
+        by_source = sources.column("source").value_counts().to_pylist()
         planned = lab_time(trials, prepared.rig)
         return {
             "spec": str(GRID.relative_to(REPO)),
@@ -117,12 +121,12 @@ def scenario_grid(fraction: float) -> dict[str, Any]:
             "silent": outcome.silent,
             "wall_s": round(wall_s, 2),
             "trials_per_s": round(len(trials) / wall_s, 1),
-            "peak_rss_mb": round(_peak_rss_mb(), 1),
+            "peak_rss_mb": round(peak_rss_mb, 1),
             "rss_mb_by_trial": rss,
             "rows": {
                 "trials": int(len(run.trials)),
-                "samples": int(len(samples)),
-                "samples_by_source": {k: int(v) for k, v in samples["source"].value_counts().items()},
+                "samples": int(sources.num_rows),
+                "samples_by_source": {str(e["values"]): int(e["counts"]) for e in by_source},
                 "midi": int(len(run.midi)),
             },
             "bytes_on_disk": _folder_bytes(run.path),
@@ -155,6 +159,7 @@ def scenario_random(samples: int) -> dict[str, Any]:
         start = time.perf_counter()
         outcome = run_sweep(spec, data_dir=folder / "data", progress=False, subscribers=[sample])
         wall_s = time.perf_counter() - start
+        peak_rss_mb = _peak_rss_mb()
         run = load_run(outcome.run_id, folder / "data")
         return {
             "trials": samples,
@@ -162,7 +167,7 @@ def scenario_random(samples: int) -> dict[str, Any]:
             "completed": outcome.trials,
             "wall_s": round(wall_s, 2),
             "trials_per_s": round(samples / wall_s, 1),
-            "peak_rss_mb": round(_peak_rss_mb(), 1),
+            "peak_rss_mb": round(peak_rss_mb, 1),
             "rss_mb_by_trial": rss,
             "rss_growth_mb_after_first_tenth": round(rss[-1][1] - rss[1][1], 1) if len(rss) > 2 else None,
             "bytes_on_disk": _folder_bytes(run.path),
