@@ -1,0 +1,88 @@
+"""`pianobot play`: one-line errors with exit 2, JSON score keys, dry-run plan."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import mido
+import pytest
+
+from pianobot.cli import main
+from pianobot.io.midifile import Note, write_song
+
+SONGS = Path(__file__).resolve().parents[2] / "experiments" / "songs"
+
+
+def cli(args: list[str], capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> tuple[int, str, str]:
+    monkeypatch.setattr(sys, "argv", ["pianobot", *args])
+    code = 0
+    try:
+        main()
+    except SystemExit as exc:
+        code = int(exc.code or 0)
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def _type2(path: Path) -> Path:
+    mid = mido.MidiFile(type=2)
+    for note in (60, 62):
+        track = mido.MidiTrack([mido.Message("note_on", note=note, velocity=64, time=0),
+                                mido.Message("note_off", note=note, velocity=0, time=480)])
+        mid.tracks.append(track)
+    mid.save(path)
+    return path
+
+
+@pytest.mark.parametrize("kind", ["missing", "not-midi", "type-2", "no-playable-notes"])
+def test_bad_input_is_one_line_and_exit_2(kind: str, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    data = tmp_path / "data"
+    extra: list[str] = []
+    if kind == "missing":
+        song = tmp_path / "nope.mid"
+    elif kind == "not-midi":
+        song = tmp_path / "text.mid"
+        song.write_text("MThd? no, just text\n")
+    elif kind == "type-2":
+        song = _type2(tmp_path / "t2.mid")
+    else:
+        song = write_song(tmp_path / "high.mid", [Note(105, 0.0, 1.0, 64)], tempo_bpm=90)
+        extra = ["--transpose", "12"]
+    code, out, err = cli(["play", str(song), "--data", str(data), "--json", *extra], capsys, monkeypatch)
+    assert code == 2
+    assert out == ""
+    lines = [line for line in err.splitlines() if not line.startswith("warning:")]
+    assert len(lines) == 1 and lines[0].startswith("error: ")
+    assert "Traceback" not in err
+    assert not (data / "runs").exists()
+
+
+def test_naive_play_prints_the_score_keys(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                          monkeypatch: pytest.MonkeyPatch) -> None:
+    code, out, _ = cli(["play", str(SONGS / "scale_crescendo.mid"), "--planner", "naive", "--data",
+                        str(tmp_path), "--json", "--plot", str(tmp_path / "roll.png")], capsys, monkeypatch)
+    assert code == 0
+    payload = json.loads(out)
+    for key in ("f1", "onset_rms_ms", "onset_mean_ms", "duration_mae_ms", "velocity_mae",
+                "notes_target", "notes_played"):
+        assert key in payload
+    assert payload["notes_target"] == 15 and payload["planner"] == "naive"
+    assert (tmp_path / "roll.png").is_file()
+    assert Path(payload["files"]["performance_mid"]).is_file()
+
+
+def test_dry_run_prints_the_plan(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    code, out, err = cli(["play", str(SONGS / "twinkle_standard.mid"), "--dry-run", "--json", "--data",
+                          str(tmp_path)], capsys, monkeypatch)
+    assert code == 0
+    payload = json.loads(out)
+    assert len(payload["plan_notes"]) == 42
+    assert payload["mapping"].startswith("linear 40–110")
+    assert "cannot be played in time" in err
+    code, out, _ = cli(["play", str(SONGS / "mary.mid"), "--dry-run", "--data", str(tmp_path)], capsys, monkeypatch)
+    assert code == 0 and "mapping:" in out
+    assert not (tmp_path / "runs").exists()

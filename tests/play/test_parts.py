@@ -1,0 +1,85 @@
+"""Building blocks of `play` on synthetic inputs: dynamics map, RLS adapter, scoring, tables."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from pianobot.io.midifile import Note
+from pianobot.play.adapt import OnlineAdapter
+from pianobot.play.dynamics import DynamicsMap
+from pianobot.play.score import score_performance
+from pianobot.play.settings import PlaySettings
+from pianobot.play.strokes import StrokeTable
+
+
+def test_dynamics_map_linear_and_absolute() -> None:
+    mapped = DynamicsMap.fit([40, 75, 110], (2.0, 12.0), "mapped")
+    assert mapped.apply([40, 75, 110]).tolist() == pytest.approx([2.0, 7.0, 12.0])
+    assert "40–110 → 2.0–12.0" in mapped.describe()
+    absolute = DynamicsMap.fit([1, 5, 100], (2.0, 12.0), "absolute")
+    assert absolute.apply([1, 5, 100]).tolist() == [2.0, 5.0, 12.0]
+    flat = DynamicsMap.fit([64, 64], (2.0, 12.0), "mapped")
+    assert flat.apply([64]).tolist() == [7.0]
+
+
+def test_adapter_learns_a_scaled_and_shifted_map() -> None:
+    rng = np.random.default_rng(0)
+    adapter = OnlineAdapter()
+    for i in range(60):
+        predicted = float(rng.uniform(2, 12))
+        played = round(1.6 * predicted + 1.0)  # the true piano: louder, with an offset
+        adapter.observe(i, predicted, 0.5, played, 0.5 * 1.2 + 0.03)
+    state = adapter.state()
+    assert state["velocity_gain"] == pytest.approx(1.6, abs=0.15)
+    assert state["velocity_offset"] == pytest.approx(1.0, abs=1.0)
+    assert adapter.corrected_lead(0.5) == pytest.approx(0.63, abs=0.01)
+    # Inverting: to play 17 the model must be asked for about (17 - 1) / 1.6 = 10.
+    assert adapter.model_target(17.0) == pytest.approx(10.0, abs=0.6)
+    assert len(adapter.history) == 60
+
+
+def test_adapter_steps_are_bounded() -> None:
+    adapter = OnlineAdapter()
+    adapter.observe(0, 5.0, 0.5, 120.0, 0.5)  # one absurd note
+    state = adapter.state()
+    assert abs(state["velocity_gain"] - 1.0) <= 0.15 + 1e-12
+    assert abs(state["velocity_offset"]) <= 2.0 + 1e-12
+
+
+def test_score_counts_hits_and_errors() -> None:
+    target = [Note(60, 0.0, 1.0, 40), Note(62, 2.0, 3.0, 80), Note(64, 4.0, 5.0, 100)]
+    played = [Note(60, 0.01, 0.8, 5), Note(62, 2.2, 2.9, 9), Note(65, 4.0, 5.0, 9)]
+    score = score_performance(target, played, [4.0, 8.0, 10.0])
+    assert score.f1 == pytest.approx(1 / 3)  # only the first is within 50 ms with the right pitch
+    assert score.notes_matched == 2  # the late one still counts for timing
+    assert score.onset_mean_ms == pytest.approx((10 + 200) / 2)
+    assert score.onset_rms_ms == pytest.approx(np.sqrt((0.01**2 + 0.2**2) / 2) * 1e3)
+    assert score.velocity_mae == pytest.approx(1.0)
+    assert score.velocity_mae_unmapped == pytest.approx((35 + 71) / 2)
+    assert score.duration_mae_ms == pytest.approx((210 + 300) / 2)
+
+
+class _Linear:
+    """A fake predictor: loud with speed, silent below 0.02 m/s, lead = 0.02 m / speed."""
+
+    def predict(self, frame: pd.DataFrame) -> pd.DataFrame:
+        v = frame["down_velocity_mps"].to_numpy(float)
+        hold = frame["hold_s"].to_numpy(float)
+        silent = v < 0.02
+        return pd.DataFrame({
+            "on_velocity": np.where(silent, np.nan, 200 * v),
+            "p_silent": silent.astype(float),
+            "lead_s": np.where(silent, np.nan, 0.02 / v),
+            "midi_hold_s": np.where(silent, np.nan, 0.1 + hold),
+        }, index=frame.index)
+
+
+def test_stroke_table_inverts_the_model() -> None:
+    table = StrokeTable.build(_Linear(), -60.0, PlaySettings(), 0.06)  # type: ignore[arg-type]
+    lo, hi = table.velocity_range
+    assert lo >= 4.0 - 1e-9 and hi == pytest.approx(12.0)
+    assert float(table.inverse(8.0)) == pytest.approx(0.04, rel=1e-3)
+    assert float(table.lead(0.04)) == pytest.approx(0.5, rel=0.05)
+    assert float(table.arm_hold_for(0.04, 0.6)) == pytest.approx(0.5)
