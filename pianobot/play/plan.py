@@ -179,7 +179,7 @@ def plan_model(
         reason = ""
         if not lo - 1e-6 <= targets[i] <= hi + 1e-6:
             reason = f"target {targets[i]:.1f} clipped to the reachable {lo:.1f}–{hi:.1f}"
-        hold = float(min(table.arm_hold_for(speed, n.duration_s), hold_cap))
+        hold = min(float(table.arm_hold_for(speed, n.duration_s)), hold_cap)
         lead = float(table.lead(speed))
         rows.append(_row(i, n, targets[i], table, speed, hold, lead, reason))
     frame = schedule(pd.DataFrame(rows, columns=list(PLAN_COLUMNS)), tables, settings, rig)
@@ -230,21 +230,21 @@ def schedule(frame: pd.DataFrame, tables: dict[float, StrokeTable], settings: Pl
             _set_hold(out, prev, float(p.hold_s) - cut, tables, settings)
             needed -= cut
             short -= cut
-        out.iat[i, out.columns.get_loc("move_s")] = move
-        out.iat[i, out.columns.get_loc("vacuum_change_s")] = vac
+        _put(out, i, "move_s", move)
+        _put(out, i, "vacuum_change_s", vac)
         if short > late_limit + 1e-9:
-            out.iat[i, out.columns.get_loc("status")] = "skip"
-            out.iat[i, out.columns.get_loc("reason")] = (
+            _put(out, i, "status", "skip")
+            _put(out, i, "reason", (
                 f"no time to release and re-strike: the arm is free {short * 1e3:.0f} ms after "
                 "this note's motion must start"
-            )
+            ))
             continue
         if short > 0:
-            out.iat[i, out.columns.get_loc("start_s")] = needed
-            out.iat[i, out.columns.get_loc("late_s")] = short
+            _put(out, i, "start_s", needed)
+            _put(out, i, "late_s", short)
             note = f"late by {short * 1e3:.0f} ms"
-            old = str(out.iat[i, out.columns.get_loc("reason")])
-            out.iat[i, out.columns.get_loc("reason")] = f"{old}; {note}" if old else note
+            old = str(out["reason"].iloc[i])
+            _put(out, i, "reason", f"{old}; {note}" if old else note)
         prev = i
     return out
 
@@ -253,15 +253,19 @@ def _set_hold(frame: pd.DataFrame, i: int, hold_s: float, tables: dict[float, St
               settings: PlaySettings) -> None:
     """Shorten row i's arm hold and update what depends on it (MIDI hold, busy time)."""
     row = frame.iloc[i]
-    cols = frame.columns
-    frame.iat[i, cols.get_loc("hold_s")] = hold_s
+    _put(frame, i, "hold_s", hold_s)
     table = tables.get(float(row.vacuum_kpa))
     speed = float(row.down_velocity_mps)
     if table is not None:
-        frame.iat[i, cols.get_loc("predicted_midi_hold_s")] = float(table.midi_hold(speed, hold_s))
-        frame.iat[i, cols.get_loc("busy_s")] = table.busy_s(speed, hold_s)
+        _put(frame, i, "predicted_midi_hold_s", float(table.midi_hold(speed, hold_s)))
+        _put(frame, i, "busy_s", table.busy_s(speed, hold_s))
     else:
-        frame.iat[i, cols.get_loc("busy_s")] = busy_s(settings, speed, hold_s)
+        _put(frame, i, "busy_s", busy_s(settings, speed, hold_s))
+
+
+def _put(frame: pd.DataFrame, i: int, column: str, value: Any) -> None:
+    """Set one cell of row position i."""
+    frame.loc[frame.index[i], column] = value
 
 
 def _warnings(frame: pd.DataFrame) -> tuple[str, ...]:

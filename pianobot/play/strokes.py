@@ -89,21 +89,21 @@ class StrokeTable:
     def predict_velocity(self, speed_mps: npt.ArrayLike) -> FloatArray:
         """Predicted on-velocity at down velocities (the monotone envelope)."""
         ok = self.sounding
-        return np.asarray(np.interp(speed_mps, self.speeds_mps[ok], self.velocity[ok]), dtype=np.float64)
+        return np.asarray(np.interp(_f(speed_mps), self.speeds_mps[ok], self.velocity[ok]), dtype=np.float64)
 
     def lead(self, speed_mps: npt.ArrayLike) -> FloatArray:
-        return np.asarray(np.interp(speed_mps, self.speeds_mps, self.lead_s), dtype=np.float64)
+        return np.asarray(np.interp(_f(speed_mps), self.speeds_mps, self.lead_s), dtype=np.float64)
 
     def midi_hold(self, speed_mps: npt.ArrayLike, hold_s: npt.ArrayLike) -> FloatArray:
         """Predicted MIDI hold (note-on → note-off) for a down velocity and an arm hold."""
-        h0 = np.interp(speed_mps, self.speeds_mps, self.hold0_s)
-        slope = np.interp(speed_mps, self.speeds_mps, self.hold_slope)
+        h0 = np.interp(_f(speed_mps), self.speeds_mps, self.hold0_s)
+        slope = np.interp(_f(speed_mps), self.speeds_mps, self.hold_slope)
         return np.asarray(h0 + slope * np.asarray(hold_s, dtype=np.float64), dtype=np.float64)
 
     def arm_hold_for(self, speed_mps: npt.ArrayLike, midi_hold_s: npt.ArrayLike) -> FloatArray:
         """Arm hold so the predicted MIDI hold equals the wanted one (≥ 0, uncapped)."""
-        h0 = np.interp(speed_mps, self.speeds_mps, self.hold0_s)
-        slope = np.interp(speed_mps, self.speeds_mps, self.hold_slope)
+        h0 = np.interp(_f(speed_mps), self.speeds_mps, self.hold0_s)
+        slope = np.interp(_f(speed_mps), self.speeds_mps, self.hold_slope)
         return np.asarray(np.maximum(0.0, (np.asarray(midi_hold_s) - h0) / slope), dtype=np.float64)
 
     def busy_s(self, speed_mps: float, hold_s: float) -> float:
@@ -120,6 +120,10 @@ def make_press(settings: PlaySettings, speed_mps: float, hold_s: float) -> Press
 def busy_s(settings: PlaySettings, speed_mps: float, hold_s: float) -> float:
     """Motion start → the next press may start: the press itself plus the recovery."""
     return press_duration_s(make_press(settings, speed_mps, hold_s)) + settings.recovery_s
+
+
+def _f(values: npt.ArrayLike) -> FloatArray:
+    return np.asarray(values, dtype=np.float64)
 
 
 def _monotone(velocity: FloatArray) -> FloatArray:
