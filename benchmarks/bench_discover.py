@@ -36,15 +36,22 @@ def score(scenario: sc.Scenario, result: DiscoveryResult) -> dict[str, Any]:
     found = list(result.accepted_effects)
     families = {family_of(e) for e in found}
     first, last = result.iterations[0], result.iterations[-1]
-    gap_before = first.before.gap.primary
-    gap_after = (last.after or last.before).gap.primary
+    g0, g1 = first.before.gap, (last.after or last.before).gap
+    # Judge on the measure the effect shows in: position, unless it stayed at the noise floor
+    # (a velocity curve changes only the sound).
+    measure = (
+        "position_m"
+        if g0.primary_name == "position_m" and g0.position_m > 0.3 * g0.sigma_m
+        else "on_velocity"
+    )
+    gap_before, gap_after = getattr(g0, measure), getattr(g1, measure)
     shrink = _shrink(gap_before, gap_after)
     row: dict[str, Any] = {
         "scenario": scenario.name,
         "kind": scenario.kind,
         "expected": list(scenario.expected),
         "found": found,
-        "gap_name": first.before.gap.primary_name,
+        "gap_name": measure,
         "gap_before": gap_before,
         "gap_after": gap_after,
         "shrink": shrink,

@@ -197,6 +197,34 @@ def _bootstrap(
     return tuple(out)
 
 
+# Below these a held-out measure is at its noise floor and its ratio means nothing.
+_POSITION_FLOOR_SIGMAS = 0.3
+_VELOCITY_FLOOR = 0.3
+
+
+def _primary_or_nan(before: Localisation, weights: dm.Weights) -> float:
+    """The primary gap, or NaN when it is at the noise floor (then other measures decide)."""
+    g = before.gap
+    floor = (
+        _POSITION_FLOOR_SIGMAS * weights.sigma_m
+        if g.primary_name == "position_m"
+        else _VELOCITY_FLOOR
+    )
+    return g.primary if g.primary > floor else float("nan")
+
+
+def _other_gaps(before: Localisation, after: Localisation) -> tuple[tuple[str, float, float], ...]:
+    """On-velocity gap before/after when it is not the primary and above its floor."""
+    b, a = before.gap, after.gap
+    if (
+        b.primary_name == "on_velocity"
+        or not np.isfinite(b.on_velocity)
+        or b.on_velocity <= _VELOCITY_FLOOR
+    ):
+        return ()
+    return (("on_velocity", b.on_velocity, a.on_velocity),)
+
+
 def _verdict(
     iterations: Sequence[Iteration], final: Localisation, settings: DiscoverySettings
 ) -> tuple[str, bool]:
@@ -228,15 +256,20 @@ def _decision_line(iterations: Sequence[Iteration]) -> str:
             for name in c.effect_params
         )
         b, a = it.before.gap, it.after.gap
-        shrink = f"{b.primary / a.primary:.1f}×" if a.primary > 0 else "down to the noise floor"
-        unit, scale = ("mm", 1e3) if b.primary_name == "position_m" else ("", 1.0)
         text = f"Missing effect: {c.effect}" + (f", {params}" if params else "")
-        text += (
-            f"; held-out systematic {'RMS' if unit else 'velocity RMS'} "
-            f"{b.primary * scale:.3g} → {a.primary * scale:.3g}{(' ' + unit) if unit else ''} "
-            f"({shrink})"
-        )
-        if np.isfinite(b.on_velocity) and np.isfinite(a.on_velocity) and unit:
+        if np.isfinite(c.gap_before):  # the position gap was above its noise floor
+            shrink = f"{b.primary / a.primary:.1f}×" if a.primary > 0 else "to the noise floor"
+            unit, scale = ("mm", 1e3) if b.primary_name == "position_m" else ("", 1.0)
+            what = "RMS" if unit else "MIDI velocity RMS"
+            text += (
+                f"; held-out systematic {what} {b.primary * scale:.3g} → "
+                f"{a.primary * scale:.3g}{(' ' + unit) if unit else ''} ({shrink})"
+            )
+        if (
+            np.isfinite(b.on_velocity)
+            and np.isfinite(a.on_velocity)
+            and b.primary_name == "position_m"
+        ):
             text += f"; MIDI velocity RMS {b.on_velocity:.2g} → {a.on_velocity:.2g}"
         parts.append(text)
     return "\n".join(parts) if parts else "No missing effect found."
@@ -291,8 +324,9 @@ def discover(
                     effect_params=names,
                     off_values=dm.off_values(names),
                     delta_bic=current_fit.bic - cand_fit.bic,
-                    gap_before=before.gap.primary,
+                    gap_before=_primary_or_nan(before, weights),
                     gap_after=after.gap.primary,
+                    other_gaps=_other_gaps(before, after),
                     proposed_by=("sparse",) if any(p.family == effect for p in proposals) else (),
                 )
             )

@@ -72,6 +72,8 @@ class Candidate:
     gap_before: float  # held-out primary gap of the base model
     gap_after: float  # held-out primary gap with this effect
     proposed_by: tuple[str, ...] = ()  # e.g. ("sparse",) when STLSQ pointed at it
+    # Other held-out measures above their noise floor: (name, before, after), e.g. on-velocity.
+    other_gaps: tuple[tuple[str, float, float], ...] = ()
     status: str = "pending"
     reasons: tuple[str, ...] = field(default_factory=tuple)
 
@@ -82,10 +84,21 @@ class Candidate:
 
     @property
     def gap_reduction(self) -> float:
-        """Fraction of the held-out gap removed (negative when it grows)."""
-        if not (np.isfinite(self.gap_before) and self.gap_before > 0):
+        """Fraction of the held-out gap removed (negative when it grows).
+
+        Over every measure above its noise floor (position, and MIDI velocity when recorded):
+        the largest reduction counts, unless some measure grows by more than 10 % — an
+        effect that fixes the sound but breaks the motion is not an explanation.
+        """
+        reductions = [
+            1.0 - after / before
+            for _, before, after in (("primary", self.gap_before, self.gap_after), *self.other_gaps)
+            if np.isfinite(before) and before > 0 and np.isfinite(after)
+        ]
+        if not reductions:
             return 0.0
-        return float(1.0 - self.gap_after / self.gap_before)
+        worst = min(reductions)
+        return float(worst if worst < -0.1 else max(reductions))
 
     @property
     def off_excluded(self) -> bool:
@@ -112,6 +125,10 @@ class Candidate:
             "gap_before": self.gap_before,
             "gap_after": self.gap_after,
             "gap_reduction": self.gap_reduction,
+            "other_gaps": [
+                {"measure": name, "before": before, "after": after}
+                for name, before, after in self.other_gaps
+            ],
             "off_excluded": self.off_excluded,
             "proposed_by": list(self.proposed_by),
             "status": self.status,
