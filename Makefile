@@ -22,9 +22,13 @@ test: $(STAMP)
 test-fast: $(STAMP)
 	$(BIN)/python -m pytest -n $(PYTEST_WORKERS) -p no:cacheprovider -m "not slow and not hardware"
 
+LAST_RUN = $(BIN)/python -c "from pianobot.store import list_runs; print(list_runs('$(DATA)')[-1].run_id)"
+
 demo: $(STAMP)
 	$(BIN)/pianobot sweep experiments/quickstart.yaml --data $(DATA)
+	$(BIN)/pianobot report $$($(LAST_RUN)) --data $(DATA) --out $(DATA)/quickstart-report.html
 	$(BIN)/pianobot runs --data $(DATA)
+	@echo "Open $(DATA)/quickstart-report.html in a browser; README.md has a five-minute tour."
 
 bench: $(STAMP)
 	mkdir -p benchmarks/results
