@@ -26,6 +26,7 @@ import pandas as pd
 
 from pianobot.errors import InputError
 from pianobot.io.keystroke_log import SkippedLine
+from pianobot.io.source import read_input_bytes
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -107,18 +108,7 @@ def read_force_log(
 
 
 def _read_text(path: Path) -> str:
-    where = str(path)
-    try:
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise InputError("no such file", where) from None
-    except OSError as exc:
-        raise InputError(f"cannot read the file ({exc.strerror or exc})", where) from None
-    if not data.strip():
-        raise InputError("the file is empty", where)
-    if b"\x00" in data:
-        raise InputError("not a force capture (binary data)", where)
-    return data.decode("utf-8", errors="replace")
+    return read_input_bytes(path, "a force capture").decode("utf-8", errors="replace")
 
 
 def parse_readings(lines: list[str]) -> tuple[list[int], list[SkippedLine], list[int]]:

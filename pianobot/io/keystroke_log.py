@@ -24,6 +24,7 @@ import pandas as pd
 from pianobot.errors import InputError
 from pianobot.io.keystroke_events import LogEvent, Press, assign_presses, group_presses
 from pianobot.io.keystroke_layouts import LAYOUT_CHOICES, Layout, choose_layout
+from pianobot.io.source import read_input_bytes
 from pianobot.physics.trajectory import move_profile
 
 TRIAL_COLUMNS = (
@@ -137,16 +138,7 @@ def read_keystroke_log(path: Path | str, layout: str = "auto") -> KeystrokeLog:
 
 def _read_lines(path: Path) -> list[str]:
     where = str(path)
-    try:
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise InputError("no such file", where) from None
-    except OSError as exc:
-        raise InputError(f"cannot read the file ({exc.strerror or exc})", where) from None
-    if not data.strip():
-        raise InputError("the file is empty", where)
-    if b"\x00" in data:
-        raise InputError("not a text log (binary data)", where)
+    data = read_input_bytes(path, "a text log")
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError:

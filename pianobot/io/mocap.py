@@ -31,6 +31,7 @@ import numpy.typing as npt
 import pandas as pd
 
 from pianobot.errors import InputError
+from pianobot.io.source import read_input_bytes
 
 FloatArray = npt.NDArray[np.float64]
 ROLES = ("arm", "fingertip", "key")
@@ -156,17 +157,7 @@ def read_mocap(
 
 
 def _read_text(path: Path) -> str:
-    where = str(path)
-    try:
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise InputError("no such file", where) from None
-    except OSError as exc:
-        raise InputError(f"cannot read the file ({exc.strerror or exc})", where) from None
-    if not data.strip():
-        raise InputError("the file is empty", where)
-    if b"\x00" in data:
-        raise InputError("not a Motive CSV export (binary data)", where)
+    data = read_input_bytes(path, "a Motive CSV export")
     return data.decode("utf-8-sig", errors="replace")
 
 
