@@ -6,6 +6,14 @@ ophyd-async sim pattern: devices share one generator). Time is a `VirtualClock`;
 a pure function of (world config, seed, press, vacuum, note, key) where key = trial id and
 attempt, so a redone trial after a crash reproduces the uninterrupted run exactly.
 
+The arm is free again when it is back at its hover height (the world's arm trace), not when the
+key has come to rest: the key returns and rings on its own. The world simulates every keystroke
+from a key at rest, so a re-strike of the same key must not start while that key is still below
+its re-trigger depth (the piano's release depth, where the note-off fires and a new note can
+start): the arm waits until the previous stroke's key trace has risen above it for good, and the
+press record says how long it waited. The residual motion above that depth (under a millimetre)
+and the finger's own ringing are not carried into the next stroke.
+
 Injected faults (rig file `faults:`):
 - `drop_connection_every_n_presses: N` — every N-th press sent loses the link half-way down
   (ConnectionLost); the arm must `connect()` again.
@@ -27,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from pianobot.physics.trajectory import Press
+from pianobot.physics.trajectory import Press, press_duration_s
 from pianobot.plan import key_change_s
 from pianobot.rig.clock import VirtualClock
 from pianobot.rig.errors import ConnectionLost, SafetyStop
@@ -37,6 +45,10 @@ from pianobot.rig.station import Rig, Station, StationSettings, TrialLike
 # Events and frames older than this before a query window can no longer be asked for: dropping
 # them keeps memory flat over a 100,000-trial sweep.
 BUFFER_HORIZON_S = 60.0
+# The arm counts as back up once its truth trace stays within this of the hover height.
+ARM_AT_REST_M = 2e-5
+# Re-trigger depth when a world does not say (a digital piano's release contact, ~1 mm).
+DEFAULT_RETRIGGER_M = 1e-3
 
 
 @dataclass(frozen=True)
@@ -66,6 +78,7 @@ class SimState:
     mocap: list[Trace] = field(default_factory=list)
     truth: Trace | None = None
     extra: dict[str, float] = field(default_factory=dict)
+    key_ready_s: dict[int, float] = field(default_factory=dict)  # note -> key above re-trigger depth
 
     def rng(self, stream: str) -> np.random.Generator:
         """A generator seeded by (seed, key, stream): the same draws for a redone keystroke."""
@@ -118,11 +131,21 @@ class SimArm:
             self.connected = False
             state.clock.sleep(0.1)  # the link drops part-way down
             raise ConnectionLost(f"RTDE connection lost during press #{state.presses_sent} (injected fault)")
+        warnings: tuple[str, ...] = ()
+        wait_s = state.key_ready_s.get(note, -np.inf) - t0_s
+        if wait_s > 0:
+            # The key of the last stroke on this note is still below its re-trigger depth.
+            state.clock.sleep(wait_s)
+            t0_s = state.clock.now()
+            warnings = (f"re-strike of note {note} waited {wait_s * 1e3:.0f} ms for the key to rise "
+                        "above its re-trigger depth",)
         stroke = state.world.keystroke(press, state.vacuum_kpa, note=note, t0_s=t0_s, key=state.key)
         self._publish(stroke)
-        state.clock.sleep(t0_s + float(stroke.duration_s) - state.clock.now())
+        t_up_s = t0_s + _arm_back_s(stroke, press)
+        state.key_ready_s[note] = t0_s + _key_ready_s(stroke, _retrigger_m(state.world))
+        state.clock.sleep(t_up_s - state.clock.now())
         arm = Trace(t_s=_f64(stroke.arm_t_s), x0_m=_f64(stroke.arm_x0_m), source="arm")
-        return PressRecord(t_start_s=t0_s, t_end_s=t0_s + float(stroke.duration_s), arm=arm)
+        return PressRecord(t_start_s=t0_s, t_end_s=t_up_s, arm=arm, warnings=warnings)
 
     def _publish(self, stroke: Any) -> None:
         """Feed the keyboard's MIDI queue, the mocap buffer and the truth record from one stroke."""
@@ -231,6 +254,40 @@ class SimMocap:
 
     def describe(self) -> dict[str, Any]:
         return {"kind": "sim-mocap", "mocap_drop_prob": self.state.faults.mocap_drop_prob}
+
+
+def _arm_back_s(stroke: Any, press: Press) -> float:
+    """Motion start → the arm is back at its hover height (commanded profile, or later if it lags).
+
+    The answer is a sample time of the world's truth trace, so run-clock times stay on the
+    world's output grid (a resumed run then stamps MIDI exactly like the uninterrupted one).
+    """
+    t_s = _f64(stroke.truth_t_s) - float(stroke.t0_s)
+    if not t_s.size:
+        return float(stroke.duration_s)
+    away = np.nonzero(np.abs(_f64(stroke.truth_x0_m)) > ARM_AT_REST_M)[0]
+    last_s = float(t_s[away[-1]]) if away.size else 0.0
+    k = int(np.searchsorted(t_s, max(press_duration_s(press), last_s) - 1e-9))
+    return float(t_s[min(k, t_s.size - 1)])
+
+
+def _key_ready_s(stroke: Any, retrigger_m: float) -> float:
+    """Motion start → the key is above its re-trigger depth for the rest of the stroke."""
+    t_s = _f64(stroke.truth_t_s) - float(stroke.t0_s)
+    deep = np.nonzero(_f64(stroke.truth_x2_m) >= retrigger_m)[0]
+    if not deep.size:
+        return 0.0
+    k = int(deep[-1])
+    return float(t_s[min(k + 1, t_s.size - 1)])
+
+
+def _retrigger_m(world: Any) -> float:
+    """The world's piano release depth (the re-trigger depth of its keys)."""
+    model = getattr(world, "model", None)
+    readout = getattr(model, "readout_params", None)
+    if callable(readout):
+        return float(readout().release_m)
+    return DEFAULT_RETRIGGER_M
 
 
 def _column(trace: Trace, name: str) -> FloatArray:

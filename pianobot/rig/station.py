@@ -1,11 +1,22 @@
 """The keystroke sequence, the same for every backend: vacuum, position, press, collect.
 
-One keystroke: set the vacuum if it changed (the regulator settles, seconds), hover over the key
-if the note or the run-up distance changed, press, wait `settle_s` so the key returns and the
-last MIDI message arrives (the study's scripts slept 0.5 s around every press), then collect the
-MIDI events and the mocap trace by time window from motion start to the end of the wait. MIDI is
-assigned to a keystroke by time, never by counting messages, so a lost or extra message cannot
-shift every later keystroke.
+Two ways to press:
+
+- `keystroke(trial)` — the sweep's sequence: set the vacuum if it changed (the regulator
+  settles, seconds), hover over the key if the note or the run-up distance changed, press, wait
+  `settle_s` so the key returns and the last MIDI message arrives (the study's scripts slept
+  0.5 s around every press), then collect MIDI and mocap by time window.
+- `press(trial, start_at_s=...)` — the player's timed press: the caller has already set the
+  vacuum (`set_vacuum`) and hovered over the key (`move_to_key`, which returns how long the move
+  took), so the press starts at a planned time on the rig clock (the virtual clock advances to
+  it, a wall clock sleeps until it) and returns as soon as the arm is back up, without a settle
+  pause unless one is asked for. The key still returns and rings on its own meanwhile; a
+  backend that cannot press a key before it is back above its re-trigger depth waits for it
+  and says so in the press record's warnings.
+
+MIDI is assigned to a keystroke by time window (motion start → end of the arm's move or of the
+settle pause), never by counting messages, so a lost or extra message cannot shift every later
+keystroke. Events after the window (a late note-off) belong to whoever reads the next window.
 """
 
 from __future__ import annotations
@@ -16,6 +27,7 @@ from dataclasses import dataclass
 from typing import Any, Protocol
 
 from pianobot.physics.trajectory import Press
+from pianobot.rig.errors import SafetyViolation
 from pianobot.rig.protocols import Arm, Clock, Keyboard, KeystrokeResult, Mocap, Trace, Vacuum
 
 
@@ -44,19 +56,23 @@ class TrialLike(Protocol):
 # world the keystroke's identity and to fire injected faults.
 BeforePress = Callable[[TrialLike, int], None]
 
+# Vacuum levels (kPa) and hover distances (m) closer than these are the same setting.
+SAME_VACUUM_KPA = 1e-9
+SAME_DISTANCE_M = 1e-9
+
 
 @dataclass(frozen=True)
 class StationSettings:
     """How a keystroke is collected."""
 
-    settle_s: float = 0.5  # wait after the arm is back, before the MIDI window closes
+    settle_s: float = 0.5  # sweep keystrokes: wait after the arm is back, before the window closes
     after_vacuum_change_s: float = 5.0  # from the command: regulator and jammed particles settle
     record_arm: bool = True
     record_mocap: bool = True
 
 
 class Station:
-    """Runs one keystroke on a set of devices; remembers vacuum level and hover position."""
+    """Runs keystrokes on a set of devices; remembers vacuum level and hover position."""
 
     def __init__(
         self,
@@ -79,6 +95,16 @@ class Station:
         self._vacuum_measured_kpa: float | None = None
         self._hover: tuple[int, float] | None = None
 
+    @property
+    def hover(self) -> tuple[int, float] | None:
+        """(note, distance_m) the arm hovers at, or None when unknown."""
+        return self._hover
+
+    @property
+    def vacuum_kpa(self) -> float | None:
+        """The settled vacuum level, or None when unknown (at start, after venting)."""
+        return self._vacuum_kpa
+
     def forget_position(self) -> None:
         """After a reconnect or a stop the arm may be anywhere: hover again before the next press."""
         self._hover = None
@@ -88,26 +114,63 @@ class Station:
         self._vacuum_kpa = None
         self._vacuum_measured_kpa = None
 
-    def keystroke(self, trial: TrialLike, attempt: int = 1) -> KeystrokeResult:
-        """Execute one planned keystroke and gather what it produced.
+    def set_vacuum(self, vacuum_kpa: float) -> float:
+        """Set the level unless it is set already and wait until it settled; return the measured level.
 
-        Raises whatever the devices raise (ConnectionLost, SafetyStop, SafetyViolation); the
-        runner decides what to do about it.
+        The wait is `after_vacuum_change_s` from the command: `Vacuum.set_kpa` may have waited
+        for the regulator already, the jammed particles need the rest.
         """
-        if self._vacuum_kpa is None or not math.isclose(self._vacuum_kpa, trial.vacuum_kpa):
-            t_command_s = self.clock.now()
-            self._vacuum_kpa = None  # unknown until the regulator reports back
-            self._vacuum_measured_kpa = self.vacuum.set_kpa(trial.vacuum_kpa)
-            # set_kpa may already have waited for the regulator; the particles need the rest.
-            waited_s = self.clock.now() - t_command_s
-            self.clock.sleep(self.settings.after_vacuum_change_s - waited_s)
-            self._vacuum_kpa = trial.vacuum_kpa
-        hover = (trial.note, trial.distance_m)
-        if self._hover != hover:
-            # Forget first: if the move fails half-way the arm is somewhere in between.
-            self._hover = None
-            self.arm.move_to_key(trial.note, trial.distance_m)
-            self._hover = hover
+        if self._vacuum_kpa is not None and math.isclose(self._vacuum_kpa, vacuum_kpa, abs_tol=SAME_VACUUM_KPA):
+            return float(self._vacuum_measured_kpa if self._vacuum_measured_kpa is not None else vacuum_kpa)
+        t_command_s = self.clock.now()
+        self._vacuum_kpa = None  # unknown until the regulator reports back
+        self._vacuum_measured_kpa = self.vacuum.set_kpa(vacuum_kpa)
+        waited_s = self.clock.now() - t_command_s
+        self.clock.sleep(self.settings.after_vacuum_change_s - waited_s)
+        self._vacuum_kpa = float(vacuum_kpa)
+        return float(self._vacuum_measured_kpa)
+
+    def move_to_key(self, note: int, distance_m: float) -> float:
+        """Hover `distance_m` above `note`'s key unless already there; return the seconds it took."""
+        hover = (int(note), float(distance_m))
+        if self._hover is not None and self._hover[0] == hover[0] and math.isclose(
+            self._hover[1], hover[1], abs_tol=SAME_DISTANCE_M
+        ):
+            return 0.0
+        # Forget first: if the move fails half-way the arm is somewhere in between.
+        self._hover = None
+        t0_s = self.clock.now()
+        self.arm.move_to_key(hover[0], hover[1])
+        self._hover = hover
+        return self.clock.now() - t0_s
+
+    def keystroke(
+        self, trial: TrialLike, attempt: int = 1, *, start_at_s: float | None = None,
+        settle_s: float | None = None,
+    ) -> KeystrokeResult:
+        """Set the vacuum, hover over the key, press and collect (the sweep's sequence).
+
+        `settle_s` defaults to the station's pause after a press. Raises whatever the devices
+        raise (ConnectionLost, SafetyStop, SafetyViolation); the runner decides what to do.
+        """
+        self.set_vacuum(trial.vacuum_kpa)
+        self.move_to_key(trial.note, trial.distance_m)
+        return self.press(trial, attempt, start_at_s=start_at_s,
+                          settle_s=self.settings.settle_s if settle_s is None else settle_s)
+
+    def press(
+        self, trial: TrialLike, attempt: int = 1, *, start_at_s: float | None = None, settle_s: float = 0.0
+    ) -> KeystrokeResult:
+        """Press the key the arm hovers over, starting at `start_at_s` on the rig clock.
+
+        The arm must hover over `trial.note` at `trial.distance_m` and the vacuum must be at
+        `trial.vacuum_kpa` (else SafetyViolation: nothing moved). A start time already past
+        starts at once; the record's `t_start_s` says when the press really started. Returns
+        when the arm is back up plus `settle_s`.
+        """
+        self._check_ready(trial)
+        if start_at_s is not None:
+            self.clock.sleep(start_at_s - self.clock.now())
         if self.before_press is not None:
             self.before_press(trial, attempt)
         try:
@@ -115,7 +178,7 @@ class Station:
         except BaseException:
             self._hover = None
             raise
-        self.clock.sleep(self.settings.settle_s)
+        self.clock.sleep(settle_s)
         t_to_s = max(self.clock.now(), record.t_end_s)
         midi = self.keyboard.events_between(record.t_start_s, t_to_s)
         traces: list[Trace] = []
@@ -130,13 +193,33 @@ class Station:
             vacuum_kpa_measured=self._vacuum_measured_kpa,
         )
 
+    def _check_ready(self, trial: TrialLike) -> None:
+        hover = self._hover
+        if hover is None or hover[0] != trial.note or not math.isclose(
+            hover[1], trial.distance_m, abs_tol=SAME_DISTANCE_M
+        ):
+            where = "an unknown position" if hover is None else f"note {hover[0]} at {hover[1]:g} m"
+            raise SafetyViolation(
+                f"press of note {trial.note} at {trial.distance_m:g} m refused: the arm hovers at "
+                f"{where}; call move_to_key first"
+            )
+        level = self._vacuum_kpa
+        if level is None or not math.isclose(level, trial.vacuum_kpa, abs_tol=SAME_VACUUM_KPA):
+            now = "unknown" if level is None else f"{level:g} kPa"
+            raise SafetyViolation(
+                f"press at {trial.vacuum_kpa:g} kPa refused: the vacuum is {now}; call set_vacuum first"
+            )
+
 
 class Rig:
     """Devices, clock and keystroke sequence of one rig, as `open_rig` yields it.
 
-    `keystroke(trial, attempt)` runs one planned keystroke; `reconnect()` re-opens the arm's
-    link after a ConnectionLost; `clear_stop()` is called when an operator resumes a run that a
-    protective stop ended; `make_safe()` retracts the arm and vents the vacuum.
+    Sweeps call `keystroke(trial, attempt)`; players set the vacuum (`set_vacuum`), move
+    (`move_to_key`, returns its duration) and press at planned times (`press_at`).
+    `reconnect()` re-opens the arm's link after a ConnectionLost; `clear_stop()` is called when
+    an operator resumes a run that a protective stop ended; `make_safe()` retracts the arm and
+    vents the vacuum. Every keystroke result carries what the backend adds (for the sim the
+    world's truth trace and key features).
     """
 
     def __init__(
@@ -168,9 +251,39 @@ class Rig:
     def simulated(self) -> bool:
         return self.kind == "sim"
 
-    def keystroke(self, trial: TrialLike, attempt: int = 1) -> KeystrokeResult:
-        """Run one keystroke (attempt numbers start at 1) and return what it produced."""
-        result = self.station.keystroke(trial, attempt)
+    def keystroke(
+        self, trial: TrialLike, attempt: int = 1, *, start_at_s: float | None = None,
+        settle_s: float | None = None,
+    ) -> KeystrokeResult:
+        """Run one keystroke (attempt numbers start at 1): vacuum, hover, press, settle, collect.
+
+        `start_at_s` delays the press to a rig-clock time; `settle_s` replaces the rig's pause
+        after the press (default: the rig file's `settle_s.between_presses_s`).
+        """
+        result = self.station.keystroke(trial, attempt, start_at_s=start_at_s, settle_s=settle_s)
+        return self._finished(result)
+
+    def press_at(
+        self, trial: TrialLike, attempt: int = 1, *, start_at_s: float | None = None, settle_s: float = 0.0
+    ) -> KeystrokeResult:
+        """Press the key the arm hovers over, starting at rig-clock time `start_at_s`.
+
+        No vacuum change and no move: call `set_vacuum` and `move_to_key` first (else
+        SafetyViolation, nothing moves). Returns when the arm is back up (plus `settle_s`), so
+        the next lateral move can overlap the key's return. A start already past starts at
+        once: compare `result.press.t_start_s` with the plan.
+        """
+        return self._finished(self.station.press(trial, attempt, start_at_s=start_at_s, settle_s=settle_s))
+
+    def set_vacuum(self, vacuum_kpa: float) -> float:
+        """Set the finger's vacuum and wait until it settled (no-op when already set); measured kPa."""
+        return self.station.set_vacuum(vacuum_kpa)
+
+    def move_to_key(self, note: int, distance_m: float) -> float:
+        """Hover `distance_m` above `note`'s key; the seconds the move took (0 when already there)."""
+        return self.station.move_to_key(note, distance_m)
+
+    def _finished(self, result: KeystrokeResult) -> KeystrokeResult:
         return self._finish(result) if self._finish is not None else result
 
     def reconnect(self) -> None:
