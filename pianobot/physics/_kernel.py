@@ -14,6 +14,11 @@ loop is written without branches (effects switch through selects and zero coeffi
 LLVM turns it into SIMD code: one keystroke's step is a chain of dependent multiply-adds, and
 only independent keystrokes in parallel keep the CPU busy. numba has no vector `exp` here, so
 a short polynomial one (`_exp`) stands in for it.
+
+Lanes never interact: every per-keystroke quantity (constants, state, arm profile) lives in its
+own lane, a partial block is padded with copies of its last keystroke, and the block size (small
+for a few keystrokes, else `BLOCK`) only sets how many lanes run side by side. A keystroke's
+samples are therefore bit-identical alone and in any batch (tests/physics/test_batch_independence.py).
 """
 
 from __future__ import annotations
@@ -61,10 +66,10 @@ N_EP = 19
 # Rows of the per-block work array: the constants above, then the state of each keystroke.
 # One array (keystroke index last) instead of many keeps the compiler free of aliasing doubts,
 # which is what lets it vectorise the step across the block.
-(S_X0, S_X0P, S_X0N, S_X1, S_X2, S_V1, S_V2, S_A1, S_A2, S_ENG, S_ATT, S_FC, S_V2E, S_RAMP) = range(
-    N_KP, N_KP + 14
+(S_X0, S_X0P, S_X0N, S_X1, S_X2, S_V1, S_V2, S_A1, S_A2, S_ENG, S_ATT, S_FC, S_V2E) = range(
+    N_KP, N_KP + 13
 )
-N_W = N_KP + 14
+N_W = N_KP + 13
 
 STIFF_NONE, STIFF_CUBIC, STIFF_EXP = 0.0, 1.0, 2.0
 LAG_NONE, LAG_FIRST_ORDER, LAG_DELAY = 0.0, 1.0, 2.0
@@ -106,15 +111,10 @@ def _arm_positions(
     b0: int, nb: int, t: float,
 ) -> None:
     """Commanded arm positions of keystrokes b0..b0+nb at time t into `w[row]`."""
-    if mode == 0 and w[S_RAMP, 0] > 0.0:
-        # Every press of the block is a constant-speed ramp (no acceleration phases).
-        for jj in range(w.shape[1]):
-            w[row, jj] = w[D_VP, jj] * min(max(t, 0.0), w[D_TC, jj]) - w[U_VP, jj] * min(
-                max(t - w[T_UP, jj], 0.0), w[U_TC, jj]
-            )
-        return
     if mode == 0:
-        # The press is the down move minus the later up move of the same length.
+        # The press is the down move minus the later up move of the same length. A ramp is the
+        # same formula with a = 0 and no acceleration phase, so every lane takes one path and a
+        # keystroke's arm motion never depends on which presses share its block.
         for jj in range(w.shape[1]):
             w[row, jj] = _move(t, w[D_A, jj], w[D_TA, jj], w[D_TC, jj], w[D_VP, jj]) - _move(
                 t - w[T_UP, jj], w[U_A, jj], w[U_TA, jj], w[U_TC, jj], w[U_VP, jj]
@@ -142,12 +142,7 @@ def _load_block(
     trace_x0: FloatArray, t0: float,
 ) -> None:
     """Constants of keystrokes b0..b0+nb into `w` (padded with copies of the last) and rest state."""
-    ramps = 1.0  # S_RAMP (read from lane 0): 1 when no press of the block accelerates
-    for jj in range(nb):
-        if kp[b0 + jj, D_TA] > 0.0 or kp[b0 + jj, U_TA] > 0.0:
-            ramps = 0.0
     for jj in range(w.shape[1]):
-        w[S_RAMP, jj] = ramps
         src = b0 + min(jj, nb - 1)
         for col in range(N_KP):
             w[col, jj] = kp[src, col]

@@ -114,10 +114,15 @@ def lsim_uniform(ss: StateSpace, t_s: npt.ArrayLike, u: npt.ArrayLike) -> FloatA
     Ad = E[..., :n, :n]
     Bd1 = E[..., :n, n + m :]
     Bd0 = E[..., :n, n : n + m] - Bd1
-    if np.any(u_arr[..., 0] != 0.0):
-        z_start = -np.linalg.solve(A, B @ u_arr[..., 0][..., None])[..., 0]
-    else:
-        z_start = np.zeros((*batch, n))  # at rest (also when A is singular: k0 = 0)
+    # Each system starts in equilibrium with its own first input; one at rest needs no solve
+    # (A is singular when the chain has no static equilibrium, e.g. k0 = k2 = 0), decided per
+    # system so that a row never depends on the other rows of its batch.
+    u_first = u_arr[..., 0]
+    displaced = np.any(u_first != 0.0, axis=-1)
+    z_start = np.zeros((*batch, n))
+    if np.any(displaced):
+        rhs = (B[displaced] @ u_first[displaced][..., None])[..., 0]
+        z_start[displaced] = -np.linalg.solve(A[displaced], rhs[..., None])[..., 0]
     # Input terms of every step at once; only the state recursion remains sequential.
     drive = Bd0 @ u_arr[..., :-1] + Bd1 @ u_arr[..., 1:]
     z = np.empty((*batch, n, t.size))

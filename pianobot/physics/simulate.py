@@ -9,7 +9,10 @@ separate and re-touch. The other effects are described in `effects.py`.
 
 Integration is a compiled fixed-step semi-implicit scheme (see `_kernel.py`) with an internal
 step ≤ 0.2 ms, outputs taken every `out_dt_s`. Keystrokes of different length share one time
-grid: each is simulated to the end of the longest (arm at rest at its start height after).
+grid: each is simulated to the end of the longest (arm at rest at its start height after). A
+keystroke's samples never depend on its companions: alone it has the first
+`output_count(duration, out_dt_s)` of them, bit for bit; past its own horizon a row simply goes
+on (the key keeps settling), so readers that look for "the end" should cut at that horizon.
 """
 
 from __future__ import annotations
@@ -159,12 +162,20 @@ def _is_linear(ep: FloatArray) -> bool:
     return not any(ep[i] != 0.0 for i in _KEY_SIDE)
 
 
+def output_count(duration_s: float, out_dt_s: float) -> int:
+    """Samples of a simulation of `duration_s` (0, out_dt_s, ... up to duration_s inclusive).
+
+    A keystroke alone has this many samples; in a longer batch its first this-many are the same.
+    """
+    return int(math.floor(duration_s / out_dt_s + 1e-9)) + 1
+
+
 def _run(
     kp: FloatArray, ep: FloatArray, mode: int, trace_t: FloatArray, trace_x0: FloatArray,
     t_start: float, duration_s: float, out_dt_s: float, step_s: float,
 ) -> SimBatch:
     h, every = _grid(out_dt_s, step_s)
-    n_out = int(math.floor(duration_s / out_dt_s + 1e-9)) + 1
+    n_out = output_count(duration_s, out_dt_s)
     n_steps = (n_out - 1) * every
     n = kp.shape[0]
     outs = [np.empty((n, n_out)) for _ in range(5)]

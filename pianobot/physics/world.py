@@ -26,7 +26,7 @@ from pianobot.physics.effects import Effects
 from pianobot.physics.model import KeystrokeModel
 from pianobot.physics.msd import MSDParams
 from pianobot.physics.piano import PianoEvent, PianoParams, key_events
-from pianobot.physics.simulate import SimBatch, simulate_presses
+from pianobot.physics.simulate import SimBatch, output_count, simulate_presses
 from pianobot.physics.trajectory import Press, press_duration_s
 
 FloatArray = npt.NDArray[np.float64]
@@ -156,9 +156,17 @@ class World:
         bl = list(blocks) if blocks is not None else [None] * len(presses)
         keys = [self._block_key(float(v), b) for v, b in zip(p, bl, strict=True)]
         cfg = self.config
-        dur = max((press_duration_s(pr, "trapezoid") for pr in presses), default=0.0) + cfg.settle_s
+        dur = max((self._horizon_s(pr) for pr in presses), default=cfg.settle_s)
         return simulate_presses(presses, p, self.model, out_dt_s=cfg.out_dt_s, duration_s=dur,
                                 step_s=cfg.step_s, block_keys=keys)
+
+    def _horizon_s(self, press: Press) -> float:
+        """How long a keystroke is simulated when it is alone: the press plus settling time.
+
+        In a batch every keystroke runs to the longest one's horizon; observations are cut at
+        the keystroke's own horizon so that a keystroke never depends on its companions.
+        """
+        return press_duration_s(press, "trapezoid") + self.config.settle_s
 
     def keystroke(
         self,
@@ -201,7 +209,8 @@ class World:
         cfg = self.config
         rng = np.random.default_rng([self.seed, _seed_of(key)])
         t_end = press_duration_s(press, self.model.arm_profile)
-        duration = _rest_time(batch, j, t_end)
+        own = output_count(self._horizon_s(press), cfg.out_dt_s)
+        duration = _rest_time(batch.t_s[:own], batch.x1_m[j, :own], batch.x2_m[j, :own], t_end)
         keep = batch.t_s <= duration + 1e-9
         t = batch.t_s[keep]
         x0, x1, x2 = batch.x0_m[j, keep], batch.x1_m[j, keep], batch.x2_m[j, keep]
@@ -249,9 +258,11 @@ class World:
         )
 
 
-def _rest_time(batch: SimBatch, j: int, t_end_s: float, tol_m: float = 2e-5) -> float:
-    """Motion start → arm back up and the key at rest (within `tol_m` of rest from then on)."""
-    t = batch.t_s
-    moving = np.nonzero((np.abs(batch.x2_m[j]) > tol_m) | (np.abs(batch.x1_m[j]) > tol_m))[0]
-    last = float(t[moving[-1]]) if moving.size else 0.0
-    return float(min(max(t_end_s, last + 1e-3), t[-1]))
+def _rest_time(
+    t_s: FloatArray, x1_m: FloatArray, x2_m: FloatArray, t_end_s: float, tol_m: float = 2e-5
+) -> float:
+    """Motion start → arm back up and the key at rest (within `tol_m` of rest from then on),
+    at most the end of the given samples (the keystroke's own horizon)."""
+    moving = np.nonzero((np.abs(x2_m) > tol_m) | (np.abs(x1_m) > tol_m))[0]
+    last = float(t_s[moving[-1]]) if moving.size else 0.0
+    return float(min(max(t_end_s, last + 1e-3), t_s[-1]))
