@@ -13,7 +13,7 @@ from pianobot.physics.trajectory import Press, press_duration_s
 from pianobot.plan import key_change_s
 from pianobot.rig import Rig, open_rig
 from pianobot.rig.clock import VirtualClock, WallClock
-from pianobot.rig.errors import ConnectionLost, SafetyStop
+from pianobot.rig.errors import ConnectionLost, SafetyStop, SafetyViolation
 from pianobot.rig.protocols import Arm, Keyboard, Mocap, Vacuum
 from pianobot.spec import RigSpec
 
@@ -220,3 +220,77 @@ def test_clocks() -> None:
     assert clock.now() == 6.5
     wall = WallClock()
     assert 0.0 <= wall.now() < 60.0
+
+
+@dataclass
+class SlowKeyWorld(FakeWorld):
+    """A FakeWorld whose key stays down (5 mm) for `linger_s` after the arm is back up."""
+
+    linger_s: float = 0.3
+
+    def keystroke(self, press: Press, vacuum_kpa: float, *, note: int, t0_s: float, key: str) -> Stroke:
+        stroke = super().keystroke(press, vacuum_kpa, note=note, t0_s=t0_s, key=key)
+        t = np.arange(0.0, stroke.duration_s + self.linger_s, 1e-3)
+        arm = np.interp(t, stroke.truth_t_s - t0_s, stroke.truth_x0_m, right=0.0)
+        key_x = np.where(t < stroke.duration_s + self.linger_s - 0.05, 0.005, 0.0)
+        return replace(stroke, duration_s=float(t[-1]), truth_t_s=t + t0_s, truth_x0_m=arm,
+                       truth_x1_m=arm, truth_x2_m=key_x)
+
+
+def test_press_at_starts_at_the_planned_time_and_returns_when_the_arm_is_up() -> None:
+    with open_rig(_rig(), world=FakeWorld()) as rig:
+        rig.set_vacuum(-20.0)
+        assert rig.move_to_key(60, 0.01) == 0.0  # the arm starts over the first key
+        moved = rig.move_to_key(67, 0.01)
+        assert moved == pytest.approx(key_change_s(60, 67, _rig()))
+        trial = replace(T("a", 0), note=67)
+        start = rig.clock.now() + 1.25
+        result = rig.press_at(trial, start_at_s=start)
+        assert result.press.t_start_s == pytest.approx(start)
+        # No settle pause: back as soon as the arm is up; truth and key features as in sweeps.
+        assert rig.clock.now() == pytest.approx(start + press_duration_s(trial.press()), abs=1e-3)
+        assert [t.source for t in result.traces] == ["arm", "mocap", "sim-truth"]
+        assert "max_key_travel_m" in result.extra
+        late = rig.press_at(trial, start_at_s=start)  # a start in the past starts at once
+        assert late.press.t_start_s == pytest.approx(result.press.t_end_s)
+
+
+def test_press_at_refuses_a_key_it_does_not_hover_over_or_an_unset_vacuum() -> None:
+    world = FakeWorld()
+    with open_rig(_rig(), world=world) as rig:
+        with pytest.raises(SafetyViolation, match="move_to_key"):
+            rig.press_at(T("a", 0))  # nothing positioned yet
+        rig.move_to_key(60, 0.01)
+        with pytest.raises(SafetyViolation, match="set_vacuum"):
+            rig.press_at(T("a", 0))
+        rig.set_vacuum(-20.0)
+        with pytest.raises(SafetyViolation, match="hovers at note 60"):
+            rig.press_at(replace(T("a", 0), note=62))
+        assert world.calls == []  # nothing was pressed
+        assert rig.press_at(T("a", 0)).midi
+
+
+def test_a_restrike_waits_for_the_key_to_rise_but_another_key_does_not() -> None:
+    with open_rig(_rig(), world=SlowKeyWorld(linger_s=0.3)) as rig:
+        rig.set_vacuum(-20.0)
+        rig.move_to_key(60, 0.01)
+        first = rig.press_at(T("a", 0))
+        assert first.press.warnings == ()
+        again = rig.press_at(T("b", 1), start_at_s=rig.clock.now())
+        # The key stayed below its re-trigger depth for ~0.25 s after the arm was up.
+        waited = again.press.t_start_s - first.press.t_end_s
+        assert 0.2 < waited < 0.3
+        assert "re-strike of note 60 waited" in again.press.warnings[0]
+        rig.move_to_key(62, 0.01)
+        other = rig.press_at(replace(T("c", 2), note=62))
+        assert other.press.warnings == ()
+        assert other.press.t_start_s == pytest.approx(again.press.t_end_s + key_change_s(60, 62, _rig()))
+
+
+def test_keystroke_takes_a_start_time_and_a_settle_override() -> None:
+    with open_rig(_rig(), world=FakeWorld()) as rig:
+        rig.keystroke(T("a", 0))
+        start = rig.clock.now() + 2.0
+        result = rig.keystroke(T("b", 1), start_at_s=start, settle_s=0.0)
+        assert result.press.t_start_s == pytest.approx(start)
+        assert rig.clock.now() == pytest.approx(result.press.t_end_s)
