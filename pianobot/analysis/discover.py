@@ -38,7 +38,7 @@ class DiscoverySettings:
 
     held_out_fraction: float = 0.33
     rule: DecisionRule = field(default_factory=DecisionRule)
-    max_iterations: int = 4
+    max_iterations: int = 6
     bootstrap_samples: int = 2
     max_nfev: int = 20
     screen_nfev: int = 12  # screening fits (effect parameters only) stop earlier

@@ -102,11 +102,19 @@ class Candidate:
 
     @property
     def off_excluded(self) -> bool:
-        """True when some effect parameter's interval excludes its "off" value."""
-        return any(
-            self.fit.excludes(name, off)
+        """True when some effect parameter's interval excludes its "off" value.
+
+        A switch without parameters (contact, arm_acceleration) has no interval: for it the
+        information criterion and the held-out gap decide alone.
+        """
+        checks = [
+            (name, off)
             for name, off in zip(self.effect_params, self.off_values, strict=True)
-        )
+            if np.isfinite(off)
+        ]
+        if not checks:
+            return True
+        return any(self.fit.excludes(name, off) for name, off in checks)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON-ready values."""

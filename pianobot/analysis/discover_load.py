@@ -72,13 +72,23 @@ def _press(row: pd.Series, notes: set[str]) -> Press | None:
         accel = DEFAULT_ACCELERATION_MPS2
         notes.add(f"acceleration {DEFAULT_ACCELERATION_MPS2} m/s² assumed (UR moveL default)")
     up = _float(row, "up_velocity_mps")
+    hold = _float(row, "hold_s")
+    if not math.isfinite(hold):
+        # An imported take times its strokes: with equal down and up moves, the hold is what
+        # the stroke lasts beyond twice the time to the bottom.
+        start, bottom, end = (_float(row, c) for c in ("t_start_s", "t_bottom_s", "t_end_s"))
+        hold = max((end - start) - 2.0 * (bottom - start), 0.0)
+        if math.isfinite(hold):
+            notes.add("hold derived from the take's stroke timing (equal down and up moves)")
+        else:
+            hold = 0.0
     return Press(
         distance_m=distance,
         depth_m=depth,
         down_velocity_mps=down,
         up_velocity_mps=up if math.isfinite(up) and up > 0 else down,
         acceleration_mps2=accel,
-        hold_s=_float(row, "hold_s", 0.0),
+        hold_s=hold,
     )
 
 

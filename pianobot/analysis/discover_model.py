@@ -108,16 +108,19 @@ def start_points(
 
     An end stop or escapement the key never reaches has no gradient, so their depths are
     started across the key travel actually measured (or across their bounds without mocap).
+    Other effects are started at their default and across the range of their magnitude
+    parameter: a stick/slip or stick/release switch makes the error jump, and a local fit
+    from one start can stall on the wrong step.
     """
-    specs = {s.name: s for s in effect_specs(model, effect)}
+    specs = effect_specs(model, effect)
+    by_name = {s.name: s for s in specs}
     travel = [
         float(np.nanmax(k.x_m[2]))
         for k in keystrokes
         if k.has_motion and np.isfinite(k.x_m[2]).any()
     ]
-    starts: list[dict[str, float]] = [{}]
     for name in (f"{effect}.bed_depth_m", f"{effect}.letoff_depth_m"):
-        spec = specs.get(name)
+        spec = by_name.get(name)
         if spec is None:
             continue
         if travel:
@@ -125,7 +128,18 @@ def start_points(
             depths = [f * top for f in (0.5, 0.7, 0.85, 0.95)]
         else:
             depths = list(np.linspace(spec.lower, spec.upper, 5)[1:-1])
-        starts = [{name: min(max(d, spec.lower), spec.upper)} for d in depths]
+        return [{name: min(max(d, spec.lower), spec.upper)} for d in depths]
+    starts: list[dict[str, float]] = [{}]
+    magnitude = next((s for s in specs if s.off is not None), None)
+    if magnitude is not None:
+        lo, hi = (
+            magnitude.to_internal(max(magnitude.lower, 1e-9)),
+            magnitude.to_internal(magnitude.upper),
+        )
+        for fraction in (0.1, 0.3, 0.6, 0.9):
+            value = magnitude.from_internal(lo + fraction * (hi - lo))
+            if value != magnitude.off:
+                starts.append({magnitude.name: value})
     return starts
 
 

@@ -208,6 +208,14 @@ def several(seed: int = 0) -> Scenario:
     )
 
 
+def default_world(seed: int = 0) -> Scenario:
+    """The simulated world's default physics (every effect, richer forms) from the study model."""
+    truth = WorldConfig().build_model()
+    start = _study().replace(piano=truth.piano)
+    expected = tuple(n for n in truth.effects.names if n != "stiffness_drift")
+    return Scenario("default-world", "multi", truth, start, expected, seed)
+
+
 def full_suite() -> list[Scenario]:
     """Every scenario of the benchmark."""
     suite = [
@@ -221,7 +229,7 @@ def full_suite() -> list[Scenario]:
     ]
     suite += [control("clean", seed) for seed in range(30, 35)]
     suite += [control("k2-off", 40), control("c1-off", 41), control("noise-x2", 42)]
-    suite += [midi_only(50), several(60)]
+    suite += [midi_only(50), several(60), default_world(70)]
     return suite
 
 

@@ -148,3 +148,10 @@ def test_stratified_split_spans_speeds_and_vacua() -> None:
     assert len(set(train) | set(held)) == 24 and not set(train) & set(held)
     assert {ks[i].vacuum_kpa for i in held} == {0.0, -40.0}
     assert 6 <= len(held) <= 10
+
+
+def test_a_switch_without_parameters_can_be_accepted() -> None:
+    rule = DecisionRule()
+    switch = _candidate("arm_acceleration", 500.0, 0.1, n=0)
+    accepted, _ = choose([switch], rule, threshold=10.0)
+    assert accepted is not None and accepted.effect == "arm_acceleration"
