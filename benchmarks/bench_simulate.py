@@ -30,7 +30,7 @@ from scipy.integrate import solve_ivp  # noqa: E402
 from pianobot.physics.effects import Effects  # noqa: E402
 from pianobot.physics.model import KeystrokeModel  # noqa: E402
 from pianobot.physics.msd import MSDParams, simulate_linear  # noqa: E402
-from pianobot.physics.simulate import simulate_presses  # noqa: E402
+from pianobot.physics.simulate import SimBatch, simulate_presses  # noqa: E402
 from pianobot.physics.trajectory import Press, press_timing, sample_presses  # noqa: E402
 
 N = 500
@@ -110,7 +110,9 @@ def main() -> dict[str, Any]:
                            "cpu_count": os.cpu_count(), "batch": {}}
     for name, model in models.items():
         for step in (1e-4, 2e-4):
-            run = lambda m=model, h=step: simulate_presses(presses, vacuum, m, duration_s=DURATION_S, step_s=h)  # noqa: E731
+            def run(m: KeystrokeModel = model, h: float = step) -> SimBatch:
+                return simulate_presses(presses, vacuum, m, duration_s=DURATION_S, step_s=h)
+
             rate, cpu_rate = best_rate(run, N)
             coarse = run()
             fine = simulate_presses(presses, vacuum, model, duration_s=DURATION_S, step_s=step / 10)
