@@ -2,11 +2,11 @@
 
     python experiments/songs/make_songs.py
 
-The note lists live in `pianobot.play.library` (so tests build the same songs in code):
-a C-major scale with a crescendo, Twinkle Twinkle Little Star and Mary Had a Little Lamb (the
-songs of the study's demos) with varied dynamics, in robot notation at ♩ = 90 (one syllable per
-whole note: what one soft finger can keep up with), and Twinkle in the usual notation (one
-syllable per quarter note) to show what the planner does when it cannot keep up.
+The note lists live in `pianobot.play.library` (so tests build the same songs in code): a
+C-major scale with a crescendo, Twinkle Twinkle Little Star and Mary Had a Little Lamb (the
+songs of the study's demos) with varied dynamics, in the usual notation at ♩ = 90 (one syllable
+per quarter note), and Twinkle in robot notation (one syllable per whole note: the tempo at
+which one soft finger keeps every note and its whole dynamic range).
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from pianobot.io.midifile import write_song
-from pianobot.play.library import SongSpec, mary, scale_crescendo, twinkle
+from pianobot.play.library import ROBOT_BEAT, SongSpec, mary, scale_crescendo, twinkle
 
 HERE = Path(__file__).resolve().parent
 
@@ -25,7 +25,7 @@ def songs() -> dict[str, SongSpec]:
         "scale_crescendo": scale_crescendo(),
         "twinkle": twinkle(),
         "mary": mary(),
-        "twinkle_standard": twinkle(beat=1.0),
+        "twinkle_robot": twinkle(beat=ROBOT_BEAT),
     }
 
 

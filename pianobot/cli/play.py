@@ -20,7 +20,7 @@ from pianobot.play import PlayResult, play_song
 
 PLAN_SHOWN = ("note_index", "pitch", "onset_s", "song_velocity", "target_velocity", "vacuum_kpa",
               "down_velocity_mps", "hold_s", "predicted_velocity", "predicted_lead_s", "start_s",
-              "status", "reason")
+              "move_s", "status", "reason")
 
 
 def _fmt(value: Any) -> str:
@@ -38,8 +38,11 @@ def _print_plan(result: PlayResult) -> None:
     console = Console()
     console.print(table)
     summary = result.plan.summary()
+    geometry = summary["geometry"] or {}
     console.print(f"mapping: {summary['dynamics']['text'] if summary['dynamics'] else 'none'}; "
-                  f"{summary['planned']} of {summary['notes']} notes planned, {summary['skipped']} skipped",
+                  f"{summary['planned']} of {summary['notes']} notes planned, {summary['skipped']} skipped; "
+                  f"stroke: hover {geometry.get('distance_m', float('nan')) * 1e3:.0f} mm, "
+                  f"{geometry.get('acceleration_mps2', float('nan')):g} m/s², up {geometry.get('up_velocity_mps', float('nan')):g} m/s",
                   highlight=False, markup=False)
 
 
@@ -71,7 +74,7 @@ def play(
     transpose: Annotated[int, typer.Option("--transpose", help="Semitones to add to every note.")] = 0,
     track: Annotated[int | None, typer.Option("--track", help="Play only this track (0-based).")] = None,
     dynamics: Annotated[str, typer.Option("--dynamics", help="mapped (song range → reachable range) | absolute (clip).")] = "mapped",
-    rig: Annotated[str, typer.Option("--rig", help="sim, or a rig file.")] = "sim",
+    rig: Annotated[str, typer.Option("--rig", help="sim (the built-in rig: sweep-like moves between keys), or a rig file such as experiments/rigs/sim-play.yaml (a player's moves).")] = "sim",
     seed: Annotated[int | None, typer.Option("--seed", help="Seed of the simulated world.")] = None,
     plot: Annotated[Path | None, typer.Option("--plot", help="Also write the piano roll here (PNG).")] = None,
 ) -> None:

@@ -4,11 +4,12 @@ Each song is a list of (pitch, beats, velocity) with a tempo; `to_notes` puts it
 axis. Notes are detached: each sounds for `articulation` of its beat length, the rest of the
 beat is silence (a single finger needs that gap to release the key and strike the next one).
 
-Robot notation: one finger inside the soft envelope needs about two seconds per keystroke with
-a key change (lead ≈ 0.4–1.2 s from motion start to note-on, press ≈ 0.7–1.5 s, the finger's
-recovery, a lateral move of 0.3–0.5 s), so the songs give each syllable a whole note
-(`ROBOT_BEAT` quarter notes) at ♩ = 90. `beat=1` gives the usual notation, which a single soft
-finger cannot keep up with: the planner then skips and reports the notes it has no time for.
+Songs are in the usual notation by default (`beat=1`: one syllable per quarter note, half notes
+at phrase ends). `beat=ROBOT_BEAT` gives robot notation, one syllable per whole note: one soft
+finger inside its proven envelope needs 0.7 s (loudest) to 1.6 s (quietest) from motion start
+until the arm is back up, plus 0.37–0.53 s to change key, so at ♩ = 90 it keeps every note and
+its whole dynamic range only in robot notation; in the usual notation the planner plays faster
+(louder) strokes and skips and reports the notes it has no time for.
 """
 
 from __future__ import annotations
@@ -53,7 +54,7 @@ def _ramp(start: int, stop: int, n: int) -> list[int]:
     return [round(start + (stop - start) * i / (n - 1)) for i in range(n)]
 
 
-def scale_crescendo(tempo_bpm: float = 90.0, beat: float = ROBOT_BEAT) -> SongSpec:
+def scale_crescendo(tempo_bpm: float = 90.0, beat: float = 1.0) -> SongSpec:
     """C major up and down (15 notes), one crescendo from pp to ff."""
     up = [C4, D4, E4, F4, G4, A4, B4, C5]
     pitches = up + up[-2::-1]
@@ -66,11 +67,11 @@ _TWINKLE_B = [G4, G4, F4, F4, E4, E4, D4]
 _PHRASE_BEATS = [1.0] * 6 + [2.0]
 
 
-def twinkle(tempo_bpm: float = 90.0, beat: float = ROBOT_BEAT) -> SongSpec:
+def twinkle(tempo_bpm: float = 90.0, beat: float = 1.0) -> SongSpec:
     """Twinkle Twinkle Little Star (42 notes, A B B A) with phrase dynamics.
 
-    `beat` is how many quarter notes one syllable lasts (1: the usual notation; the default is
-    robot notation, see the module doc).
+    `beat` is how many quarter notes one syllable lasts (1: the usual notation, the default;
+    `ROBOT_BEAT`: robot notation, see the module doc).
     """
     beats = [b * beat for b in _PHRASE_BEATS * 2]
     half = [b * beat for b in _PHRASE_BEATS]
@@ -83,7 +84,7 @@ def twinkle(tempo_bpm: float = 90.0, beat: float = ROBOT_BEAT) -> SongSpec:
     return SongSpec("twinkle", tempo_bpm, tuple(notes))
 
 
-def mary(tempo_bpm: float = 90.0, beat: float = ROBOT_BEAT) -> SongSpec:
+def mary(tempo_bpm: float = 90.0, beat: float = 1.0) -> SongSpec:
     """Mary Had a Little Lamb (26 notes): soft verse, louder answer, fading close."""
     pitches = [E4, D4, C4, D4, E4, E4, E4, D4, D4, D4, E4, G4, G4,
                E4, D4, C4, D4, E4, E4, E4, E4, D4, D4, E4, D4, C4]
@@ -93,15 +94,19 @@ def mary(tempo_bpm: float = 90.0, beat: float = ROBOT_BEAT) -> SongSpec:
     return SongSpec("mary", tempo_bpm, tuple(_phrase(pitches, [b * beat for b in beats], velocities)))
 
 
-def etude(n_notes: int = 60, tempo_bpm: float = 90.0, beat: float = ROBOT_BEAT, seed_pitch: int = C4) -> SongSpec:
-    """A long exercise for adaptation: stepwise C-major walk with swelling dynamics.
+def etude(n_notes: int = 60, tempo_bpm: float = 90.0, beat: float = 2.0, seed_pitch: int = C4) -> SongSpec:
+    """A long exercise for adaptation: a stepwise C-major walk in phrases of uneven length.
 
-    Pitches climb and fall through a fifth; velocities cycle from ff through pp and back every 12 notes so
-    every stretch of the piece asks for the whole dynamic range.
+    Each phrase is one crescendo or diminuendo over its own range (a musician's phrasing, not a
+    cycle arranged so every third of the piece asks for the same loudness): the first third
+    swells from mp, the middle reaches ff and pp, the last third fades out and rises once more.
     """
     steps = [0, 2, 4, 5, 7, 5, 4, 2]
-    cycle = [115, 100, 85, 70, 55, 40, 30, 45, 60, 75, 90, 105]
-    notes = [(seed_pitch + steps[i % len(steps)], beat, cycle[i % len(cycle)]) for i in range(n_notes)]
+    ramps = [(45, 95, 8), (95, 55, 8), (60, 115, 6), (110, 35, 10), (40, 80, 8), (85, 120, 8), (115, 30, 12)]
+    velocities = [v for start, stop, n in ramps for v in _ramp(start, stop, n)]
+    while len(velocities) < n_notes:  # longer pieces repeat the phrasing
+        velocities += velocities
+    notes = [(seed_pitch + steps[i % len(steps)], beat, velocities[i]) for i in range(n_notes)]
     return SongSpec(f"etude{n_notes}", tempo_bpm, tuple(notes))
 
 

@@ -4,7 +4,9 @@ The original demo commanded a down velocity of 0.001·v m/s for MIDI velocity v,
 press at the note's onset (ignoring the time a press takes before the note sounds), held for
 the note's length and used one fixed vacuum. It also stepped between keys by a hard-coded key
 width; on the simulated rig lateral positions do not affect the sound, so only the timing of the
-move is kept here. Speeds are clipped into the finger's envelope so the baseline stays safe.
+move is kept here. Speeds are clipped into the finger's envelope so the baseline stays safe, and
+it gets the same fast stroke geometry (shortest hover, highest acceleration) as the model planner
+has to choose from, so the comparison measures the model, not the geometry.
 """
 
 from __future__ import annotations
@@ -16,7 +18,8 @@ import pandas as pd
 
 from pianobot.errors import InputError
 from pianobot.io.midifile import Note
-from pianobot.play.plan import PLAN_COLUMNS, Plan, envelope_limits, schedule
+from pianobot.play.plan import Plan, envelope_limits, fastest_geometry
+from pianobot.play.schedule import PLAN_COLUMNS, schedule
 from pianobot.play.settings import PlaySettings
 from pianobot.play.strokes import busy_s
 from pianobot.spec import RigSpec
@@ -29,6 +32,7 @@ def plan_naive(notes: Sequence[Note], settings: PlaySettings, rig: RigSpec) -> P
     if not notes:
         raise InputError("the song has no playable notes", "SONG")
     limits = envelope_limits(settings, rig)
+    geometry = fastest_geometry(settings, rig)
     v_lo, v_hi = limits.get("down_velocity_mps", (0.0, 0.06))
     vacuum = float(settings.vacuum_levels_kpa[0])
     hold_cap = limits.get("hold_s", (0.0, 2.0))[1]
@@ -40,14 +44,13 @@ def plan_naive(notes: Sequence[Note], settings: PlaySettings, rig: RigSpec) -> P
             "note_index": i, "pitch": n.pitch, "onset_s": n.onset_s, "offset_s": n.offset_s,
             "song_velocity": n.velocity, "target_velocity": float(n.velocity),
             "vacuum_kpa": vacuum, "down_velocity_mps": speed,
-            "up_velocity_mps": settings.up_velocity_mps, "acceleration_mps2": settings.acceleration_mps2,
-            "depth_m": settings.depth_m, "distance_m": settings.distance_m, "hold_s": hold,
+            **geometry.to_dict(), "hold_s": hold,
             "predicted_velocity": np.nan, "predicted_lead_s": 0.0, "predicted_midi_hold_s": np.nan,
-            "move_s": 0.0, "vacuum_change_s": 0.0, "start_s": n.onset_s,
-            "busy_s": busy_s(settings, speed, hold), "late_s": 0.0, "status": "play", "reason": "",
+            "predicted_release_s": np.nan, "move_s": 0.0, "vacuum_change_s": 0.0, "start_s": n.onset_s,
+            "busy_s": busy_s(geometry, settings, speed, hold), "late_s": 0.0, "status": "play", "reason": "",
         })
     frame = pd.DataFrame(rows, columns=list(PLAN_COLUMNS))
     # The demo simply waited for each press to finish: a note that cannot start at its onset
     # starts as soon as the arm is free, however late (no skipping, no shortening).
     frame = schedule(frame, {}, settings, rig, max_late_s=float("inf"), shorten=False)
-    return Plan("naive", frame, settings, None, {}, ())
+    return Plan("naive", frame, settings, None, {}, (), geometry)

@@ -1,11 +1,13 @@
 """Executing a plan on the rig, note by note, on the rig's clock; the performance is a run.
 
-Each planned note becomes one keystroke whose motion starts at its planned time: the loop sleeps
-the rig clock (virtual for the sim) until the vacuum change, the lateral move and the motion
-start are due, then presses through a `Station` without the sweep's settle pause. The MIDI the
-piano sends is collected by contiguous time windows (each keystroke's, and the gaps between),
-so no event is lost or counted twice. The run (kind "play") holds the plan, one trials row per
-note (with the target and the prediction beside the outcome), samples and MIDI, like a sweep.
+Each planned note becomes one timed keystroke through the rig's public API: the loop waits on
+the rig clock (virtual for the sim) until a phrase's vacuum change is due (`Rig.set_vacuum`),
+moves to the key as soon as the arm is back up from the previous press (`Rig.move_to_key`; the
+released key keeps returning meanwhile) and has the press start at its planned time
+(`Rig.press_at`, no settle pause). The MIDI the piano sends is collected by contiguous time
+windows (each keystroke's, and the gaps between), so no event is lost or counted twice. The run
+(kind "play") holds the plan, one trials row per note (with the target and the prediction beside
+the outcome), samples including the sim's truth trace, key features and MIDI, like a sweep.
 """
 
 from __future__ import annotations
@@ -25,8 +27,7 @@ from pianobot.io.midifile import Note
 from pianobot.physics.trajectory import Press, press_duration_s
 from pianobot.play.adapt import OnlineAdapter
 from pianobot.play.plan import Plan
-from pianobot.play.strokes import busy_s
-from pianobot.rig import Station, StationSettings, open_rig
+from pianobot.rig import open_rig
 from pianobot.rig.errors import ConnectionLost, SafetyStop, SafetyViolation
 from pianobot.rig.protocols import MidiEvent
 from pianobot.run import TrialData, read_keystroke
@@ -41,7 +42,7 @@ TAIL_S = 1.0  # listen this long after the last press for a late note-off
 
 @dataclass(frozen=True)
 class NoteStroke:
-    """One note's keystroke, shaped like a planned trial (what `Station` and the store read)."""
+    """One note's keystroke, shaped like a planned trial (what the rig and the store read)."""
 
     trial_id: str
     index: int
@@ -73,6 +74,7 @@ class Performance:
     origin_s: float  # rig-clock time of the song's time zero
     adaptation: list[dict[str, Any]] = field(default_factory=list)
     recovery_s: float = math.nan  # median observed arm occupancy beyond the press itself
+    rig_warnings: tuple[str, ...] = ()  # what the rig reported (e.g. a re-strike that had to wait)
 
 
 def trial_id_for(song_key: str, note_index: int) -> str:
@@ -109,11 +111,12 @@ def perform(
         strokes = pd.DataFrame(loop.rows)
         notes = pair_notes(loop.events, loop.origin_s)
         recovery = float(pd.Series(loop.recoveries).median()) if loop.recoveries else math.nan
-        writer.update_meta(origin_s=loop.origin_s, observed_recovery_s=recovery,
+        writer.update_meta(origin_s=loop.origin_s, observed_recovery_s=recovery, rig_warnings=loop.warnings,
                            adaptation=None if adapter is None else adapter.history)
         writer.finish(status, reason)
         return Performance(tuple(notes), strokes, writer.run_id, writer.path, status, reason,
-                           loop.origin_s, [] if adapter is None else list(adapter.history), recovery)
+                           loop.origin_s, [] if adapter is None else list(adapter.history), recovery,
+                           tuple(loop.warnings))
 
 
 class _Loop:
@@ -124,14 +127,10 @@ class _Loop:
         self.plan, self.frame, self.rig, self.device, self.writer = plan, frame, rig, device, writer
         self.adapter = adapter
         self.clock = device.clock
-        self.station = Station(
-            device.arm, device.vacuum, device.keyboard, device.mocap, device.clock,
-            StationSettings(settle_s=0.0, after_vacuum_change_s=0.0),
-            before_press=device.station.before_press,
-        )
         self.events: list[MidiEvent] = []
         self.rows: list[dict[str, Any]] = []
         self.recoveries: list[float] = []
+        self.warnings: list[str] = []
         self.batch: list[TrialData] = []
         self.origin_s = 0.0
         self.collected_to_s = 0.0
@@ -144,7 +143,7 @@ class _Loop:
             return "completed", "no note of the plan can be played"
         first = played.iloc[0]
         self._set_vacuum(float(first.vacuum_kpa))
-        self._move(int(first.pitch))
+        self._move(int(first.pitch), float(first.distance_m))
         now = self.clock.now()
         # Song time zero on the rig clock: the first motion starts lead_in after the setup.
         self.origin_s = now + self.plan.settings.lead_in_s - min(0.0, float(played["start_s"].min()))
@@ -164,7 +163,6 @@ class _Loop:
         return status, reason
 
     def _note(self, row: pd.Series) -> None:
-        settings = self.plan.settings
         speed, predicted, lead_model = float(row.down_velocity_mps), float(row.predicted_velocity), float(row.predicted_lead_s)
         lead, hold = lead_model, float(row.hold_s)
         move = float(row.move_s) if self.pitch is not None and int(row.pitch) != self.pitch else 0.0
@@ -180,14 +178,13 @@ class _Loop:
         if changes_vacuum:
             self._sleep_until(start - move - float(row.vacuum_change_s))
             self._set_vacuum(float(row.vacuum_kpa))
-        self._sleep_until(start - move)
-        self._move(int(row.pitch))
-        self._sleep_until(start)
+        # Move as soon as the arm is free: the plan left room for the move before `start`.
+        self._move(int(row.pitch), float(row.distance_m))
         gap = self._collect_gap()
         stroke = NoteStroke(str(row.trial_id), int(row.note_index), int(row.pitch), float(row.vacuum_kpa),
-                            speed, settings.up_velocity_mps, settings.acceleration_mps2, settings.depth_m,
-                            settings.distance_m, hold)
-        data = self._keystroke(stroke)
+                            speed, float(row.up_velocity_mps), float(row.acceleration_mps2), float(row.depth_m),
+                            float(row.distance_m), hold)
+        data = self._keystroke(stroke, start)
         data = dataclasses.replace(data, midi=tuple(gap) + data.midi)
         on_velocity = data.row.get("on_velocity", math.nan)
         played = None if not (isinstance(on_velocity, float) and math.isfinite(on_velocity)) else on_velocity
@@ -228,26 +225,28 @@ class _Loop:
         lead = self.adapter.corrected_lead(float(table.lead(speed)))
         start = self.origin_s + float(row.onset_s) - lead
         planned_free = self.origin_s + float(row.start_s) + float(row.busy_s)
-        room = planned_free - start - busy_s(settings, speed, 0.0)
+        room = planned_free - start - table.busy_s(speed, 0.0)
         return speed, float(min(float(row.hold_s), max(0.0, room)))
 
-    def _keystroke(self, stroke: NoteStroke) -> TrialData:
-        """One keystroke; a dropped link is re-opened and the note tried once more."""
+    def _keystroke(self, stroke: NoteStroke, start_s: float) -> TrialData:
+        """One timed keystroke; a dropped link is re-opened and the note tried once more."""
         for attempt in (1, 2):
             t0 = self.clock.now()
             try:
-                result = self.station.keystroke(stroke, attempt)
+                result = self.device.press_at(stroke, attempt, start_at_s=start_s)
             except ConnectionLost as exc:
-                self.station.forget_position()
                 if attempt == 2:
                     return failed_trial(stroke, attempt, f"connection lost: {exc}", t0)
                 self.device.reconnect()
+                self.pitch = None  # the arm may be anywhere: hover again
+                self._move(stroke.note, stroke.distance_m)
                 continue
             except SafetyViolation as exc:
                 return failed_trial(stroke, attempt, f"refused: {exc}", t0)
             self.events.extend(result.midi)
             self.collected_to_s = max(self.collected_to_s, self.clock.now(), result.press.t_end_s)
             self.recoveries.append(result.press.t_end_s - result.press.t_start_s - press_duration_s(stroke.press()))
+            self.warnings.extend(result.press.warnings)
             return read_keystroke(stroke, attempt, result)
         raise AssertionError("unreachable")
 
@@ -263,14 +262,12 @@ class _Loop:
         self.clock.sleep(t_s - self.clock.now())
 
     def _set_vacuum(self, vacuum_kpa: float) -> None:
-        t0 = self.clock.now()
-        self.device.vacuum.set_kpa(vacuum_kpa)
-        self.clock.sleep(self.rig.settle_s.after_vacuum_change_s - (self.clock.now() - t0))
+        self.device.set_vacuum(vacuum_kpa)  # waits for the regulator and the particles
         self.vacuum_kpa = vacuum_kpa
 
-    def _move(self, pitch: int) -> None:
+    def _move(self, pitch: int, distance_m: float) -> None:
         if pitch != self.pitch:
-            self.device.arm.move_to_key(pitch, self.plan.settings.distance_m)
+            self.device.move_to_key(pitch, distance_m)
             self.pitch = pitch
 
     def _flush(self) -> None:

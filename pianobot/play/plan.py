@@ -5,12 +5,18 @@ Per note the planner chooses, from the model's tabulated strokes (`StrokeTable`)
 - loudness: the down velocity whose predicted on-velocity equals the note's target (the song's
   velocity mapped onto the reachable range, see `DynamicsMap`), at the phrase's vacuum level;
 - duration: the arm hold whose predicted note-on → note-off time equals the note's length;
-- timing: motion start = onset − predicted lead (motion start → note-on); the lateral move to
-  the key comes before that and must fit after the previous press and its recovery.
+- timing: motion start = onset − predicted lead (motion start → note-on).
 
-When a note cannot start on time, the previous note's hold is shortened first; a note still
-later than `max_late_s` is skipped and reported with the reason (so the notes after it stay in
-time) rather than dragging the rest of the song late.
+The arm is free again once it is back up (`busy_s`); the lateral move to the next key starts
+then, while the released key is still returning, and a re-strike of the same key waits for the
+predicted note-off (the key back above its re-trigger depth). When a note cannot start on time
+the previous note's hold is shortened first, then the note is played with a faster (louder)
+stroke, whose lead is shorter; a note still later than `max_late_s` is skipped and reported with
+the reason, so the notes after it stay in time.
+
+The stroke geometry (hover distance, acceleration; depth and up velocity fixed) is chosen per
+song: every candidate in the settings is planned and the one playing the most notes, then the
+fewest forced louder, then the least late, then with the widest loudness range wins.
 """
 
 from __future__ import annotations
@@ -26,29 +32,18 @@ import pandas as pd
 from pianobot.analysis.predictors import StrokePredictor
 from pianobot.errors import InputError
 from pianobot.io.midifile import Note
-from pianobot.plan import key_change_s
 from pianobot.play.dynamics import DynamicsMap, DynamicsMode
+from pianobot.play.schedule import LOUDER, PLAN_COLUMNS, VACUUM_BUDGET_FACTOR, note_row, schedule
 from pianobot.play.settings import PlaySettings
-from pianobot.play.strokes import StrokeTable, busy_s
+from pianobot.play.strokes import StrokeGeometry, StrokeTable
 from pianobot.spec import RigSpec
-
-# A phrase may change the vacuum only across a rest this many times the rig's settle time:
-# the regulator's real settling varies with the size of the step.
-VACUUM_BUDGET_FACTOR = 1.25
-
-PLAN_COLUMNS: tuple[str, ...] = (
-    "note_index", "pitch", "onset_s", "offset_s", "song_velocity", "target_velocity",
-    "vacuum_kpa", "down_velocity_mps", "up_velocity_mps", "acceleration_mps2", "depth_m",
-    "distance_m", "hold_s", "predicted_velocity", "predicted_lead_s", "predicted_midi_hold_s",
-    "move_s", "vacuum_change_s", "start_s", "busy_s", "late_s", "status", "reason",
-)
 
 
 @dataclass(frozen=True)
 class Plan:
     """A performance plan: one row per melody note (`PLAN_COLUMNS`), song time in seconds.
 
-    `status` is "play" or "skip"; `reason` says why a note is skipped, late or clipped.
+    `status` is "play" or "skip"; `reason` says why a note is skipped, late, louder or clipped.
     `start_s` is the planned motion start in song time (it may be negative: the first press
     starts before the song's time zero by its lead).
     """
@@ -59,13 +54,14 @@ class Plan:
     dynamics: DynamicsMap | None = None
     tables: dict[float, StrokeTable] = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
+    geometry: StrokeGeometry | None = None
 
     @property
     def played(self) -> pd.DataFrame:
         return self.notes[self.notes["status"] == "play"]
 
     def summary(self) -> dict[str, Any]:
-        """Counts and the mapping, for JSON output and run.json."""
+        """Counts, geometry and the mapping, for JSON output and run.json."""
         frame = self.notes
         return {
             "planner": self.planner,
@@ -73,6 +69,8 @@ class Plan:
             "planned": int((frame["status"] == "play").sum()),
             "skipped": int((frame["status"] == "skip").sum()),
             "late": int((frame["late_s"] > 0).sum()),
+            "louder_to_keep_time": int(frame["reason"].str.contains(LOUDER).sum()),
+            "geometry": None if self.geometry is None else self.geometry.to_dict(),
             "dynamics": None if self.dynamics is None else self.dynamics.to_dict(),
             "reachable_by_vacuum": {
                 f"{k:g}": list(t.velocity_range) for k, t in sorted(self.tables.items())
@@ -81,27 +79,46 @@ class Plan:
         }
 
 
-def envelope_limits(settings: PlaySettings, rig: RigSpec) -> dict[str, tuple[float, float]]:
-    """The finger's envelope on this rig; InputError if the fixed stroke geometry leaves it."""
+def geometries(settings: PlaySettings, rig: RigSpec) -> list[StrokeGeometry]:
+    """The candidate stroke geometries; InputError if a setting leaves the finger's envelope."""
     env = rig.envelope_for(settings.finger)
-    fixed = {
-        "distance_m": settings.distance_m,
-        "depth_m": settings.depth_m,
-        "acceleration_mps2": settings.acceleration_mps2,
-        "up_velocity_mps": settings.up_velocity_mps,
-    }
-    for name, value in fixed.items():
+
+    def checked(name: str, value: float) -> float:
         if name in env and not env[name].contains(value):
             raise InputError(
                 f"{name} = {value:g} is outside the {settings.finger} finger's envelope "
                 f"[{env[name].low:g}, {env[name].high:g}]", f"play settings: {name}",
             )
-    return {name: (lim.low, lim.high) for name, lim in env.items()}
+        return float(value)
+
+    def top(name: str, fallback: float) -> float:
+        return float(env[name].high) if name in env else fallback
+
+    depth = checked("depth_m", settings.depth_m)
+    up = checked("up_velocity_mps", settings.up_velocity_mps or top("up_velocity_mps", 0.7))
+    accelerations = settings.accelerations_mps2 or (top("acceleration_mps2", 2.0),)
+    return [
+        StrokeGeometry(checked("distance_m", d), depth, checked("acceleration_mps2", a), up)
+        for a in accelerations for d in settings.distances_m
+    ]
 
 
-def stroke_tables(predictor: StrokePredictor, settings: PlaySettings, rig: RigSpec) -> dict[float, StrokeTable]:
-    """One table per allowed vacuum level, down velocities capped by the envelope."""
+def fastest_geometry(settings: PlaySettings, rig: RigSpec) -> StrokeGeometry:
+    """The candidate with the shortest press cycle: shortest hover, highest acceleration."""
+    return min(geometries(settings, rig), key=lambda g: (g.distance_m, -g.acceleration_mps2))
+
+
+def envelope_limits(settings: PlaySettings, rig: RigSpec) -> dict[str, tuple[float, float]]:
+    """The finger's envelope on this rig as (low, high) per parameter (geometry checked too)."""
+    geometries(settings, rig)
+    return {name: (lim.low, lim.high) for name, lim in rig.envelope_for(settings.finger).items()}
+
+
+def stroke_tables(predictor: StrokePredictor, settings: PlaySettings, rig: RigSpec,
+                  geometry: StrokeGeometry | None = None) -> dict[float, StrokeTable]:
+    """One table per allowed vacuum level for a geometry (default: the fastest)."""
     limits = envelope_limits(settings, rig)
+    geometry = geometry or fastest_geometry(settings, rig)
     v_lo, v_hi = limits.get("vacuum_kpa", (-math.inf, math.inf))
     levels = [p for p in settings.vacuum_levels_kpa if v_lo - 1e-9 <= p <= v_hi + 1e-9]
     if not levels:
@@ -110,10 +127,11 @@ def stroke_tables(predictor: StrokePredictor, settings: PlaySettings, rig: RigSp
             "play settings: vacuum_levels_kpa",
         )
     cap = limits.get("down_velocity_mps", (0.0, 0.06))[1]
-    tables = {float(p): StrokeTable.build(predictor, p, settings, cap) for p in levels}
-    if not any(t.sounding.sum() >= 2 for t in tables.values()):
-        raise InputError("the model predicts no sounding stroke inside the finger's envelope", "--model")
-    return tables
+    return {float(p): StrokeTable.build(predictor, p, geometry, settings, cap) for p in levels}
+
+
+def _sounds(tables: dict[float, StrokeTable]) -> bool:
+    return any(t.sounding.sum() >= 2 for t in tables.values())
 
 
 def reachable_range(tables: dict[float, StrokeTable]) -> tuple[float, float]:
@@ -161,10 +179,39 @@ def plan_model(
     dynamics: DynamicsMode = "mapped",
     tables: dict[float, StrokeTable] | None = None,
 ) -> Plan:
-    """Plan a melody with the model's inverse (see the module doc)."""
+    """Plan a melody with the model's inverse (see the module doc).
+
+    `tables` fixes the stroke configuration (one geometry); otherwise every candidate geometry
+    of the settings is planned and the best kept.
+    """
     if not notes:
         raise InputError("the song has no playable notes", "SONG")
-    tables = tables if tables is not None else stroke_tables(predictor, settings, rig)
+    if tables is not None:
+        candidates = [tables]
+    else:
+        candidates = [t for g in geometries(settings, rig) if _sounds(t := stroke_tables(predictor, settings, rig, g))]
+    if not candidates or not all(_sounds(t) for t in candidates):
+        raise InputError("the model predicts no sounding stroke inside the finger's envelope", "--model")
+    plans = [_plan_with(notes, t, settings, rig, dynamics) for t in candidates]
+    return min(plans, key=_cost)
+
+
+def _cost(plan: Plan) -> tuple[float, ...]:
+    """Skipped notes, then notes forced louder, then lateness, then a narrower loudness range."""
+    frame = plan.notes
+    lo, hi = plan.dynamics.target_range if plan.dynamics is not None else (0.0, 0.0)
+    return (
+        float((frame["status"] == "skip").sum()),
+        float(frame["reason"].str.contains(LOUDER).sum()),
+        round(float(frame["late_s"].sum()), 3),
+        -round(hi - lo, 1),
+        plan.geometry.distance_m if plan.geometry is not None else 0.0,
+    )
+
+
+def _plan_with(notes: Sequence[Note], tables: dict[float, StrokeTable], settings: PlaySettings,
+               rig: RigSpec, dynamics: DynamicsMode) -> Plan:
+    """The plan for one stroke geometry (its tables, one per vacuum level)."""
     dmap = DynamicsMap.fit([n.velocity for n in notes], reachable_range(tables), dynamics)
     targets = dmap.apply([n.velocity for n in notes])
     rest_s = VACUUM_BUDGET_FACTOR * rig.settle_s.after_vacuum_change_s
@@ -179,93 +226,10 @@ def plan_model(
         reason = ""
         if not lo - 1e-6 <= targets[i] <= hi + 1e-6:
             reason = f"target {targets[i]:.1f} clipped to the reachable {lo:.1f}–{hi:.1f}"
-        hold = min(float(table.arm_hold_for(speed, n.duration_s)), hold_cap)
-        lead = float(table.lead(speed))
-        rows.append(_row(i, n, targets[i], table, speed, hold, lead, reason))
-    frame = schedule(pd.DataFrame(rows, columns=list(PLAN_COLUMNS)), tables, settings, rig)
-    return Plan("model", frame, settings, dmap, dict(tables), _warnings(frame))
-
-
-def _row(i: int, n: Note, target: float, table: StrokeTable, speed: float, hold: float,
-         lead: float, reason: str) -> dict[str, Any]:
-    s = table.settings
-    return {
-        "note_index": i, "pitch": n.pitch, "onset_s": n.onset_s, "offset_s": n.offset_s,
-        "song_velocity": n.velocity, "target_velocity": float(target),
-        "vacuum_kpa": table.vacuum_kpa, "down_velocity_mps": speed,
-        "up_velocity_mps": s.up_velocity_mps, "acceleration_mps2": s.acceleration_mps2,
-        "depth_m": s.depth_m, "distance_m": s.distance_m, "hold_s": hold,
-        "predicted_velocity": float(table.predict_velocity(speed)),
-        "predicted_lead_s": lead,
-        "predicted_midi_hold_s": float(table.midi_hold(speed, hold)),
-        "move_s": 0.0, "vacuum_change_s": 0.0, "start_s": n.onset_s - lead,
-        "busy_s": table.busy_s(speed, hold), "late_s": 0.0, "status": "play", "reason": reason,
-    }
-
-
-def schedule(frame: pd.DataFrame, tables: dict[float, StrokeTable], settings: PlaySettings,
-             rig: RigSpec, *, max_late_s: float | None = None, shorten: bool = True) -> pd.DataFrame:
-    """Fit the presses one after another: shorten holds, allow small lateness, else skip.
-
-    Each row's `start_s` is its ideal motion start (onset − lead); the arm is free again
-    `busy_s` after a start; before the next press it moves sideways (`move_s`) and, for a new
-    phrase level, waits for the vacuum (`vacuum_change_s`).
-    """
-    out = frame.copy()
-    late_limit = settings.max_late_s if max_late_s is None else max_late_s
-    vacuum_budget = VACUUM_BUDGET_FACTOR * rig.settle_s.after_vacuum_change_s
-    prev: int | None = None
-    for i in range(len(out)):
-        row = out.iloc[i]
-        if prev is None:
-            prev = i
-            continue
-        p = out.iloc[prev]
-        move = key_change_s(int(p.pitch), int(row.pitch), rig) if row.pitch != p.pitch else 0.0
-        vac = vacuum_budget if abs(row.vacuum_kpa - p.vacuum_kpa) > 1e-9 else 0.0
-        needed = float(p.start_s) + float(p.busy_s) + move + vac
-        short = needed - float(row.start_s)
-        if shorten and short > 0 and p.hold_s > 0:
-            cut = min(short, float(p.hold_s))
-            _set_hold(out, prev, float(p.hold_s) - cut, tables, settings)
-            needed -= cut
-            short -= cut
-        _put(out, i, "move_s", move)
-        _put(out, i, "vacuum_change_s", vac)
-        if short > late_limit + 1e-9:
-            _put(out, i, "status", "skip")
-            _put(out, i, "reason", (
-                f"no time to release and re-strike: the arm is free {short * 1e3:.0f} ms after "
-                "this note's motion must start"
-            ))
-            continue
-        if short > 0:
-            _put(out, i, "start_s", needed)
-            _put(out, i, "late_s", short)
-            note = f"late by {short * 1e3:.0f} ms"
-            old = str(out["reason"].iloc[i])
-            _put(out, i, "reason", f"{old}; {note}" if old else note)
-        prev = i
-    return out
-
-
-def _set_hold(frame: pd.DataFrame, i: int, hold_s: float, tables: dict[float, StrokeTable],
-              settings: PlaySettings) -> None:
-    """Shorten row i's arm hold and update what depends on it (MIDI hold, busy time)."""
-    row = frame.iloc[i]
-    _put(frame, i, "hold_s", hold_s)
-    table = tables.get(float(row.vacuum_kpa))
-    speed = float(row.down_velocity_mps)
-    if table is not None:
-        _put(frame, i, "predicted_midi_hold_s", float(table.midi_hold(speed, hold_s)))
-        _put(frame, i, "busy_s", table.busy_s(speed, hold_s))
-    else:
-        _put(frame, i, "busy_s", busy_s(settings, speed, hold_s))
-
-
-def _put(frame: pd.DataFrame, i: int, column: str, value: Any) -> None:
-    """Set one cell of row position i."""
-    frame.loc[frame.index[i], column] = value
+        rows.append(note_row(i, n, float(targets[i]), table, speed, hold_cap, reason))
+    frame = schedule(pd.DataFrame(rows, columns=list(PLAN_COLUMNS)), tables, settings, rig, hold_cap_s=hold_cap)
+    geometry = next(iter(tables.values())).geometry
+    return Plan("model", frame, settings, dmap, dict(tables), _warnings(frame), geometry)
 
 
 def _warnings(frame: pd.DataFrame) -> tuple[str, ...]:
@@ -276,6 +240,9 @@ def _warnings(frame: pd.DataFrame) -> tuple[str, ...]:
             f"{len(skipped)} of {len(frame)} note(s) cannot be played in time and are skipped "
             f"(first: note {int(skipped.iloc[0].note_index)}: {skipped.iloc[0].reason})"
         )
+    louder = int(frame["reason"].str.contains(LOUDER).sum())
+    if louder:
+        out.append(f"{louder} note(s) are played {LOUDER} (a faster stroke sounds sooner)")
     late = int((frame["late_s"] > 0).sum())
     if late:
         out.append(f"{late} note(s) start up to {frame['late_s'].max() * 1e3:.0f} ms late")

@@ -19,15 +19,10 @@ from pianobot.play.perform import Performance, perform
 from pianobot.play.plan import Plan, plan_model
 from pianobot.play.score import Score, score_performance
 from pianobot.play.settings import PlaySettings
-from pianobot.spec import RigSpec, Travel, load_rig
+from pianobot.spec import RigSpec, load_rig
 
 PlannerName = Literal["model", "naive"]
 PLANNERS: tuple[str, ...] = ("model", "naive")
-
-# Between keys the built-in sim rig moves like a player, not like a sweep: lift just clear of
-# the black keys (≈ 12 mm above the white ones) and move briskly. A rig file's own `travel`
-# settings are used as they are.
-PLAY_TRAVEL = Travel(velocity_mps=0.5, acceleration_mps2=4.0, lift_m=0.012)
 
 
 @dataclass(frozen=True)
@@ -64,17 +59,23 @@ class PlayResult:
         if self.performance is not None:
             p = self.performance
             out.update({"run_id": p.run_id, "status": p.status, "reason": p.reason,
-                        "observed_recovery_s": p.recovery_s})
+                        "observed_recovery_s": p.recovery_s, "rig_warnings": list(p.rig_warnings)})
             if p.adaptation:
                 out["adaptation"] = {"updates": len(p.adaptation), "final": {
                     k: v for k, v in p.adaptation[-1].items() if k.startswith(("velocity_", "lead_"))}}
         return out
 
 
-def play_rig(rig: str | Path) -> RigSpec:
-    """The rig to play on: "sim" is the built-in sim rig with player-like travel; else a file."""
+def play_rig(rig: str | Path | RigSpec) -> RigSpec:
+    """The rig to play on: "sim" is the built-in sim rig exactly as documented, else a rig file.
+
+    Nothing is overridden: the built-in rig moves between keys like a sweep (slowly, with a
+    50 mm lift); `experiments/rigs/sim-play.yaml` holds the travel settings of a player.
+    """
+    if isinstance(rig, RigSpec):
+        return rig
     if str(rig) == "sim":
-        return load_rig("sim").model_copy(update={"travel": PLAY_TRAVEL})
+        return load_rig("sim")
     if not Path(rig).is_file():
         raise InputError("rig file not found", str(rig))
     return load_rig(rig)
@@ -103,7 +104,7 @@ def play_song(
     transpose: int = 0,
     track: int | None = None,
     dynamics: str = "mapped",
-    rig: str | Path = "sim",
+    rig: str | Path | RigSpec = "sim",
     seed: int | None = None,
     plot: Path | None = None,
     settings: PlaySettings | None = None,

@@ -1,10 +1,10 @@
 """A model's keystroke outcomes tabulated over down velocity, for fast per-note inverses.
 
-For one stroke configuration (vacuum, acceleration, depth, run-up, up velocity) the planner
-asks the model once for on-velocity, silence, lead (motion start → note-on) and MIDI hold at a
-grid of down velocities and two holds, then answers every note by interpolation. The loudness
-curve is made monotone (running maximum over sounding speeds) so the inverse is single-valued
-and picks the slowest speed that reaches a loudness.
+For one stroke configuration (vacuum and a `StrokeGeometry`: hover distance, depth,
+acceleration, up velocity) the planner asks the model once for on-velocity, silence, lead
+(motion start → note-on) and MIDI hold at a grid of down velocities and two holds, then answers
+every note by interpolation. The loudness curve is made monotone (running maximum over sounding
+speeds) so the inverse is single-valued and picks the slowest speed that reaches a loudness.
 """
 
 from __future__ import annotations
@@ -27,10 +27,34 @@ FALLBACK_HOLD_SLOPE = 1.0
 
 
 @dataclass(frozen=True)
+class StrokeGeometry:
+    """The part of a press fixed for a song: hover distance, depth, acceleration, up velocity.
+
+    Per note only the down velocity (loudness) and the hold (length) change. A short hover and
+    a high acceleration and up velocity make the press cycle short, which a fast tempo needs.
+    """
+
+    distance_m: float
+    depth_m: float
+    acceleration_mps2: float
+    up_velocity_mps: float
+
+    def press(self, down_velocity_mps: float, hold_s: float) -> Press:
+        """The press of one note with this geometry."""
+        return Press(self.distance_m, self.depth_m, float(down_velocity_mps), self.up_velocity_mps,
+                     self.acceleration_mps2, float(hold_s))
+
+    def to_dict(self) -> dict[str, float]:
+        return {"distance_m": self.distance_m, "depth_m": self.depth_m,
+                "acceleration_mps2": self.acceleration_mps2, "up_velocity_mps": self.up_velocity_mps}
+
+
+@dataclass(frozen=True)
 class StrokeTable:
     """Outcomes of one stroke configuration over a grid of down velocities."""
 
     vacuum_kpa: float
+    geometry: StrokeGeometry
     settings: PlaySettings
     speeds_mps: FloatArray
     velocity: FloatArray  # monotone envelope of the predicted on-velocity (NaN where silent)
@@ -39,8 +63,8 @@ class StrokeTable:
     hold_slope: FloatArray  # d(MIDI hold)/d(arm hold)
 
     @classmethod
-    def build(cls, predictor: StrokePredictor, vacuum_kpa: float, settings: PlaySettings,
-              max_down_velocity_mps: float) -> StrokeTable:
+    def build(cls, predictor: StrokePredictor, vacuum_kpa: float, geometry: StrokeGeometry,
+              settings: PlaySettings, max_down_velocity_mps: float) -> StrokeTable:
         """Ask `predictor` for the outcomes at `settings.speeds` down velocities up to the cap."""
         lo = min(settings.min_down_velocity_mps, max_down_velocity_mps)
         speeds = np.linspace(lo, max_down_velocity_mps, settings.speeds)
@@ -49,10 +73,7 @@ class StrokeTable:
             "down_velocity_mps": np.r_[speeds, speeds],
             "hold_s": np.r_[np.zeros(speeds.size), np.full(speeds.size, h1)],
             "vacuum_kpa": vacuum_kpa,
-            "acceleration_mps2": settings.acceleration_mps2,
-            "depth_m": settings.depth_m,
-            "distance_m": settings.distance_m,
-            "up_velocity_mps": settings.up_velocity_mps,
+            **geometry.to_dict(),
         })
         out = predictor.predict(frame)
         n = speeds.size
@@ -64,7 +85,7 @@ class StrokeTable:
         slope = (hold[n:] - hold[:n]) / h1
         slope = np.where(np.isfinite(slope) & (slope > 0.2) & (slope < 3.0), slope, FALLBACK_HOLD_SLOPE)
         velocity = _monotone(on)
-        return cls(float(vacuum_kpa), settings, speeds, velocity, _filled(lead), _filled(hold[:n]), slope)
+        return cls(float(vacuum_kpa), geometry, settings, speeds, velocity, _filled(lead), _filled(hold[:n]), slope)
 
     @property
     def sounding(self) -> npt.NDArray[np.bool_]:
@@ -106,20 +127,24 @@ class StrokeTable:
         slope = np.interp(_f(speed_mps), self.speeds_mps, self.hold_slope)
         return np.asarray(np.maximum(0.0, (np.asarray(midi_hold_s) - h0) / slope), dtype=np.float64)
 
+    def release_s(self, speed_mps: float, hold_s: float) -> float:
+        """Predicted motion start → note-off: the key is back above its re-trigger depth then."""
+        return float(self.lead(speed_mps)) + float(self.midi_hold(speed_mps, hold_s))
+
     def busy_s(self, speed_mps: float, hold_s: float) -> float:
-        """Motion start → the next press may start: the press itself plus the recovery."""
-        return busy_s(self.settings, speed_mps, hold_s)
+        """Motion start → the next press or move may start: the press itself plus the recovery."""
+        return busy_s(self.geometry, self.settings, speed_mps, hold_s)
+
+    def fastest_lead_for(self, max_lead_s: float, at_least_mps: float) -> float | None:
+        """Slowest down velocity ≥ `at_least_mps` whose predicted lead is at most `max_lead_s`."""
+        grid = np.linspace(max(at_least_mps, float(self.speeds_mps[0])), float(self.speeds_mps[-1]), 4 * self.speeds_mps.size)
+        ok = self.lead(grid) <= max_lead_s
+        return float(grid[np.argmax(ok)]) if ok.any() else None
 
 
-def make_press(settings: PlaySettings, speed_mps: float, hold_s: float) -> Press:
-    """The press of a note: the song's fixed geometry with this down velocity and hold."""
-    s = settings
-    return Press(s.distance_m, s.depth_m, float(speed_mps), s.up_velocity_mps, s.acceleration_mps2, float(hold_s))
-
-
-def busy_s(settings: PlaySettings, speed_mps: float, hold_s: float) -> float:
-    """Motion start → the next press may start: the press itself plus the recovery."""
-    return press_duration_s(make_press(settings, speed_mps, hold_s)) + settings.recovery_s
+def busy_s(geometry: StrokeGeometry, settings: PlaySettings, speed_mps: float, hold_s: float) -> float:
+    """Motion start → the arm is back up and recovered: the press itself plus `recovery_s`."""
+    return press_duration_s(geometry.press(speed_mps, hold_s)) + settings.recovery_s
 
 
 def _f(values: npt.ArrayLike) -> FloatArray:

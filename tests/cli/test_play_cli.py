@@ -13,6 +13,7 @@ from pianobot.cli import main
 from pianobot.io.midifile import Note, write_song
 
 SONGS = Path(__file__).resolve().parents[2] / "experiments" / "songs"
+PLAY_RIG = Path(__file__).resolve().parents[2] / "experiments" / "rigs" / "sim-play.yaml"
 
 
 def cli(args: list[str], capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> tuple[int, str, str]:
@@ -76,13 +77,18 @@ def test_naive_play_prints_the_score_keys(tmp_path: Path, capsys: pytest.Capture
 
 def test_dry_run_prints_the_plan(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                  monkeypatch: pytest.MonkeyPatch) -> None:
-    code, out, err = cli(["play", str(SONGS / "twinkle_standard.mid"), "--dry-run", "--json", "--data",
-                          str(tmp_path)], capsys, monkeypatch)
+    code, out, err = cli(["play", str(SONGS / "twinkle.mid"), "--dry-run", "--json", "--data",
+                          str(tmp_path), "--rig", str(PLAY_RIG)], capsys, monkeypatch)
     assert code == 0
     payload = json.loads(out)
     assert len(payload["plan_notes"]) == 42
     assert payload["mapping"].startswith("linear 40–110")
+    assert payload["plan"]["geometry"]["distance_m"] == 0.002
     assert "cannot be played in time" in err
+    # The built-in rig moves between keys like a sweep (50 mm lift, slowly): more notes drop.
+    code, out, _ = cli(["play", str(SONGS / "twinkle.mid"), "--dry-run", "--json", "--data", str(tmp_path)],
+                       capsys, monkeypatch)
+    assert code == 0 and json.loads(out)["plan"]["skipped"] > payload["plan"]["skipped"]
     code, out, _ = cli(["play", str(SONGS / "mary.mid"), "--dry-run", "--data", str(tmp_path)], capsys, monkeypatch)
     assert code == 0 and "mapping:" in out
     assert not (tmp_path / "runs").exists()

@@ -12,14 +12,14 @@ from pianobot.run import run_sweep
 from pianobot.store import load_run
 
 REPO = Path(__file__).resolve().parents[2]
-SONGS = REPO / "experiments" / "songs"
+CALIBRATION = REPO / "experiments" / "play_calibration.yaml"
 
 
 @pytest.fixture(scope="session")
 def fitted_model(tmp_path_factory: pytest.TempPathFactory) -> LearnedPredictor:
-    """A GP predictor learned from the calibration sweep on the default sim world (seed 0)."""
+    """A GP predictor learned from the play calibration sweep on the default sim world (seed 0)."""
     data = tmp_path_factory.mktemp("calibration")
-    outcome = run_sweep(SONGS / "calibration.yaml", data_dir=data, progress=False)
+    outcome = run_sweep(CALIBRATION, data_dir=data, progress=False)
     assert outcome.status == "completed"
     trials = load_run(outcome.run_id, data).trials
     with warnings.catch_warnings():
