@@ -19,6 +19,10 @@ Lanes never interact: every per-keystroke quantity (constants, state, arm profil
 own lane, a partial block is padded with copies of its last keystroke, and the block size (small
 for a few keystrokes, else `BLOCK`) only sets how many lanes run side by side. A keystroke's
 samples are therefore bit-identical alone and in any batch (tests/physics/test_batch_independence.py).
+
+The module stays one file on purpose: numba's disk cache (cache=True) only watches the source
+file of the cached function, so a kernel that inlined helpers from another module would keep
+running stale machine code after those helpers changed.
 """
 
 from __future__ import annotations
