@@ -1,7 +1,8 @@
 """Benchmark the `play` planner: a 1,000-note song, per-note inverse time, physics vs GP model.
 
 For each model: the time to tabulate it over the play stroke configuration (one table per
-vacuum level), the time to plan a 1,000-note song (mapping, inverse, timing, scheduling), the
+vacuum level), the time to plan a 1,000-note song (mapping, inverse, timing, scheduling) with
+one geometry and with the choice among every candidate geometry (tables included), the
 per-note inverse through the table, and the per-note inverse asked of the model directly
 (`StrokePredictor.inverse`, what a planner without tables would pay). The GP is learned from the
 calibration sweep on the default sim world. Writes JSON to benchmarks/results/play.json (and
@@ -25,7 +26,7 @@ import numpy as np
 from pianobot.analysis.learn import LearnedPredictor, training_set
 from pianobot.analysis.predictors import PhysicsPredictor, StrokePredictor
 from pianobot.play.library import etude
-from pianobot.play.plan import plan_model, stroke_tables
+from pianobot.play.plan import fastest_geometry, geometries, plan_model, stroke_tables
 from pianobot.play.session import play_rig
 from pianobot.play.settings import PlaySettings
 from pianobot.run import run_sweep
@@ -33,7 +34,8 @@ from pianobot.store import load_run
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "results" / "play.json"
-CALIBRATION = HERE.parent / "experiments" / "songs" / "calibration.yaml"
+CALIBRATION = HERE.parent / "experiments" / "play_calibration.yaml"
+PLAY_RIG = HERE.parent / "experiments" / "rigs" / "sim-play.yaml"
 
 
 def _gp() -> LearnedPredictor:
@@ -47,14 +49,18 @@ def _gp() -> LearnedPredictor:
 
 def _measure(predictor: StrokePredictor, n_notes: int) -> dict[str, Any]:
     settings = PlaySettings()
-    rig = play_rig("sim")
+    rig = play_rig(PLAY_RIG)
     notes = etude(n_notes).to_notes()
+    geometry = fastest_geometry(settings, rig)
     t0 = time.perf_counter()
-    tables = stroke_tables(predictor, settings, rig)
+    tables = stroke_tables(predictor, settings, rig, geometry)
     table_s = time.perf_counter() - t0
     t0 = time.perf_counter()
     plan = plan_model(notes, predictor, settings, rig, tables=tables)
     plan_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    chosen = plan_model(notes, predictor, settings, rig)  # every candidate geometry, best kept
+    choose_s = time.perf_counter() - t0
     targets = plan.notes["target_velocity"].to_numpy(float)
     table = tables[float(plan.notes["vacuum_kpa"].iloc[0])]
     t0 = time.perf_counter()
@@ -64,14 +70,17 @@ def _measure(predictor: StrokePredictor, n_notes: int) -> dict[str, Any]:
     direct = targets[: min(50, targets.size)]
     t0 = time.perf_counter()
     for target in direct:
-        predictor.inverse(np.array([target]), vacuum_kpa=table.vacuum_kpa, acceleration_mps2=settings.acceleration_mps2,
-                          depth_m=settings.depth_m, distance_m=settings.distance_m)
+        predictor.inverse(np.array([target]), vacuum_kpa=table.vacuum_kpa, acceleration_mps2=geometry.acceleration_mps2,
+                          depth_m=geometry.depth_m, distance_m=geometry.distance_m)
     per_note_direct_ms = (time.perf_counter() - t0) / direct.size * 1e3
     return {
         "notes": n_notes,
         "tabulate_s": table_s,
         "plan_s": plan_s,
         "plan_total_s": table_s + plan_s,
+        "plan_choosing_geometry_s": choose_s,
+        "candidate_geometries": len(geometries(settings, rig)),
+        "chosen_hover_m": chosen.geometry.distance_m if chosen.geometry else None,
         "per_note_plan_ms": plan_s / n_notes * 1e3,
         "per_note_inverse_table_us": per_note_table_us,
         "per_note_inverse_direct_ms": per_note_direct_ms,
