@@ -4,7 +4,7 @@ Each repetition simulates keystrokes through the linear model with known paramet
 like noise, identifies the model (Jacobian + keystroke bootstrap intervals) and records the
 relative errors, whether each 95 % interval covers the truth, and the wall time.
 
-    .venv/bin/python benchmarks/bench_identify.py [--reps 20] [--bootstrap 10] [--out FILE]
+    .venv/bin/python benchmarks/bench_identify.py [--reps 20] [--bootstrap 0] [--out FILE]
 """
 
 from __future__ import annotations
@@ -33,13 +33,14 @@ def truth_of(name: str) -> float:
         return TRUTH.k1_npm(float(match.group(1)))
     return {"c1_nspm": TRUTH.c1_nspm, "k2_npm": TRUTH.k2_npm, "c2_nspm": TRUTH.c2_nspm,
             "c1_over_m1_per_s": TRUTH.c1_nspm / TRUTH.m1_kg, "c2_over_m2_per_s": TRUTH.c2_nspm / TRUTH.m2_kg,
-            "k2_over_m2_per_s2": TRUTH.k2_npm / TRUTH.m2_kg}.get(name, math.nan)
+            "k2_over_m2_per_s2": TRUTH.k2_npm / TRUTH.m2_kg, "k1_a_npm": TRUTH.k1_a_npm,
+            "k1_b_npm_per_kpa": TRUTH.k1_b_npm_per_kpa}.get(name, math.nan)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--reps", type=int, default=20)
-    parser.add_argument("--bootstrap", type=int, default=10)
+    parser.add_argument("--bootstrap", type=int, default=0)
     parser.add_argument("--out", type=Path, default=None)
     args = parser.parse_args()
     per_param: dict[str, dict[str, list[float]]] = {}
@@ -54,17 +55,26 @@ def main() -> None:
             truth = truth_of(e.name)
             if math.isnan(truth):
                 continue
-            rec = per_param.setdefault(e.name, {"rel_error": [], "covered": []})
+            rec = per_param.setdefault(e.name, {"rel_error": [], "covered": [], "covered_jacobian": [],
+                                                "covered_bootstrap": []})
             rec["rel_error"].append(abs(e.value - truth) / abs(truth))
             lo, hi = e.ci95
             rec["covered"].append(float(lo <= truth <= hi))
+            rec["covered_jacobian"].append(float(e.ci_jacobian[0] <= truth <= e.ci_jacobian[1]))
+            if e.ci_bootstrap is not None:
+                rec["covered_bootstrap"].append(float(e.ci_bootstrap[0] <= truth <= e.ci_bootstrap[1]))
     summary = {
         name: {"max_rel_error": max(r["rel_error"]), "coverage": sum(r["covered"]) / len(r["covered"])}
         for name, r in per_param.items()
     }
-    all_cov = [c for r in per_param.values() for c in r["covered"]]
+    def overall(key: str) -> float | None:
+        values = [c for r in per_param.values() for c in r[key]]
+        return sum(values) / len(values) if values else None
+
     payload = {"reps": args.reps, "bootstrap": args.bootstrap, "params": summary,
-               "coverage_overall": sum(all_cov) / len(all_cov),
+               "coverage_overall": overall("covered"),
+               "coverage_jacobian_hac": overall("covered_jacobian"),
+               "coverage_bootstrap": overall("covered_bootstrap"),
                "seconds_per_fit_median": sorted(times)[len(times) // 2]}
     text = json.dumps(payload, indent=2)
     if args.out:

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from pianobot.analysis.learn import LearnedPredictor, cross_validate, save_predictor, training_set
+from pianobot.analysis.learn import cross_validate_models, save_predictor, training_set
 from pianobot.analysis.learn_models import MODEL_KINDS
 from pianobot.analysis.predictors import PhysicsPredictor, load_predictor
 from pianobot.errors import InputError
@@ -41,13 +41,11 @@ def fit_runs(
     physics = None
     if "physics" in kinds:
         physics = load_predictor(physics_model) if physics_model else PhysicsPredictor.published()
-    table = cross_validate(data, kinds, folds=folds, seed=seed, physics=physics)
+    table, fitted = cross_validate_models(data, kinds, folds=folds, seed=seed, physics=physics)
     saved: dict[str, Path] = {}
     if out_dir is not None:
         for kind in kinds:
-            if kind == "physics":
-                continue
-            model = LearnedPredictor(kind, seed).fit(data)
-            saved[kind] = save_predictor(model, Path(out_dir) / f"predictor-{kind}.json",
-                                         cv=table, runs=list(run_ids))
+            if kind in fitted:
+                saved[kind] = save_predictor(fitted[kind], Path(out_dir) / f"predictor-{kind}.json",
+                                             cv=table, runs=list(run_ids))
     return table, saved

@@ -41,8 +41,9 @@ def test_recovers_linear_parameters_within_tolerance() -> None:
 
 
 def test_intervals_cover_truth_in_most_repetitions() -> None:
+    # The full 20-repetition check is benchmarks/bench_identify.py (measured: 97 % overall).
     covered, total = 0, 0
-    for seed in range(4):
+    for seed in range(5):
         trials, samples = linear_keystrokes(TRUTH, seed=100 + seed, speeds_mps=(0.02, 0.05))
         fit = identify_trajectories(keystroke_batch(samples, trials), coupling="tied", bootstrap=0)
         for e in fit.estimates:
@@ -52,7 +53,7 @@ def test_intervals_cover_truth_in_most_repetitions() -> None:
             lo, hi = e.ci95
             covered += lo <= truth <= hi
             total += 1
-    assert covered / total >= 0.85
+    assert covered / total >= 0.9
 
 
 def test_identified_model_beats_wrong_prior_on_heldout() -> None:
@@ -62,6 +63,20 @@ def test_identified_model_beats_wrong_prior_on_heldout() -> None:
     assert rms_x2_m(test, fit.params) < 0.5 * rms_x2_m(test, MSDParams())
     peak_hz, _ = peak_response(fit.params.at(-40.0))
     assert 1.0 < peak_hz < 30.0
+
+
+def test_noise_on_the_arm_trace_widens_the_intervals() -> None:
+    """Input noise is absorbed by the fit (errors in variables): the intervals must still grow."""
+    trials, clean = linear_keystrokes(TRUTH, seed=7, noise_m=0.0, speeds_mps=(0.02, 0.05))
+    rng = np.random.default_rng(7)
+    out_only = clean.assign(x1_m=clean.x1_m + rng.normal(0, 5e-6, len(clean)),
+                            x2_m=clean.x2_m + rng.normal(0, 5e-6, len(clean)))
+    both = out_only.assign(x0_m=clean.x0_m + rng.normal(0, 2e-5, len(clean)))
+    widths = []
+    for samples in (out_only, both):
+        e = identify_trajectories(keystroke_batch(samples, trials), coupling="tied").estimate("k2_npm")
+        widths.append(math.log(e.ci_jacobian[1] / e.ci_jacobian[0]))
+    assert widths[1] > 2.0 * widths[0]
 
 
 def test_run_without_key_trajectories_is_input_error() -> None:

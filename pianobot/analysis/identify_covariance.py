@@ -1,0 +1,150 @@
+"""Covariances of identified parameters when residuals are not independent white noise.
+
+Used by `pianobot.analysis.identify`: keystroke residuals are correlated in time (the key rings,
+the arm trace is noisy and drives the model), so s²(JᵀJ)⁻¹ is too narrow. Two estimates:
+
+- `hac_covariance`: sandwich with a long-run (Newey–West) middle per keystroke, window from the
+  scores' own autocorrelation — honest under model error;
+- `noise_covariance`: linearised propagation of the measured noise levels through the model,
+  including noise on its input — honest when the model is right, and the only one that sees the
+  part of the input noise the fit absorbs.
+
+`larger_variances` combines them (per parameter the larger variance).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+import numpy.typing as npt
+
+FloatArray = npt.NDArray[np.float64]
+
+
+def hac_covariance(mask: npt.NDArray[np.bool_], J: FloatArray, r: FloatArray) -> FloatArray:
+    """Covariance of the log-parameters, robust to residuals correlated along each keystroke.
+
+    The residuals of one keystroke are not independent: noise on the measured arm trace is
+    filtered by the model into slow, smooth errors on x1 and x2 (and any model error is smooth
+    too), so neighbouring samples carry nearly the same information. Counting them as
+    independent (s²(JᵀJ)⁻¹) makes intervals too narrow. Here the score g_t = Σ_channels J_t r_t
+    of each keystroke is treated as a time series and its long-run covariance is estimated with
+    Bartlett (Newey–West) weights up to a lag chosen from the scores' own autocorrelation
+    (`_score_window`); keystrokes are independent of each other. The sandwich
+    (JᵀJ)⁻¹ · meat · (JᵀJ)⁻¹ then equals s²(JᵀJ)⁻¹ for white residuals and widens by the
+    effective-sample-size factor when they are correlated, without needing many keystrokes
+    (a keystroke-cluster sandwich needs dozens of clusters per parameter to be reliable).
+    """
+    n, _, T = mask.shape
+    p = J.shape[1]
+    scores = np.zeros((n, 2, T, p))
+    scores[mask] = J * r[:, None]
+    g = scores.sum(axis=1)  # (n, T, p): x1 and x2 at one instant share the same input noise
+    lag = _score_window(g)
+    meat = np.einsum("ktp,ktq->pq", g, g)
+    for ell in range(1, lag + 1):
+        gamma = np.einsum("ktp,ktq->pq", g[:, ell:], g[:, :-ell])
+        meat += (1.0 - ell / (lag + 1.0)) * (gamma + gamma.T)
+    bread = np.linalg.pinv(J.T @ J)
+    n_offsets = int(np.count_nonzero(mask.any(axis=2)))  # profiled rest offsets
+    dof = max(r.size - p - n_offsets, 1)
+    cov = bread @ meat @ bread * (r.size / dof)  # small-sample correction, as for s²
+    return np.asarray(0.5 * (cov + cov.T), dtype=np.float64)
+
+
+def larger_variances(a: FloatArray, b: FloatArray) -> FloatArray:
+    """Per-parameter larger variance of two covariances, with the correlations of the one that
+    is larger overall (so the result stays a valid, positive semi-definite covariance)."""
+    va, vb = np.clip(np.diag(a), 0.0, None), np.clip(np.diag(b), 0.0, None)
+    base = a if float(np.sum(va / np.maximum(vb, 1e-300))) >= va.size else b
+    sd_base = np.sqrt(np.clip(np.diag(base), 1e-300, None))
+    corr = base / np.outer(sd_base, sd_base)
+    sd = np.sqrt(np.maximum(va, vb))
+    return np.asarray(corr * np.outer(sd, sd), dtype=np.float64)
+
+
+def noise_sigma_m(x: FloatArray) -> float:
+    """Sample noise σ of smooth traces (rows), from the MAD of second differences.
+
+    Arm, fingertip and key move smoothly at the mocap rate over most samples (rest, hold), so
+    the second difference there is noise only: Var(Δ²e) = 6σ². The median ignores the few
+    samples where the motion itself curves (accelerations, contact, ringing).
+    """
+    d2 = np.diff(np.asarray(x, dtype=np.float64), n=2, axis=-1).ravel()
+    d2 = d2[np.isfinite(d2)]
+    if d2.size == 0:
+        return 0.0
+    return float(1.4826 * np.median(np.abs(d2)) / math.sqrt(6.0))
+
+
+def noise_covariance(
+    mask: npt.NDArray[np.bool_],
+    J: FloatArray,
+    impulse: FloatArray,
+    level_idx: npt.NDArray[np.intp],
+    traces_m: Sequence[FloatArray],
+    scale_m: float,
+) -> FloatArray:
+    """Covariance of the log-parameters propagated from white measurement noise (linearised).
+
+    θ̂ − θ ≈ −(JᵀJ)⁻¹ Jᵀ (G e_in − e_out): output noise e_out enters directly, noise e_in on the
+    measured arm trace enters through the model G itself. G e_in rings like the key, i.e. much
+    like a change of the key's parameters, so the fit absorbs part of it and the residuals no
+    longer show it (an errors-in-variables effect the residual-based sandwich cannot see). Its
+    contribution Jᵀ G Gᵀ J is computed from the model's impulse response per vacuum level
+    (Gᵀ J is a cross-correlation, done by FFT). Noise σs come from `noise_sigma_m`.
+
+    Args:
+        mask: (n, 2, T) where x1, x2 were measured (J's rows, in order).
+        J: Jacobian of the residuals (in units of `scale_m`) with respect to the parameters.
+        impulse: (levels, 2, T) response of x1, x2 to one unit sample of x0.
+        level_idx: the level of each keystroke.
+        traces_m: measured x0, x1, x2 (n, T) for the noise levels.
+        scale_m: the residuals' unit in metres.
+    """
+    n, _, T = mask.shape
+    p = J.shape[1]
+    Jfull = np.zeros((n, 2, T, p))
+    Jfull[mask] = J
+    s_in, s1, s2 = (noise_sigma_m(x) / scale_m for x in traces_m)
+    meat = np.zeros((p, p))
+    for c, s_out in enumerate((s1, s2)):
+        meat += s_out**2 * np.einsum("ktp,ktq->pq", Jfull[:, c], Jfull[:, c])
+    if s_in > 0:
+        size = 2 * T
+        H = np.fft.rfft(impulse, size, axis=-1)[level_idx]  # (n, 2, F)
+        F = np.fft.rfft(Jfull, size, axis=2)  # (n, 2, F, p)
+        # (Gᵀ J)[τ] = Σ_c Σ_m h_c[m] J_c[τ + m]
+        gtj = np.fft.irfft(np.einsum("kcf,kcfp->kfp", np.conj(H), F), size, axis=1)[:, :T]
+        meat += s_in**2 * np.einsum("ktp,ktq->pq", gtj, gtj)
+    bread = np.linalg.pinv(J.T @ J)
+    cov = bread @ meat @ bread
+    return np.asarray(0.5 * (cov + cov.T), dtype=np.float64)
+
+
+def _score_window(g: FloatArray, c: float = 5.0) -> int:
+    """Truncation lag for the long-run covariance of the per-keystroke score series g (n, T, p).
+
+    The key is a lightly damped resonator: arm-trace noise reaches x2 as a ringing error whose
+    correlation oscillates and decays over tens of samples, which a lag-1 (AR(1)) rule misses.
+    Instead the window follows the data: for each parameter's score, the integrated
+    autocorrelation time τ(W) = 1 + 2 Σ_{l≤W} ρ(l) is accumulated until W ≥ c·τ(W) (Sokal's
+    automatic window); the widest window over the parameters is used, at most T/2.
+    """
+    n, T, p = g.shape
+    var = np.einsum("ktp,ktp->p", g, g)
+    widest = 1
+    for j in range(p):
+        if var[j] <= 0:
+            continue
+        tau = 1.0
+        for ell in range(1, T // 2):
+            tau += 2.0 * float(np.sum(g[:, ell:, j] * g[:, :-ell, j])) / var[j]
+            if ell >= c * max(tau, 1.0):
+                widest = max(widest, ell)
+                break
+        else:
+            widest = T // 2
+    return int(min(max(widest, 1), max(T // 2, 1)))
