@@ -106,14 +106,23 @@ def start_points(
 ) -> list[dict[str, float]]:
     """Starting values worth trying for an effect's fit (one simulation each, best one kept).
 
-    An end stop or escapement the key never reaches has no gradient, so their depths are
-    started across the key travel actually measured (or across their bounds without mocap).
-    Other effects are started at their default and across the range of their magnitude
-    parameter: a stick/slip or stick/release switch makes the error jump, and a local fit
-    from one start can stall on the wrong step.
+    The effect's magnitude (the parameter with an "off" value) is started across its range: a
+    stick/slip or stick/release switch makes the error jump, and a local fit from one start can
+    stall on the wrong step. An end stop or escapement the key never reaches has no gradient,
+    so their depths are also started across the key travel actually measured (or across their
+    bounds without mocap), in combination with the magnitudes.
     """
     specs = effect_specs(model, effect)
     by_name = {s.name: s for s in specs}
+    magnitudes: list[dict[str, float]] = [{}]
+    magnitude = next((s for s in specs if s.off is not None), None)
+    if magnitude is not None:
+        lo = magnitude.to_internal(max(magnitude.lower, 1e-9))
+        hi = magnitude.to_internal(magnitude.upper)
+        for fraction in (0.1, 0.3, 0.6, 0.9):
+            value = magnitude.from_internal(lo + fraction * (hi - lo))
+            if value != magnitude.off:
+                magnitudes.append({magnitude.name: value})
     travel = [
         float(np.nanmax(k.x_m[2]))
         for k in keystrokes
@@ -128,19 +137,10 @@ def start_points(
             depths = [f * top for f in (0.5, 0.7, 0.85, 0.95)]
         else:
             depths = list(np.linspace(spec.lower, spec.upper, 5)[1:-1])
-        return [{name: min(max(d, spec.lower), spec.upper)} for d in depths]
-    starts: list[dict[str, float]] = [{}]
-    magnitude = next((s for s in specs if s.off is not None), None)
-    if magnitude is not None:
-        lo, hi = (
-            magnitude.to_internal(max(magnitude.lower, 1e-9)),
-            magnitude.to_internal(magnitude.upper),
-        )
-        for fraction in (0.1, 0.3, 0.6, 0.9):
-            value = magnitude.from_internal(lo + fraction * (hi - lo))
-            if value != magnitude.off:
-                starts.append({magnitude.name: value})
-    return starts
+        return [
+            {name: min(max(d, spec.lower), spec.upper), **m} for d in depths for m in magnitudes[:4]
+        ]
+    return magnitudes
 
 
 def off_values(names: Sequence[str]) -> tuple[float, ...]:

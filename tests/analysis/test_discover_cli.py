@@ -9,8 +9,9 @@ import pytest
 from typer.testing import CliRunner
 
 from pianobot.analysis import discover_scenarios as sc
+from pianobot.analysis.discover_decide import family_of
 from pianobot.cli import _register, app
-from pianobot.physics.model import load_model
+from pianobot.physics.model import load_model, save_model
 
 
 @pytest.fixture(scope="module")
@@ -19,13 +20,12 @@ def cli() -> CliRunner:
     return CliRunner()
 
 
-def test_discover_json_names_the_hidden_keybed(cli: CliRunner, tmp_path: Path) -> None:
+def test_discover_names_several_effects_one_by_one(cli: CliRunner, tmp_path: Path) -> None:
+    """Keybed + friction + mocap clock offset hidden at once: each iteration names one more."""
     data = tmp_path / "data"
-    scenario = sc.hidden_effect("keybed", "strong", seed=3)
+    scenario = sc.reduced(sc.several(seed=61))
     run_id = sc.write_run(sc.generate(scenario), data)
     start = tmp_path / "start.json"
-    from pianobot.physics.model import save_model
-
     save_model(scenario.start, start)
     report = tmp_path / "discover.html"
     result = cli.invoke(
@@ -45,12 +45,22 @@ def test_discover_json_names_the_hidden_keybed(cli: CliRunner, tmp_path: Path) -
     assert result.exit_code == 0, result.output
     payload = json.loads(result.stdout)
     assert set(payload) >= {"iterations", "verdict"}
-    first = payload["iterations"][0]
-    assert first["accepted_effect"] == "keybed"
-    assert {"candidates", "gap_before", "gap_after"} <= set(first)
-    assert first["gap_after"]["primary"] < first["gap_before"]["primary"] / 5
-    assert report.is_file() and "Missing effect: keybed" in report.read_text()
-    assert "keybed" in load_model(payload["model_file"]).effects
+    iterations = payload["iterations"]
+    assert all(
+        {"accepted_effect", "candidates", "gap_before", "gap_after"} <= set(it) for it in iterations
+    )
+    named = [it["accepted_effect"] for it in iterations if it["accepted_effect"]]
+    assert len(named) >= 2 and len(set(named)) == len(named)
+    assert {family_of(e) for e in named} >= {family_of("keybed"), family_of("key_friction")}
+    assert iterations[-1]["accepted_effect"] is None  # the loop stops when nothing passes
+    for it in iterations[:-1]:
+        assert it["gap_after"]["primary"] < it["gap_before"]["primary"]
+    total = iterations[0]["gap_before"]["primary"] / iterations[-1]["gap_after"]["primary"]
+    assert total > 5
+    html = report.read_text()
+    assert all(f"Missing effect: {e}" in html for e in named)
+    model = load_model(payload["model_file"])
+    assert set(named) <= set(model.effects.names)
 
 
 def test_discover_bad_input_is_one_line_exit_2(cli: CliRunner, tmp_path: Path) -> None:
