@@ -46,12 +46,7 @@ class IdentifyResult:
             "model_file": None if self.model_path is None else str(self.model_path),
         }
         if self.static is not None:
-            s = self.static
-            out["static_stiffness"] = {
-                "levels_kpa": s.levels_kpa.tolist(), "k1_npm": s.k1_npm.tolist(),
-                "k1_a_npm": s.k1_a_npm, "k1_b_npm_per_kpa": s.k1_b_npm_per_kpa,
-                "ci_a": list(s.ci_a), "ci_b": list(s.ci_b), "compression_m": s.compression_m,
-            }
+            out["static_stiffness"] = self.static.to_dict()
         return out
 
 
@@ -115,7 +110,6 @@ def identify_runs(
             "holdout_rms_x2_m": {"identified": rms_id, "published": rms_pub},
         }
         if static is not None:
-            provenance["static_stiffness"] = {"k1_a_npm": static.k1_a_npm,
-                                              "k1_b_npm_per_kpa": static.k1_b_npm_per_kpa}
+            provenance["static_stiffness"] = static.to_dict()
         path = save_model(model, out, intervals=intervals, provenance=provenance)
     return IdentifyResult(fit, model, rms_id, rms_pub, peaks, static, path)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import re
 from pathlib import Path
 from typing import Annotated
 
@@ -15,50 +14,14 @@ from pianobot.analysis.fit_run import fit_runs
 from pianobot.analysis.identify_run import identify_runs
 from pianobot.analysis.static_stiffness import (
     STUDY_COMPRESSION_M,
-    StaticStiffness,
-    burst_peaks_n,
-    static_stiffness,
+    force_log_levels,
+    static_stiffness_from_logs,
 )
 from pianobot.cli.common import DEFAULT_DATA, DataDir, JsonFlag, emit_json
 from pianobot.errors import InputError
 from pianobot.reports.run_report import build_run_report
 
 RunIds = Annotated[list[str], typer.Argument(help="Run ids (or unique prefixes).")]
-_READING = re.compile(r"Analog reading\s*=\s*(-?\d+)\s*$")
-
-
-def _force_peaks(spec: str) -> tuple[float, list[float]]:
-    """`P=FILE` → (vacuum kPa, press peak forces in N) using the study's sensor conversion."""
-    if "=" not in spec:
-        raise InputError(f"expected P=FILE, got {spec!r}", "--force-log")
-    level, name = spec.split("=", 1)
-    try:
-        vacuum = -abs(float(level))
-    except ValueError:
-        raise InputError(f"vacuum level {level!r} is not a number", "--force-log") from None
-    path = Path(name)
-    if not path.is_file():
-        raise InputError("force log not found", str(path))
-    readings = [int(m.group(1)) for line in path.read_text(errors="replace").splitlines()
-                if (m := _READING.search(line))]
-    if not readings:
-        raise InputError("no 'Analog reading = N' lines", str(path))
-    force_n = [0.0353 * r + 0.204 for r in readings]  # the study's sensor calibration
-    return vacuum, burst_peaks_n(force_n).tolist()
-
-
-def _static(force_logs: list[str], compression_m: float) -> StaticStiffness | None:
-    specs: list[str] = []
-    for item in force_logs:
-        folder = Path(item)
-        if "=" not in item and folder.is_dir():  # a folder of {P}.txt files
-            specs += [f"{f.stem}={f}" for f in sorted(folder.glob("*.txt")) if re.fullmatch(r"\d+", f.stem)]
-        else:
-            specs.append(item)
-    if not specs:
-        return None
-    peaks = dict(_force_peaks(s) for s in specs)
-    return static_stiffness(peaks, compression_m=compression_m)
 
 
 def register(app: typer.Typer) -> None:
@@ -81,7 +44,8 @@ def register(app: typer.Typer) -> None:
         """Identify the keystroke model from mocap trajectories; write a model file with intervals."""
         if coupling not in ("tied", "free", "auto"):
             raise InputError(f"expected tied, free or auto, got {coupling!r}", "--coupling")
-        static = _static(force_log or [], compression_m)
+        levels = force_log_levels(force_log or [])
+        static = static_stiffness_from_logs(levels, compression_m=compression_m) if levels else None
         result = identify_runs(runs, data, out=out, coupling=coupling, bootstrap=bootstrap, seed=seed,
                                x0_source=x0_source, vacuum_kpa=vacuum_kpa, static=static)
         if json_out:

@@ -64,19 +64,19 @@ def test_wrong_schema_and_tampered_file(tmp_path: Path) -> None:
         load_predictor(path)
 
 
-@pytest.mark.slow
 def test_fit_on_study_soft_finger_logs(zhang2022: Path, data_dir: Path) -> None:
     from pianobot.analysis.fit_run import fit_runs
     from pianobot.io.importers import import_keystroke_log
 
     logs = sorted((zhang2022 / "data" / "soft" / "ctrl_midi").glob("*.txt"))
     ids = [import_keystroke_log(f, data_dir).run_id for f in logs]
-    table, saved = fit_runs(ids, data_dir, kinds=["poly", "mlp"], out_dir=data_dir / "models")
+    table, saved = fit_runs(ids, data_dir, kinds=["gp", "poly"], out_dir=data_dir / "models")
     rows = table.set_index("model")
     assert rows.loc["mean", "r2"] < 0.05
-    best = str(rows.drop(index="mean")["r2"].idxmax())
-    assert rows.loc[best, "r2"] > 0.8  # measured: mlp 0.94, poly 0.83 (gp 0.97, too slow here)
-    model = load_predictor(saved[best])
+    # Measured (405 keystrokes, 5 grouped folds): gp R² 0.967, poly 0.83, spline 0.88, mlp 0.95.
+    assert rows.loc["gp", "r2"] > 0.9 and rows.loc["poly", "r2"] > 0.75
+    assert rows.loc["gp", "silent_accuracy"] > 0.95
+    model = load_predictor(saved["gp"])
     fixed = {"vacuum_kpa": -60.0, "acceleration_mps2": 0.5, "depth_m": 0.03, "distance_m": 0.05}
     lo, hi = model.velocity_range(max_down_velocity_mps=0.08, **fixed)
     targets = np.linspace(lo + 0.5, hi - 0.5, 8)
