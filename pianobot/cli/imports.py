@@ -81,6 +81,10 @@ def mocap(
     up_axis: Annotated[
         str, typer.Option("--up-axis", help="Vertical axis of the export (x|y|z).")
     ] = "y",
+    vacuum_kpa: Annotated[
+        float | None,
+        typer.Option("--vacuum-kpa", help="Finger vacuum during the take (gauge kPa, <= 0)."),
+    ] = None,
     data: DataDir = DEFAULT_DATA,
     json: JsonFlag = False,
 ) -> None:
@@ -88,7 +92,13 @@ def mocap(
     markers = _rig_markers(rig) if rig is not None else {}
     markers.update(_marker_options(marker or []))
     result = import_mocap(
-        file, data, run_id=run, markers=markers or None, min_coverage=min_coverage, up_axis=up_axis
+        file,
+        data,
+        run_id=run,
+        markers=markers or None,
+        min_coverage=min_coverage,
+        up_axis=up_axis,
+        vacuum_kpa=vacuum_kpa,
     )
     _show(result, json)
 

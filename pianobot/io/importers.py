@@ -198,14 +198,19 @@ def import_mocap(
     markers: dict[str, str] | None = None,
     min_coverage: float = 0.5,
     up_axis: str = "y",
+    vacuum_kpa: float | None = None,
 ) -> ImportResult:
     """Import a Motive take: a new run with one trial per keystroke, or aligned to `run_id`.
 
     Without `run_id`: trials carry the segmented keystrokes (arm speed estimate as
     down_velocity_mps, arm travel, key travel and speed) and mocap samples from motion start.
     With `run_id`: a derived run = that run's tables + mocap samples re-timed to its trials.
+    `vacuum_kpa` (gauge, ≤ 0): the finger's vacuum during the take, stored on every trial (a
+    Motive take does not record it); with `run_id` it fills only trials that lack one.
     """
     path, data_dir = Path(path), Path(data_dir)
+    if vacuum_kpa is not None and not (math.isfinite(vacuum_kpa) and -100.0 <= vacuum_kpa <= 0.0):
+        raise InputError(f"vacuum is a gauge pressure in [-100, 0] kPa, got {vacuum_kpa:g}", "--vacuum-kpa")
     take = read_mocap(path, markers, min_coverage, up_axis)
     strokes = segment_take(take)
     sha = file_sha256(path)
@@ -217,11 +222,13 @@ def import_mocap(
         "roles": take.roles,
         "coverage_dropped": sorted(n for n, c in take.coverage.items() if c < min_coverage),
         "up_axis": up_axis,
+        "vacuum_kpa": vacuum_kpa,
         "skipped_lines": [],
     }
     extra: dict[str, Any] = {"keystrokes": len(strokes), "roles": take.roles}
     if run_id is None:
         trials = _stroke_trials(strokes, sha)
+        trials["vacuum_kpa"] = math.nan if vacuum_kpa is None else float(vacuum_kpa)
         samples = _stroke_samples(
             take, strokes, trials["trial_id"].tolist(), strokes["t_start_s"].to_numpy(), 0.0
         )
@@ -242,6 +249,9 @@ def import_mocap(
     meta.update(derived_from=run.run_id, clock_offset_s=alignment.clock_offset_s,
                 alignment={"method": alignment.method, "score": alignment.score})  # fmt: skip
     base = trials.drop(columns=["run_id"], errors="ignore")
+    if vacuum_kpa is not None:
+        known = base["vacuum_kpa"] if "vacuum_kpa" in base else pd.Series(math.nan, index=base.index)
+        base = base.assign(vacuum_kpa=known.fillna(float(vacuum_kpa)))
     midi = run.midi.drop(columns=["run_id"], errors="ignore")
     new_id = _write_run(
         data_dir,

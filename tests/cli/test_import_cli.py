@@ -91,6 +91,29 @@ def test_mocap_json(tmp_path: Path, data_dir: Path) -> None:
     assert "clock_offset_s" not in payload
 
 
+def test_mocap_vacuum_is_stored_on_every_trial(
+    tmp_path: Path,
+    data_dir: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "io"))
+    from motive_synth import motive_csv
+
+    from pianobot.store import load_run
+
+    take = motive_csv(tmp_path / "take.csv", duration_s=8.0, starts_s=[1.0, 4.0], speeds_mps=[0.02, 0.04])
+    code, out = invoke("import", "mocap", str(take), "--marker", "arm=Unlabeled:100",
+                       "--vacuum-kpa", "-40", "--data", str(data_dir), "--json")  # fmt: skip
+    assert code == 0
+    run = load_run(json.loads(out)["run_id"], data_dir)
+    assert run.trials["vacuum_kpa"].tolist() == [-40.0, -40.0]
+    assert run.meta["vacuum_kpa"] == -40.0
+    code, _, err = run_main(["import", "mocap", str(take), "--vacuum-kpa", "40", "--data", str(data_dir)],
+                            monkeypatch, capsys)  # fmt: skip
+    assert code == 2 and "--vacuum-kpa" in err and err.count("\n") == 1
+
+
 @pytest.mark.parametrize("command", ["keystroke-log", "force-log", "mocap"])
 def test_bad_file_exit_2_and_no_run(
     tmp_path: Path,
