@@ -19,8 +19,9 @@ from typing import Any
 import numpy as np
 
 from pianobot.analysis import discover_scenarios as sc
-from pianobot.analysis.discover import DiscoveryResult, discover
+from pianobot.analysis.discover import discover
 from pianobot.analysis.discover_decide import family_of
+from pianobot.analysis.discover_result import DiscoveryResult
 
 RESULTS = Path(__file__).resolve().parent / "results" / "discover.json"
 

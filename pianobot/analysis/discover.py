@@ -17,17 +17,17 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from pianobot.analysis import discover_model as dm
-from pianobot.analysis.discover_data import Keystroke, Prediction, stratified_split
-from pianobot.analysis.discover_decide import Candidate, DecisionRule, choose, family_of
+from pianobot.analysis import discover_params as dp
+from pianobot.analysis.discover_data import Keystroke, stratified_split
+from pianobot.analysis.discover_decide import Candidate, DecisionRule, choose
 from pianobot.analysis.discover_fit import FitResult, bic, fit
 from pianobot.analysis.discover_load import load_keystrokes, resolve_model
 from pianobot.analysis.discover_localise import Localisation, localise
-from pianobot.analysis.sparse_terms import Proposal
+from pianobot.analysis.discover_result import DiscoveryResult, Iteration, decision_line, verdict
 from pianobot.errors import InputError
 from pianobot.physics.model import KeystrokeModel, save_model
 
@@ -50,79 +50,6 @@ class DiscoverySettings:
     noise_fraction: float = 1.0
 
 
-@dataclass(frozen=True)
-class Iteration:
-    """One round: localisation before, every candidate judged, the accepted one (or none)."""
-
-    index: int
-    before: Localisation
-    after: Localisation | None
-    candidates: tuple[Candidate, ...]
-    accepted: Candidate | None
-    threshold: float
-    bootstrap_delta_bic: tuple[float, ...]
-    proposals: tuple[Proposal, ...]
-
-    def to_dict(self) -> dict[str, Any]:
-        """The JSON form (`accepted_effect`, `candidates`, `gap_before`, `gap_after`, ...)."""
-        after = self.after if self.after is not None else self.before
-        return {
-            "index": self.index,
-            "accepted_effect": self.accepted.effect if self.accepted else None,
-            "accepted_family": family_of(self.accepted.effect) if self.accepted else None,
-            "gap_before": self.before.gap.to_dict(),
-            "gap_after": after.gap.to_dict(),
-            "threshold_delta_bic": self.threshold,
-            "bootstrap_delta_bic": list(self.bootstrap_delta_bic),
-            "candidates": [c.to_dict() for c in self.candidates],
-            "sparse_proposals": [
-                {"term": p.term, "family": p.family, "coefficient": p.coefficient, "share": p.share}
-                for p in self.proposals
-            ],
-            "localisation_before": self.before.to_dict(),
-            "localisation_after": after.to_dict(),
-        }
-
-
-@dataclass(frozen=True)
-class DiscoveryResult:
-    """Everything discovery found, with the model it ends with."""
-
-    iterations: tuple[Iteration, ...]
-    start_model: KeystrokeModel
-    base_model: KeystrokeModel  # the start model with its base parameters refit
-    final_model: KeystrokeModel
-    verdict: str
-    explained: bool
-    decision_line: str
-    n_train: int
-    n_held_out: int
-    held_out_ids: tuple[str, ...]
-    predictions_before: tuple[Prediction, ...] = ()  # held-out, base model
-    predictions_after: tuple[Prediction, ...] = ()  # held-out, final model
-    held_out: tuple[Keystroke, ...] = ()
-    notes: tuple[str, ...] = ()  # assumptions made for parameters the data do not record
-
-    @property
-    def accepted_effects(self) -> tuple[str, ...]:
-        """Accepted effects in the order they were found."""
-        return tuple(it.accepted.effect for it in self.iterations if it.accepted)
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready summary (the `--json` output)."""
-        return {
-            "verdict": self.verdict,
-            "explained": self.explained,
-            "decision": self.decision_line,
-            "accepted_effects": list(self.accepted_effects),
-            "n_train": self.n_train,
-            "n_held_out": self.n_held_out,
-            "notes": list(self.notes),
-            "iterations": [it.to_dict() for it in self.iterations],
-            "final_model": dm.model_to_dict(self.final_model),
-        }
-
-
 def _chi2(model: KeystrokeModel, keystrokes: Sequence[Keystroke], weights: dm.Weights) -> float:
     r = dm.residual_vector(keystrokes, dm.predict(model, keystrokes, states=False), weights)
     return float(r @ r)
@@ -143,13 +70,13 @@ def _fit_model(
     keeps the base parameters fixed (the screening fit), but the information criterion still
     counts them, so screened and joint fits compare on one scale.
     """
-    base_specs = dm.base_specs(model, keystrokes)
+    base_specs = dp.base_specs(model, keystrokes)
     specs = list(base_specs) if base else []
     if effect is not None:
-        specs += dm.effect_specs(model, effect)
+        specs += dp.effect_specs(model, effect)
 
     def residuals(values: dict[str, float]) -> np.ndarray:
-        trial = dm.apply_values(model, values)
+        trial = dp.apply_values(model, values)
         return dm.residual_vector(keystrokes, dm.predict(trial, keystrokes, states=False), weights)
 
     result = (
@@ -157,7 +84,7 @@ def _fit_model(
     )
     if not base:
         result = replace(result, bic=bic(result.chi2, len(specs) + len(base_specs), result.n))
-    return dm.apply_values(model, result.as_dict()), result
+    return dp.apply_values(model, result.as_dict()), result
 
 
 def _screen(
@@ -168,10 +95,10 @@ def _screen(
     max_nfev: int,
 ) -> tuple[KeystrokeModel, FitResult]:
     """Fit one effect with the base fixed, from the best of a few starting points."""
-    candidate = dm.with_effect(current, effect)
+    candidate = dp.with_effect(current, effect)
     starts = [
-        dm.apply_values(candidate, start)
-        for start in dm.start_points(candidate, effect, keystrokes)
+        dp.apply_values(candidate, start)
+        for start in dp.start_points(candidate, effect, keystrokes)
     ]
     best = min(starts, key=lambda m: _chi2(m, keystrokes, weights))
     return _fit_model(best, effect, keystrokes, weights, max_nfev, base=False)
@@ -225,56 +152,6 @@ def _other_gaps(before: Localisation, after: Localisation) -> tuple[tuple[str, f
     return (("on_velocity", b.on_velocity, a.on_velocity),)
 
 
-def _verdict(
-    iterations: Sequence[Iteration], final: Localisation, settings: DiscoverySettings
-) -> tuple[str, bool]:
-    accepted = [it.accepted.effect for it in iterations if it.accepted]
-    found = (
-        ("missing effects found: " + ", ".join(accepted)) if accepted else "no missing effect found"
-    )
-    lags = [row["lag1"] for row in final.phases if np.isfinite(row["lag1"])]
-    noisy_shape = not lags or float(np.median(lags)) < settings.noise_lag1
-    g = final.gap
-    if np.isfinite(g.position_m):
-        small = g.position_m <= settings.noise_fraction * max(g.sigma_m, 1e-12) or noisy_shape
-    else:
-        small = not np.isfinite(g.on_velocity) or g.on_velocity <= 1.0
-    if small:
-        return f"{found}; the remaining residual looks like noise (explained)", True
-    phases = final.worst_phases() or ["outcomes"]
-    return f"{found}; unexplained discrepancy remains in phases {', '.join(phases)}", False
-
-
-def _decision_line(iterations: Sequence[Iteration]) -> str:
-    parts = []
-    for it in iterations:
-        if it.accepted is None or it.after is None:
-            continue
-        c = it.accepted
-        params = ", ".join(
-            f"{name.split('.', 1)[1]} = {dm.format_value(name, c.fit.value(name), c.fit, name)}"
-            for name in c.effect_params
-        )
-        b, a = it.before.gap, it.after.gap
-        text = f"Missing effect: {c.effect}" + (f", {params}" if params else "")
-        if np.isfinite(c.gap_before):  # the position gap was above its noise floor
-            shrink = f"{b.primary / a.primary:.1f}×" if a.primary > 0 else "to the noise floor"
-            unit, scale = ("mm", 1e3) if b.primary_name == "position_m" else ("", 1.0)
-            what = "RMS" if unit else "MIDI velocity RMS"
-            text += (
-                f"; held-out systematic {what} {b.primary * scale:.3g} → "
-                f"{a.primary * scale:.3g}{(' ' + unit) if unit else ''} ({shrink})"
-            )
-        if (
-            np.isfinite(b.on_velocity)
-            and np.isfinite(a.on_velocity)
-            and b.primary_name == "position_m"
-        ):
-            text += f"; MIDI velocity RMS {b.on_velocity:.2g} → {a.on_velocity:.2g}"
-        parts.append(text)
-    return "\n".join(parts) if parts else "No missing effect found."
-
-
 def discover(
     keystrokes: Sequence[Keystroke],
     model: KeystrokeModel,
@@ -304,7 +181,7 @@ def discover(
         pending: list[Candidate] = []
         fitted: dict[str, KeystrokeModel] = {}
         screened: dict[str, tuple[KeystrokeModel, FitResult]] = {}
-        for effect in dm.candidate_effects(current, train, proposals):
+        for effect in dp.candidate_effects(current, train, proposals):
             screened[effect] = _screen(current, effect, train, weights, settings.screen_nfev)
         # Joint refits (base + effect) for the most promising candidates only: screening with
         # the base fixed already ranks them, and the decision uses the joint fit.
@@ -322,7 +199,7 @@ def discover(
                     effect=effect,
                     fit=cand_fit,
                     effect_params=names,
-                    off_values=dm.off_values(names),
+                    off_values=dp.off_values(names),
                     delta_bic=current_fit.bic - cand_fit.bic,
                     gap_before=_primary_or_nan(before, weights),
                     gap_after=after.gap.primary,
@@ -352,15 +229,15 @@ def discover(
             break
     held_after = tuple(dm.predict(current, held))
     final = localise(held, list(held_after), sigma_m=weights.sigma_m)
-    verdict, explained = _verdict(iterations, final, settings)
+    text, explained = verdict(iterations, final, settings.noise_lag1, settings.noise_fraction)
     return DiscoveryResult(
         iterations=tuple(iterations),
         start_model=model,
         base_model=base,
         final_model=current,
-        verdict=verdict,
+        verdict=text,
         explained=explained,
-        decision_line=_decision_line(iterations),
+        decision_line=decision_line(iterations),
         n_train=len(train),
         n_held_out=len(held),
         held_out_ids=tuple(k.key_id for k in held),

@@ -9,8 +9,9 @@ from __future__ import annotations
 import pytest
 
 from pianobot.analysis import discover_scenarios as sc
-from pianobot.analysis.discover import DiscoveryResult, discover
+from pianobot.analysis.discover import discover
 from pianobot.analysis.discover_decide import family_of
+from pianobot.analysis.discover_result import DiscoveryResult
 
 
 def _run(scenario: sc.Scenario) -> DiscoveryResult:
