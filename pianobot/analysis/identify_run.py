@@ -12,8 +12,10 @@ import numpy as np
 import pandas as pd
 
 import pianobot
+from pianobot.analysis.damping import DampingCheck, damping_check
 from pianobot.analysis.identify import TrajectoryFit, identify_trajectories, rms_x2_m, split_holdout
 from pianobot.analysis.keystroke_batch import KeystrokeBatch, keystroke_batch
+from pianobot.analysis.readout_fit import ReadoutFit, fit_readout
 from pianobot.analysis.static_stiffness import StaticStiffness
 from pianobot.errors import InputError
 from pianobot.physics.model import KeystrokeModel, save_model
@@ -32,6 +34,8 @@ class IdentifyResult:
     peak_hz: dict[str, float]
     static: StaticStiffness | None
     model_path: Path | None
+    damping: DampingCheck | None = None
+    readout: ReadoutFit | None = None
 
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {
@@ -44,6 +48,8 @@ class IdentifyResult:
             "holdout_rms_x2_published_m": self.holdout_rms_published_m,
             "x2_x0_peak_hz": self.peak_hz,
             "model_file": None if self.model_path is None else str(self.model_path),
+            "damping_check": None if self.damping is None else self.damping.to_dict(),
+            "readout": None if self.readout is None else self.readout.to_dict(),
         }
         if self.static is not None:
             out["static_stiffness"] = self.static.to_dict()
@@ -62,6 +68,13 @@ def _file_hash(path: Path) -> str:
 def load_batch(run_ids: Sequence[str], data_dir: Path, *, x0_source: str = "auto",
                vacuum_kpa: float | None = None) -> tuple[KeystrokeBatch, dict[str, str]]:
     """Keystroke batch over several runs (trial ids prefixed by run), and each run's data hash."""
+    batch, hashes, _ = load_batch_trials(run_ids, data_dir, x0_source=x0_source, vacuum_kpa=vacuum_kpa)
+    return batch, hashes
+
+
+def load_batch_trials(run_ids: Sequence[str], data_dir: Path, *, x0_source: str = "auto",
+                      vacuum_kpa: float | None = None) -> tuple[KeystrokeBatch, dict[str, str], pd.DataFrame]:
+    """`load_batch` plus the runs' trials, with the same prefixed trial ids."""
     samples, trials, hashes = [], [], {}
     for run_id in run_ids:
         run = load_run(run_id, data_dir)
@@ -76,9 +89,9 @@ def load_batch(run_ids: Sequence[str], data_dir: Path, *, x0_source: str = "auto
         trials.append(t.assign(trial_id=prefix + t["trial_id"].astype(str)))
         samples.append(s.assign(trial_id=prefix + s["trial_id"].astype(str)))
         hashes[run.run_id] = _file_hash(run.path)
-    batch = keystroke_batch(pd.concat(samples, ignore_index=True), pd.concat(trials, ignore_index=True),
-                            x0_source=x0_source)
-    return batch, hashes
+    all_trials = pd.concat(trials, ignore_index=True)
+    batch = keystroke_batch(pd.concat(samples, ignore_index=True), all_trials, x0_source=x0_source)
+    return batch, hashes, all_trials
 
 
 def identify_runs(
@@ -88,7 +101,7 @@ def identify_runs(
 ) -> IdentifyResult:
     """Identify the model from the runs' trajectories; compare with the published parameters on
     held-out keystrokes (every third per level); write the model file when `out` is given."""
-    batch, hashes = load_batch(run_ids, data_dir, x0_source=x0_source, vacuum_kpa=vacuum_kpa)
+    batch, hashes, trials = load_batch_trials(run_ids, data_dir, x0_source=x0_source, vacuum_kpa=vacuum_kpa)
     published = MSDParams()
     train, test = split_holdout(batch)
     held = identify_trajectories(train, prior=published, coupling=coupling)  # type: ignore[arg-type]
@@ -96,6 +109,13 @@ def identify_runs(
     rms_pub = rms_x2_m(test, published)
     fit = identify_trajectories(batch, prior=published, coupling=held.coupling, bootstrap=bootstrap, seed=seed)
     model = KeystrokeModel.study().replace(msd=fit.params)
+    damping = damping_check(batch, fit.params, seed=seed)
+    readout = fit_readout(batch, trials)
+    if readout is not None:
+        model = model.replace(piano=readout.piano(model.piano))
+        if abs(readout.curve_exponent - 1.0) > 0.05:  # the linear readout would misread loudness
+            model = model.with_effect("velocity_curve", curve_exponent=min(max(readout.curve_exponent, 0.5), 4.0),
+                                      curve_saturation=0.0)
     peaks = {f"{-abs(p):g}": peak_response(fit.params.at(-abs(p)))[0]
              for p in sorted(set(np.abs(batch.vacuum_kpa).tolist()))}
     path = None
@@ -108,8 +128,10 @@ def identify_runs(
             "runs": list(hashes), "data_sha256": hashes, "pianobot_version": pianobot.__version__,
             "fixed": fit.fixed, "coupling": fit.coupling, "bootstrap": bootstrap, "seed": seed,
             "holdout_rms_x2_m": {"identified": rms_id, "published": rms_pub},
+            "damping_check": None if damping is None else damping.to_dict(),
+            "readout": None if readout is None else readout.to_dict(),
         }
         if static is not None:
             provenance["static_stiffness"] = static.to_dict()
         path = save_model(model, out, intervals=intervals, provenance=provenance)
-    return IdentifyResult(fit, model, rms_id, rms_pub, peaks, static, path)
+    return IdentifyResult(fit, model, rms_id, rms_pub, peaks, static, path, damping, readout)

@@ -27,6 +27,17 @@ from pianobot.reports.html import (
 from pianobot.store import load_run
 
 
+def sound_by_level(trials: pd.DataFrame) -> pd.DataFrame:
+    """Keystrokes, sounded, silent and on-velocity range per vacuum level."""
+    rows = []
+    for vacuum, group in trials.groupby(trials["vacuum_kpa"].fillna(np.nan), dropna=False):
+        on = group["on_velocity"].astype(float)
+        rows.append({"vacuum_kpa": vacuum, "keystrokes": len(group), "sounded": int(on.notna().sum()),
+                     "silent": int((group["status"] == "silent").sum()),
+                     "on_velocity_min": on.min(), "on_velocity_median": on.median(), "on_velocity_max": on.max()})
+    return pd.DataFrame(rows)
+
+
 def build_run_report(run_ids: Sequence[str], data_dir: Path, out: Path, *, model_file: Path | None = None,
                      cv_table: pd.DataFrame | None = None) -> Path:
     """Write the report for `run_ids` to `out` and return its path."""
@@ -36,10 +47,14 @@ def build_run_report(run_ids: Sequence[str], data_dir: Path, out: Path, *, model
     trials = pd.concat([r.trials for r in runs], ignore_index=True)
     if trials.empty:
         raise InputError("the runs have no trials", ", ".join(run_ids))
-    params, intervals = MSDParams(), None
+    # Imported runs lack some columns (a mocap take has no MIDI, old logs no start times).
+    for column in ("on_velocity", "vacuum_kpa", "down_velocity_mps", "status"):
+        if column not in trials:
+            trials[column] = np.nan
+    params, intervals, provenance = MSDParams(), None, None
     if model_file is not None:
         mf = read_model_file(model_file)
-        params, intervals = mf.model.msd, mf.intervals
+        params, intervals, provenance = mf.model.msd, mf.intervals, mf.provenance
 
     sections = []
     prov = Section("Run provenance")
@@ -57,6 +72,7 @@ def build_run_report(run_ids: Sequence[str], data_dir: Path, out: Path, *, model
     sections.append(cov)
 
     out_sec = Section("Sound")
+    out_sec.add(table_html(sound_by_level(trials), caption="keystrokes per vacuum level"))
     out_sec.add(figure_html(figures.velocity_vs_speed(trials), "on-velocity vs arm speed per vacuum level"))
     out_sec.add(figure_html(figures.silent_map(trials), "silent-keystroke map"))
     sections.append(out_sec)
@@ -83,6 +99,11 @@ def build_run_report(run_ids: Sequence[str], data_dir: Path, out: Path, *, model
         irows = [{"name": k, "value": v.get("value"), "ci95_lo": (v.get("ci95") or [None, None])[0],
                   "ci95_hi": (v.get("ci95") or [None, None])[1]} for k, v in intervals.items()]
         model_sec.add(table_html(pd.DataFrame(irows), caption="identified parameters with 95 % intervals"))
+    for key, caption in (("damping_check", "damping cross-check (logarithmic decrement of free key ringing)"),
+                         ("readout", "identified piano readout (trigger depth, velocity map)")):
+        found = (provenance or {}).get(key)
+        if isinstance(found, dict):
+            model_sec.add(mapping_table_html(sorted(found.items()), caption=caption))
     sections.append(model_sec)
 
     if cv_table is not None:

@@ -132,3 +132,26 @@ def test_zzz40_identified_model_beats_published(zhang2022: Path, data_dir: Path)
     result = identify_runs([run], data_dir, out=None, bootstrap=0)  # the take carries its vacuum
     assert result.holdout_rms_identified_m < result.holdout_rms_published_m
     assert 7.0 <= result.peak_hz["-40"] <= 11.0
+
+
+def test_identify_writes_readout_and_damping_into_the_model_file(data_dir: Path, tmp_path: Path) -> None:
+    import json
+
+    from _synthetic_runs import write_run
+
+    from pianobot.analysis.features import keystroke_features
+    from pianobot.analysis.identify_run import identify_runs
+
+    trials, samples = linear_keystrokes(TRUTH, seed=4, speeds_mps=(0.01, 0.02, 0.03, 0.04, 0.05))
+    speed = {tid: keystroke_features(g.t_s.to_numpy(), g.x2_m.to_numpy(), trigger_depth_m=0.001).key_speed_at_trigger_mps
+             for tid, g in samples.groupby("trial_id")}
+    trials["on_velocity"] = [float(np.clip(np.round(127 * (speed[t] / 0.05) ** 1.5), 1, 127)) for t in trials.trial_id]
+    run = write_run(data_dir, trials, samples)
+    result = identify_runs([run], data_dir, out=tmp_path / "m.json", bootstrap=0, coupling="tied")
+    assert result.readout is not None and result.readout.trigger_depth_m == pytest.approx(0.001, abs=0.0004)
+    model = json.loads((tmp_path / "m.json").read_text())
+    piano = model["model"]["piano"]
+    assert piano["upper_sensor_m"] < result.readout.trigger_depth_m < piano["lower_sensor_m"]
+    assert model["model"]["effects"]["velocity_curve"]["curve_exponent"] == pytest.approx(1.5, rel=0.15)
+    assert model["provenance"]["readout"]["n_trials"] == int(trials["on_velocity"].notna().sum()) >= 5
+    assert "damping_check" in model["provenance"]

@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import json
-import subprocess
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -12,11 +12,28 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "analysis"))
 from _synthetic_runs import linear_keystrokes, sounded_trials, write_run  # noqa: E402
 
+from pianobot.cli import main  # noqa: E402
 from pianobot.physics.msd import MSDParams  # noqa: E402
+from pianobot.store import RunWriter  # noqa: E402
 
 
-def _cli(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "pianobot", *args], capture_output=True, text=True)
+class _Result:
+    def __init__(self, code: int, stdout: str, stderr: str) -> None:
+        self.returncode, self.stdout, self.stderr = code, stdout, stderr
+
+
+@pytest.fixture()
+def cli(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> Callable[..., _Result]:
+    """The real entry point in-process (a subprocess would pay the import time on every call)."""
+
+    def run(*args: str) -> _Result:
+        monkeypatch.setattr(sys, "argv", ["pianobot", *args])
+        with pytest.raises(SystemExit) as stop:
+            main()
+        captured = capsys.readouterr()
+        return _Result(int(stop.value.code or 0), captured.out, captured.err)
+
+    return run
 
 
 @pytest.fixture()
@@ -25,9 +42,9 @@ def traj_run(data_dir: Path) -> str:
     return write_run(data_dir, trials, samples)
 
 
-def test_identify_json_has_parameters_with_intervals(data_dir: Path, traj_run: str, tmp_path: Path) -> None:
+def test_identify_json_has_parameters_with_intervals(cli: Callable[..., _Result], data_dir: Path, traj_run: str, tmp_path: Path) -> None:
     out = tmp_path / "model.json"
-    proc = _cli("identify", traj_run, "--data", str(data_dir), "--json", "--bootstrap", "3", "--out", str(out))
+    proc = cli("identify", traj_run, "--data", str(data_dir), "--json", "--bootstrap", "3", "--out", str(out))
     assert proc.returncode == 0, proc.stderr
     payload = json.loads(proc.stdout)
     params = payload["parameters"]
@@ -38,22 +55,34 @@ def test_identify_json_has_parameters_with_intervals(data_dir: Path, traj_run: s
     assert set(params) == set(model["intervals"])
 
 
-def test_fit_json_prints_cv_table(data_dir: Path, tmp_path: Path) -> None:
+def test_fit_json_prints_cv_table(cli: Callable[..., _Result], data_dir: Path, tmp_path: Path) -> None:
     run = write_run(data_dir, sounded_trials(0), None)
-    proc = _cli("fit", run, "--model", "poly", "--data", str(data_dir), "--json", "--out-dir", str(tmp_path))
+    proc = cli("fit", run, "--model", "poly", "--data", str(data_dir), "--json", "--out-dir", str(tmp_path))
     assert proc.returncode == 0, proc.stderr
     rows = {r["model"]: r for r in json.loads(proc.stdout)["cv"]}
     assert rows["poly"]["r2"] > rows["mean"]["r2"]
     assert (tmp_path / "predictor-poly.json").is_file()
 
 
-def test_bad_input_one_line_exit_2(data_dir: Path, tmp_path: Path) -> None:
+def test_bad_input_one_line_exit_2(cli: Callable[..., _Result], data_dir: Path, tmp_path: Path) -> None:
     no_mocap = write_run(data_dir, sounded_trials(0), None, name="nomocap")
-    proc = _cli("identify", no_mocap, "--data", str(data_dir), "--out", str(tmp_path / "m.json"))
+    proc = cli("identify", no_mocap, "--data", str(data_dir), "--out", str(tmp_path / "m.json"))
     assert proc.returncode == 2 and proc.stderr.count("\n") == 1 and "mocap" in proc.stderr
-    proc = _cli("fit", "no-such-run", "--data", str(data_dir))
+    proc = cli("fit", "no-such-run", "--data", str(data_dir))
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
     wrong = tmp_path / "wrong.json"
     wrong.write_text('{"schema": "other/1"}')
-    proc = _cli("report", no_mocap, "--data", str(data_dir), "--model", str(wrong), "--out", str(tmp_path / "r.html"))
+    proc = cli("report", no_mocap, "--data", str(data_dir), "--model", str(wrong), "--out", str(tmp_path / "r.html"))
     assert proc.returncode == 2 and proc.stderr.startswith("error:") and proc.stderr.count("\n") == 1
+
+
+def test_empty_run_is_one_line_error(cli: Callable[..., _Result], data_dir: Path, tmp_path: Path) -> None:
+    writer = RunWriter.create(data_dir, name="empty", kind="import", meta={}, plan=None, fsync=False)
+    writer.finish("completed")
+    for command in (["report", writer.run_id, "--out", str(tmp_path / "r.html")],
+                    ["identify", writer.run_id, "--out", str(tmp_path / "m.json")],
+                    ["fit", writer.run_id, "--out-dir", str(tmp_path)]):
+        proc = cli(*command, "--data", str(data_dir))
+        assert proc.returncode == 2, (command, proc.stderr)
+        assert proc.stderr.startswith("error:") and proc.stderr.count("\n") == 1 and "no trials" in proc.stderr
+    assert not (tmp_path / "r.html").exists() and not (tmp_path / "m.json").exists()

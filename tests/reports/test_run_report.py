@@ -64,3 +64,37 @@ def test_html_helpers_escape_and_format(tmp_path: Path) -> None:
     assert "&lt;b&gt;" in html and "–" in html
     out = write_page(tmp_path / "p.html", "T", [Section("S").add(html)])
     assert out.read_text().startswith("<!DOCTYPE html>")
+
+
+def _assert_self_contained(path: Path, *, min_figures: int, min_tables: int) -> str:
+    page = _parse(path)
+    assert len(page.imgs) >= min_figures
+    assert all(src.startswith("data:image/png;base64,") and len(src) > 200 for src in page.imgs)
+    assert page.links == [], page.links  # no href/src to anything, no <script>, no <link>
+    assert page.tables >= min_tables
+    text = path.read_text()
+    assert not re.search(r"https?://", text)
+    return text
+
+
+def test_report_on_quickstart_sim_run(data_dir: Path, tmp_path: Path) -> None:
+    from pianobot.physics.model import KeystrokeModel, save_model
+    from pianobot.run import run_sweep
+
+    spec = Path(__file__).resolve().parents[2] / "experiments" / "quickstart.yaml"
+    outcome = run_sweep(spec, data_dir=data_dir, progress=False)
+    model = save_model(KeystrokeModel.study(), tmp_path / "model.json")
+    text = _assert_self_contained(build_run_report([outcome.run_id], data_dir, tmp_path / "r.html", model_file=model),
+                                  min_figures=6, min_tables=4)
+    for heading in ("Run provenance", "Parameter coverage", "Sound", "Keystroke stages", "Model"):
+        assert heading in text
+
+
+def test_report_on_fixture_imports(zhang2022: Path, data_dir: Path, tmp_path: Path) -> None:
+    from pianobot.io.importers import import_keystroke_log, import_mocap
+
+    log = import_keystroke_log(zhang2022 / "data/soft/ctrl_midi/soft_60_angle_45.txt", data_dir).run_id
+    take = import_mocap(zhang2022 / "zzz/zzz40.csv", data_dir, vacuum_kpa=-40.0).run_id
+    text = _assert_self_contained(build_run_report([log, take], data_dir, tmp_path / "r.html"),
+                                  min_figures=5, min_tables=4)
+    assert log in text and take in text
