@@ -108,8 +108,8 @@ def fit_readout(batch: KeystrokeBatch, trials: pd.DataFrame, *, n_depths: int = 
         scan.append({"depth_m": float(d), "rmse_velocity": rmse, "full_scale_speed_mps": s_full,
                      "curve_exponent": gamma})
     frame = pd.DataFrame(scan)
-    best = frame.loc[frame["rmse_velocity"].idxmin()]
-    if not math.isfinite(float(best["rmse_velocity"])):
+    best = scan[int(np.argmin(frame["rmse_velocity"].to_numpy(dtype=np.float64)))]
+    if not math.isfinite(best["rmse_velocity"]):
         return None
-    return ReadoutFit(float(best["depth_m"]), float(best["full_scale_speed_mps"]), float(best["curve_exponent"]),
-                      float(best["rmse_velocity"]), int(rows.size), frame)
+    return ReadoutFit(best["depth_m"], best["full_scale_speed_mps"], best["curve_exponent"],
+                      best["rmse_velocity"], int(rows.size), frame)

@@ -46,11 +46,9 @@ def press_forces_n(log: ForceLog, smooth_samples: int = SMOOTH_SAMPLES) -> Float
     force = log.samples["force_n"].to_numpy(dtype=np.float64)
     width = max(int(smooth_samples), 1)
     smooth = np.convolve(force, np.ones(width) / width, mode="same") if force.size >= width else force
-    peaks = [
-        float(np.max(smooth[int(b.start_index) : int(b.end_index)])) - log.baseline_n
-        for b in log.bursts.itertuples()
-        if int(b.end_index) > int(b.start_index)
-    ]
+    starts = log.bursts["start_index"].to_numpy(dtype=np.int64)
+    ends = log.bursts["end_index"].to_numpy(dtype=np.int64)
+    peaks = [float(np.max(smooth[a:b])) - log.baseline_n for a, b in zip(starts, ends, strict=True) if b > a]
     return np.asarray(peaks, dtype=np.float64)
 
 

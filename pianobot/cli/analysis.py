@@ -59,6 +59,20 @@ def register(app: typer.Typer) -> None:
         console.print(table)
         console.print(f"held-out RMS x2: identified {1e3 * result.holdout_rms_identified_m:.4f} mm, "
                       f"published {1e3 * result.holdout_rms_published_m:.4f} mm; x2/x0 peak (Hz): {result.peak_hz}")
+        if result.damping is not None:
+            d = result.damping
+            console.print(f"damping cross-check (log decrement, {len(d.ringing)} keystrokes): "
+                          f"{d.frequency_hz:.2f} Hz, zeta {d.zeta:.3f} [{d.zeta_ci95[0]:.3f}, {d.zeta_ci95[1]:.3f}]; "
+                          f"identified model's mode {d.model_frequency_hz:.2f} Hz, zeta {d.model_zeta:.3f}")
+        if result.readout is not None:
+            r = result.readout
+            console.print(f"readout: trigger depth {1e3 * r.trigger_depth_m:.2f} mm, velocity = 127 (s / "
+                          f"{r.full_scale_speed_mps:.4f} m/s)^{r.curve_exponent:.2f}, RMSE {r.rmse_velocity:.2f} "
+                          f"MIDI ({r.n_trials} keystrokes)")
+        if result.static is not None:
+            st = result.static
+            console.print(f"static stiffness: k1 = {st.k1_a_npm:.2f} + {st.k1_b_npm_per_kpa:.3f}|p| N/m "
+                          f"(compression {1e3 * st.compression_m:.1f} mm)")
 
     @app.command()
     def fit(
