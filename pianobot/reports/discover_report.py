@@ -85,6 +85,7 @@ def _overlay(result: DiscoveryResult, count: int = 3) -> str:
         ax.set_ylabel("mm (down +)")
     axes[-1, 0].set_xlabel("t since motion start (s)")
     axes[0, 0].legend(loc="upper right", fontsize=7, ncol=3)
+    fig.tight_layout()
     return figure_html(
         fig, "Worst held-out keystrokes: dots measured, dashed base model, solid final model"
     )
