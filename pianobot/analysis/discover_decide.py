@@ -50,7 +50,7 @@ class DecisionRule:
     """Thresholds of the acceptance rule (the stated fractions are part of the report)."""
 
     bic_margin: float = 10.0
-    min_gap_reduction: float = 0.2
+    min_gap_reduction: float = 0.1
     nested_tolerance: float = 10.0
     bootstrap_factor: float = 2.0  # threshold ≥ factor × largest bootstrap ΔBIC
 

@@ -183,7 +183,9 @@ def format_value(name: str, value: float, fit: FitResult, key: str) -> str:
     i = fit.names.index(key)
     half = 0.5 * (fit.upper_ci[i] - fit.lower_ci[i])
     scale, unit = 1.0, ""
-    if name.endswith("_m"):
+    if name.endswith("_per_m"):
+        unit = " 1/m"
+    elif name.endswith("_m"):
         scale, unit = 1e3, " mm"
     elif name.endswith("_s"):
         scale, unit = 1e3, " ms"

@@ -155,3 +155,21 @@ def test_a_switch_without_parameters_can_be_accepted() -> None:
     switch = _candidate("arm_acceleration", 500.0, 0.1, n=0)
     accepted, _ = choose([switch], rule, threshold=10.0)
     assert accepted is not None and accepted.effect == "arm_acceleration"
+
+
+def test_decision_values_are_shown_in_readable_units() -> None:
+    from pianobot.analysis.discover_fit import FitResult
+    from pianobot.analysis.discover_params import format_value
+
+    fr = FitResult(
+        ("a.bed_depth_m", "a.stiffening_per_m"),
+        (0.0095, 60.0),
+        (0.0094, 50.0),
+        (0.0096, 70.0),
+        1.0,
+        10,
+        0.0,
+        True,
+    )
+    assert format_value("bed_depth_m", 0.0095, fr, "a.bed_depth_m") == "9.5 ± 0.1 mm"
+    assert format_value("stiffening_per_m", 60.0, fr, "a.stiffening_per_m").endswith("1/m")
