@@ -25,7 +25,7 @@ import pandas as pd
 
 from pianobot.io.midifile import Note
 from pianobot.physics.trajectory import Press, press_duration_s
-from pianobot.play.adapt import OnlineAdapter
+from pianobot.play.adapt import Forecast, OnlineAdapter
 from pianobot.play.plan import Plan
 from pianobot.rig import open_rig
 from pianobot.rig.errors import ConnectionLost, SafetyStop, SafetyViolation
@@ -149,9 +149,10 @@ class _Loop:
         self.origin_s = now + self.plan.settings.lead_in_s - min(0.0, float(played["start_s"].min()))
         self.collected_to_s = now
         status, reason = "completed", None
-        for _, row in played.iterrows():
+        rows = [row for _, row in played.iterrows()]
+        for i, row in enumerate(rows):
             try:
-                self._note(row)
+                self._note(row, rows[i + 1] if i + 1 < len(rows) else None)
             except SafetyStop as exc:
                 status, reason = "stopped", f"safety stop at note {int(row.note_index)}: {exc}"
                 break
@@ -162,18 +163,14 @@ class _Loop:
         self._flush()
         return status, reason
 
-    def _note(self, row: pd.Series) -> None:
-        speed, predicted, lead_model = float(row.down_velocity_mps), float(row.predicted_velocity), float(row.predicted_lead_s)
-        lead, hold = lead_model, float(row.hold_s)
+    def _note(self, row: pd.Series, following: pd.Series | None) -> None:
+        speed, predicted, lead = float(row.down_velocity_mps), float(row.predicted_velocity), float(row.predicted_lead_s)
+        hold = float(row.hold_s)
         move = float(row.move_s) if self.pitch is not None and int(row.pitch) != self.pitch else 0.0
         changes_vacuum = self.vacuum_kpa is None or abs(float(row.vacuum_kpa) - self.vacuum_kpa) > 1e-9
         if self.adapter is not None:
             earliest = self.clock.now() + move + (float(row.vacuum_change_s) if changes_vacuum else 0.0)
-            speed, hold = self._adapted_stroke(row, earliest)
-            table = self.plan.tables[float(row.vacuum_kpa)]
-            predicted = float(table.predict_velocity(speed))
-            lead_model = float(table.lead(speed))
-            lead = self.adapter.corrected_lead(lead_model)
+            speed, hold, predicted, lead = self._adapted_stroke(row, earliest, following)
         start = self.origin_s + float(row.onset_s) - lead
         if changes_vacuum:
             self._sleep_until(start - move - float(row.vacuum_change_s))
@@ -194,7 +191,7 @@ class _Loop:
             "note_index": int(row.note_index),
             "onset_target_s": float(row.onset_s),
             "target_velocity": float(row.target_velocity),
-            "predicted_velocity": predicted if self.adapter is None else self.adapter.corrected_velocity(predicted),
+            "predicted_velocity": predicted,
             "predicted_lead_s": lead,
             "motion_late_s": max(0.0, float(data.row.get("t_start_s", start)) - start),
         }
@@ -204,29 +201,47 @@ class _Loop:
             self._flush()
         self.batch.append(data)
         if self.adapter is not None and data.status != "failed":
-            self.adapter.observe(int(row.note_index), predicted, lead_model, played, observed_lead)
+            table = self.plan.tables[float(row.vacuum_kpa)]
+            self.adapter.observe(int(row.note_index), float(row.vacuum_kpa), speed,
+                                 float(table.predict_velocity(speed)), float(table.lead(speed)), played,
+                                 observed_lead, forecast_velocity=predicted, forecast_lead_s=lead)
 
-    def _adapted_stroke(self, row: pd.Series, earliest_s: float) -> tuple[float, float]:
-        """Down velocity and hold for a note under the corrected model, keeping the schedule.
+    def _adapted_stroke(self, row: pd.Series, earliest_s: float,
+                        following: pd.Series | None) -> tuple[float, float, float, float]:
+        """Down velocity, hold, expected on-velocity and lead of a note under the corrected model.
 
-        The corrected inverse may ask for a slower (longer-lead) stroke than planned; the
-        slowest stroke that can still start by `earliest_s` bounds it, and the hold is cut so the
-        arm is free when the plan expects it (the next notes keep their timing).
+        The stroke is the one with the least expected loudness error among those that can still
+        start by `earliest_s` (+ the allowed lateness). The hold is then cut, as the planner
+        does (shorten the previous hold before playing a note louder): so the arm is free when
+        the plan expects it, and early enough for the stroke the corrected model wants for the
+        following note — a model that learned the piano is louder asks for slower strokes, whose
+        longer lead needs an earlier start than planned.
         """
         assert self.adapter is not None
         table = self.plan.tables[float(row.vacuum_kpa)]
-        settings = self.plan.settings
-        wanted = float(table.inverse(self.adapter.model_target(float(row.target_velocity))))
+        forecast = self._forecast(row)
+        onset = self.origin_s + float(row.onset_s)
+        on_time = onset - forecast.lead_s >= earliest_s - self.plan.settings.max_late_s
+        k = self.adapter.choose(forecast, float(row.target_velocity), on_time)
+        speed, lead = float(forecast.speeds_mps[k]), float(forecast.lead_s[k])
+        free_by = self.origin_s + float(row.start_s) + float(row.busy_s)
+        if following is not None:
+            ahead = self._forecast(following)
+            j = self.adapter.choose(ahead, float(following.target_velocity))
+            between = float(following.move_s) if int(following.pitch) != int(row.pitch) else 0.0
+            if abs(float(following.vacuum_kpa) - float(row.vacuum_kpa)) > 1e-9:
+                between += float(following.vacuum_change_s)
+            free_by = min(free_by, self.origin_s + float(following.onset_s) - float(ahead.lead_s[j]) - between)
+        room = free_by - (onset - lead) - table.busy_s(speed, 0.0)
+        hold = float(min(float(row.hold_s), max(0.0, room)))
+        return speed, hold, float(forecast.velocity[k]), lead
+
+    def _forecast(self, row: pd.Series) -> Forecast:
+        """The adapter's corrected model over a fine grid of down velocities at the row's vacuum."""
+        assert self.adapter is not None
+        table = self.plan.tables[float(row.vacuum_kpa)]
         grid = np.linspace(table.speeds_mps[0], table.speeds_mps[-1], FEASIBILITY_GRID)
-        leads = np.array([self.adapter.corrected_lead(float(v)) for v in table.lead(grid)])
-        on_time = self.origin_s + float(row.onset_s) - leads >= earliest_s - settings.max_late_s
-        slowest = float(grid[np.argmax(on_time)]) if on_time.any() else float(grid[-1])
-        speed = max(wanted, slowest)
-        lead = self.adapter.corrected_lead(float(table.lead(speed)))
-        start = self.origin_s + float(row.onset_s) - lead
-        planned_free = self.origin_s + float(row.start_s) + float(row.busy_s)
-        room = planned_free - start - table.busy_s(speed, 0.0)
-        return speed, float(min(float(row.hold_s), max(0.0, room)))
+        return self.adapter.forecast(float(row.vacuum_kpa), grid, table.predict_velocity(grid), table.lead(grid))
 
     def _keystroke(self, stroke: NoteStroke, start_s: float) -> TrialData:
         """One timed keystroke; a dropped link is re-opened and the note tried once more."""

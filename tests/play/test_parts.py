@@ -1,4 +1,4 @@
-"""Building blocks of `play` on synthetic inputs: dynamics map, RLS adapter, scoring, tables."""
+"""Building blocks of `play` on synthetic inputs: dynamics map, scoring, stroke tables, scheduling."""
 
 from __future__ import annotations
 
@@ -7,7 +7,6 @@ import pandas as pd
 import pytest
 
 from pianobot.io.midifile import Note
-from pianobot.play.adapt import OnlineAdapter
 from pianobot.play.dynamics import DynamicsMap
 from pianobot.play.schedule import PLAN_COLUMNS, note_row, schedule
 from pianobot.play.score import score_performance
@@ -24,30 +23,6 @@ def test_dynamics_map_linear_and_absolute() -> None:
     assert absolute.apply([1, 5, 100]).tolist() == [2.0, 5.0, 12.0]
     flat = DynamicsMap.fit([64, 64], (2.0, 12.0), "mapped")
     assert flat.apply([64]).tolist() == [7.0]
-
-
-def test_adapter_learns_a_scaled_and_shifted_map() -> None:
-    rng = np.random.default_rng(0)
-    adapter = OnlineAdapter()
-    for i in range(60):
-        predicted = float(rng.uniform(2, 12))
-        played = round(1.6 * predicted + 1.0)  # the true piano: louder, with an offset
-        adapter.observe(i, predicted, 0.5, played, 0.5 * 1.2 + 0.03)
-    state = adapter.state()
-    assert state["velocity_gain"] == pytest.approx(1.6, abs=0.15)
-    assert state["velocity_offset"] == pytest.approx(1.0, abs=1.0)
-    assert adapter.corrected_lead(0.5) == pytest.approx(0.63, abs=0.01)
-    # Inverting: to play 17 the model must be asked for about (17 - 1) / 1.6 = 10.
-    assert adapter.model_target(17.0) == pytest.approx(10.0, abs=0.6)
-    assert len(adapter.history) == 60
-
-
-def test_adapter_steps_are_bounded() -> None:
-    adapter = OnlineAdapter()
-    adapter.observe(0, 5.0, 0.5, 120.0, 0.5)  # one absurd note
-    state = adapter.state()
-    assert abs(state["velocity_gain"] - 1.0) <= 0.15 + 1e-12
-    assert abs(state["velocity_offset"]) <= 2.0 + 1e-12
 
 
 def test_score_counts_hits_and_errors() -> None:
