@@ -4,7 +4,9 @@ For each model: the time to tabulate it over the play stroke configuration (one 
 vacuum level), the time to plan a 1,000-note song (mapping, inverse, timing, scheduling) with
 one geometry and with the choice among every candidate geometry (tables included), the
 per-note inverse through the table, and the per-note inverse asked of the model directly
-(`StrokePredictor.inverse`, what a planner without tables would pay). The GP is learned from the
+(`StrokePredictor.inverse`, what a planner without tables would pay), and the online adapter's
+work per note over the whole song (`--adapt`: two forecasts over the feasibility grid, the
+choice, the update; the played loudness is the model's × 1.3, rounded). The GP is learned from the
 calibration sweep on the default sim world. Writes JSON to benchmarks/results/play.json (and
 stdout).
 
@@ -25,7 +27,9 @@ import numpy as np
 
 from pianobot.analysis.learn import LearnedPredictor, training_set
 from pianobot.analysis.predictors import PhysicsPredictor, StrokePredictor
+from pianobot.play.adapt import OnlineAdapter
 from pianobot.play.library import etude
+from pianobot.play.perform import FEASIBILITY_GRID
 from pianobot.play.plan import fastest_geometry, geometries, plan_model, stroke_tables
 from pianobot.play.session import play_rig
 from pianobot.play.settings import PlaySettings
@@ -73,6 +77,17 @@ def _measure(predictor: StrokePredictor, n_notes: int) -> dict[str, Any]:
         predictor.inverse(np.array([target]), vacuum_kpa=table.vacuum_kpa, acceleration_mps2=geometry.acceleration_mps2,
                           depth_m=geometry.depth_m, distance_m=geometry.distance_m)
     per_note_direct_ms = (time.perf_counter() - t0) / direct.size * 1e3
+    adapter = OnlineAdapter()
+    grid = np.linspace(table.speeds_mps[0], table.speeds_mps[-1], FEASIBILITY_GRID)
+    model_velocity, model_lead = table.predict_velocity(grid), table.lead(grid)
+    t0 = time.perf_counter()
+    for i, target in enumerate(targets):
+        forecast = adapter.forecast(table.vacuum_kpa, grid, model_velocity, model_lead)
+        adapter.forecast(table.vacuum_kpa, grid, model_velocity, model_lead)  # the look-ahead
+        k = adapter.choose(forecast, float(target))
+        adapter.observe(i, table.vacuum_kpa, float(grid[k]), float(model_velocity[k]), float(model_lead[k]),
+                        round(1.3 * float(model_velocity[k])), float(model_lead[k]))
+    per_note_adapt_ms = (time.perf_counter() - t0) / targets.size * 1e3
     return {
         "notes": n_notes,
         "tabulate_s": table_s,
@@ -84,6 +99,7 @@ def _measure(predictor: StrokePredictor, n_notes: int) -> dict[str, Any]:
         "per_note_plan_ms": plan_s / n_notes * 1e3,
         "per_note_inverse_table_us": per_note_table_us,
         "per_note_inverse_direct_ms": per_note_direct_ms,
+        "per_note_adapt_ms": per_note_adapt_ms,
         "planned": int((plan.notes["status"] == "play").sum()),
         "reachable": list(plan.dynamics.target_range) if plan.dynamics else None,
     }

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
+from scipy.linalg import solve_triangular
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -96,9 +97,9 @@ class LocalCorrection:
         r = np.clip(np.asarray(residuals, dtype=np.float64), -self.max_residual, self.max_residual)
         noise = self.noise_sd**2 / self.forgetting ** np.asarray(age, dtype=np.float64)
         L = np.linalg.cholesky(self._kernel(xs, xs) + np.diag(noise))
-        alpha = np.linalg.solve(L.T, np.linalg.solve(L, r))
+        alpha = solve_triangular(L.T, solve_triangular(L, r, lower=True), lower=False)
         cross = self._kernel(q.ravel(), xs)
-        v = np.linalg.solve(L, cross.T)
+        v = solve_triangular(L, cross.T, lower=True)
         var = np.maximum(self.prior_sd**2 - np.sum(v * v, axis=0), 0.0)
         return (cross @ alpha).reshape(q.shape), np.sqrt(var).reshape(q.shape)
 

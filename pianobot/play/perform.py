@@ -221,7 +221,10 @@ class _Loop:
         table = self.plan.tables[float(row.vacuum_kpa)]
         forecast = self._forecast(row)
         onset = self.origin_s + float(row.onset_s)
-        on_time = onset - forecast.lead_s >= earliest_s - self.plan.settings.max_late_s
+        # As the planner does: lateness (up to max_late_s) only where no stroke starts on time.
+        on_time = onset - forecast.lead_s >= earliest_s
+        if not on_time.any():
+            on_time = onset - forecast.lead_s >= earliest_s - self.plan.settings.max_late_s
         k = self.adapter.choose(forecast, float(row.target_velocity), on_time)
         speed, lead = float(forecast.speeds_mps[k]), float(forecast.lead_s[k])
         free_by = self.origin_s + float(row.start_s) + float(row.busy_s)

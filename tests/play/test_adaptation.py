@@ -107,7 +107,7 @@ def test_in_half_notes_adaptation_gets_what_the_tempo_allows(etudes: dict[str, P
 
     The slowest stroke that still fits one half note after the other (the press, the arm's
     recovery and the move to the next key within the beat) already sounds louder on the
-    changed world than a third of the song's targets, so those notes keep an error no model can
+    changed world than more than half of the song's targets, so those notes keep an error no model can
     remove; the adapted run is still far better than the fixed one in every third.
     """
     adapted_result = etudes["half-adapted"]
@@ -125,7 +125,7 @@ def test_in_half_notes_adaptation_gets_what_the_tempo_allows(etudes: dict[str, P
                  for i, v in enumerate(np.linspace(slowest, 0.06, 12))]
     quietest = min(v for v in reachable if v is not None)
     targets = plan.notes["target_velocity"].to_numpy(float)
-    assert np.mean(targets < quietest - 1.0) >= 0.25
+    assert np.mean(targets < quietest - 1.0) >= 0.5
     fixed, adapted = thirds(etudes["half-fixed"]), thirds(adapted_result)
     assert all(a < 0.5 * f for a, f in zip(adapted, fixed, strict=True))
     assert adapted[2] < 0.3 * fixed[2]
