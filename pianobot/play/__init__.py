@@ -5,8 +5,9 @@
 
 Modules: `plan` (the model-based planner), `naive` (the study's demo logic as a baseline),
 `strokes` (a model tabulated for fast inverses), `dynamics` (loudness mapping), `perform`
-(execution on the rig as a run), `adapt` (online correction), `score` (mir_eval), `figure`
-(piano roll), `library` (test songs in code), `session` (the whole `play` command).
+(execution on the rig as a run), `adapt` and `corrections` (online correction while playing),
+`score` (mir_eval), `figure` (piano roll), `library` (test songs in code), `session` (the whole
+`play` command).
 """
 
 from __future__ import annotations
