@@ -6,8 +6,8 @@ the arm trace is noisy and drives the model), so s²(JᵀJ)⁻¹ is too narrow. 
 - `hac_covariance`: sandwich with a long-run (Newey–West) middle per keystroke, window from the
   scores' own autocorrelation — honest under model error;
 - `noise_covariance`: linearised propagation of the measured noise levels through the model,
-  including noise on its input — honest when the model is right, and the only one that sees the
-  part of the input noise the fit absorbs.
+  including noise on its input (simulated draws) — honest when the model is right, and the only
+  one that sees the part of the input noise the fit absorbs.
 
 `larger_variances` combines them (per parameter the larger variance).
 """
@@ -15,7 +15,6 @@ the arm trace is noisy and drives the model), so s²(JᵀJ)⁻¹ is too narrow. 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -72,7 +71,11 @@ def noise_sigma_m(x: FloatArray) -> float:
     the second difference there is noise only: Var(Δ²e) = 6σ². The median ignores the few
     samples where the motion itself curves (accelerations, contact, ringing).
     """
-    d2 = np.diff(np.asarray(x, dtype=np.float64), n=2, axis=-1).ravel()
+    return sigma_from_second_differences(np.diff(np.asarray(x, dtype=np.float64), n=2, axis=-1).ravel())
+
+
+def sigma_from_second_differences(d2: FloatArray) -> float:
+    """White-noise σ from second differences Δ²x of smooth traces (NaNs ignored; see `noise_sigma_m`)."""
     d2 = d2[np.isfinite(d2)]
     if d2.size == 0:
         return 0.0
@@ -82,43 +85,33 @@ def noise_sigma_m(x: FloatArray) -> float:
 def noise_covariance(
     mask: npt.NDArray[np.bool_],
     J: FloatArray,
-    impulse: FloatArray,
-    level_idx: npt.NDArray[np.intp],
-    traces_m: Sequence[FloatArray],
-    scale_m: float,
+    sigma_out: tuple[float, float],
+    input_scores: FloatArray,
 ) -> FloatArray:
     """Covariance of the log-parameters propagated from white measurement noise (linearised).
 
     θ̂ − θ ≈ −(JᵀJ)⁻¹ Jᵀ (G e_in − e_out): output noise e_out enters directly, noise e_in on the
     measured arm trace enters through the model G itself. G e_in rings like the key, i.e. much
     like a change of the key's parameters, so the fit absorbs part of it and the residuals no
-    longer show it (an errors-in-variables effect the residual-based sandwich cannot see). Its
-    contribution Jᵀ G Gᵀ J is computed from the model's impulse response per vacuum level
-    (Gᵀ J is a cross-correlation, done by FFT). Noise σs come from `noise_sigma_m`.
+    longer show it (an errors-in-variables effect the residual-based sandwich cannot see).
 
     Args:
         mask: (n, 2, T) where x1, x2 were measured (J's rows, in order).
-        J: Jacobian of the residuals (in units of `scale_m`) with respect to the parameters.
-        impulse: (levels, 2, T) response of x1, x2 to one unit sample of x0.
-        level_idx: the level of each keystroke.
-        traces_m: measured x0, x1, x2 (n, T) for the noise levels.
-        scale_m: the residuals' unit in metres.
+        J: Jacobian of the residuals with respect to the parameters.
+        sigma_out: white noise σ of x1 and x2, in the residuals' unit (see `noise_sigma_m`).
+        input_scores: (draws, p) rows Jᵀ G e_in for simulated draws of the input noise e_in
+            (the model is piecewise: before and after touch, so G is simulated, not convolved);
+            no rows: no input noise.
     """
     n, _, T = mask.shape
     p = J.shape[1]
     Jfull = np.zeros((n, 2, T, p))
     Jfull[mask] = J
-    s_in, s1, s2 = (noise_sigma_m(x) / scale_m for x in traces_m)
     meat = np.zeros((p, p))
-    for c, s_out in enumerate((s1, s2)):
+    for c, s_out in enumerate(sigma_out):
         meat += s_out**2 * np.einsum("ktp,ktq->pq", Jfull[:, c], Jfull[:, c])
-    if s_in > 0:
-        size = 2 * T
-        H = np.fft.rfft(impulse, size, axis=-1)[level_idx]  # (n, 2, F)
-        F = np.fft.rfft(Jfull, size, axis=2)  # (n, 2, F, p)
-        # (Gᵀ J)[τ] = Σ_c Σ_m h_c[m] J_c[τ + m]
-        gtj = np.fft.irfft(np.einsum("kcf,kcfp->kfp", np.conj(H), F), size, axis=1)[:, :T]
-        meat += s_in**2 * np.einsum("ktp,ktq->pq", gtj, gtj)
+    if input_scores.shape[0] > 0:
+        meat += input_scores.T @ input_scores / input_scores.shape[0]
     bread = np.linalg.pinv(J.T @ J)
     cov = bread @ meat @ bread
     return np.asarray(0.5 * (cov + cov.T), dtype=np.float64)

@@ -2,18 +2,35 @@
 
 Identification drives the model with the measured arm trace x0 and compares the simulated
 fingertip x1 and key x2 with the measured ones, for all keystrokes at once. This module turns the
-store's long-form samples table into padded (n_keystrokes, n_samples) arrays: the input is held at
-its last value past the end of a trace, outputs are NaN there and where frames were dropped.
+store's long-form samples table into padded (n_keystrokes, n_samples) arrays.
+
+Two details keep the measurements exactly what they were, so that a model that generated the
+data can reproduce it to the noise level:
+
+- Outputs are not resampled. Every keystroke's motion-capture frames fall on a uniform clock
+  whose phase differs from keystroke to keystroke (the camera runs freely, the arm starts when it
+  starts), so each row has its own time offset: row i holds the frames at `t_s + t_offset_s[i]`.
+  Interpolating frames onto a shared grid instead would flatten every peak of the key's 10-20 Hz
+  ringing (it is sampled only 6-12 times per cycle at 120 Hz), which reads as extra damping.
+  Grid points without a frame (dropped, or past the end of the keystroke) are NaN.
+- The input is kept at its own rate (the UR controller logs at 125 or 500 Hz) on its own grid
+  `input_t_s`, held at its last value past the end of a trace; `x0_m` is that trace at the
+  output times, for plots and model-free checks.
+
+Each keystroke also carries its fingertip-key gap at the start (`distance_m`, from the trials'
+column of that name; 0 when not recorded: the finger starts on the key, as in the study's takes).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
+from pianobot.analysis.identify_covariance import noise_sigma_m, sigma_from_second_differences
 from pianobot.errors import InputError
 
 FloatArray = npt.NDArray[np.float64]
@@ -22,20 +39,58 @@ FloatArray = npt.NDArray[np.float64]
 OUTPUT_SOURCES: tuple[str, ...] = ("mocap", "sim-truth")
 
 
+def _empty() -> FloatArray:
+    return np.zeros(0)
+
+
 @dataclass(frozen=True, eq=False)
 class KeystrokeBatch:
-    """n keystrokes on one grid t_s (T,); x0/x1/x2 of shape (n, T), relative to rest."""
+    """n keystrokes: outputs on a uniform grid t_s (T,) shifted per row, input on its own grid.
+
+    Arrays x0/x1/x2 have shape (n, T) and are relative to rest; row i is sampled at
+    `t_s + t_offset_s[i]` (`row_times_s`). The optional fields default to: no offsets, the finger
+    starting on the key (`distance_m` 0), and the input given by `x0_m` on `t_s`.
+    """
 
     trial_id: tuple[str, ...]
     vacuum_kpa: FloatArray  # (n,)
     t_s: FloatArray  # (T,)
-    x0_m: FloatArray  # input, finite everywhere
+    x0_m: FloatArray  # input at the output times, finite everywhere
     x1_m: FloatArray  # NaN where not measured
     x2_m: FloatArray
+    distance_m: FloatArray = field(default_factory=_empty)  # (n,) fingertip-key gap at the start
+    t_offset_s: FloatArray = field(default_factory=_empty)  # (n,) in [0, dt)
+    input_t_s: FloatArray = field(default_factory=_empty)  # (T_in,) uniform
+    input_x0_m: FloatArray = field(default_factory=_empty)  # (n, T_in) finite
+    input_noise_m: float = math.nan  # white noise σ of the arm trace as sampled (NaN: from input_x0_m)
+
+    def __post_init__(self) -> None:
+        n = len(self.trial_id)
+        for name in ("distance_m", "t_offset_s"):
+            if getattr(self, name).size == 0:
+                object.__setattr__(self, name, np.zeros(n))
+        if self.input_t_s.size == 0:
+            object.__setattr__(self, "input_t_s", self.t_s)
+            object.__setattr__(self, "input_x0_m", self.x0_m)
+        if math.isnan(self.input_noise_m):
+            object.__setattr__(self, "input_noise_m", noise_sigma_m(self.input_x0_m))
+        if self.distance_m.shape != (n,) or self.t_offset_s.shape != (n,):
+            raise ValueError(f"distance_m and t_offset_s should have {n} entries.")
+        if self.input_x0_m.shape != (n, self.input_t_s.size):
+            raise ValueError(f"input_x0_m should have shape {(n, self.input_t_s.size)}, got {self.input_x0_m.shape}.")
 
     @property
     def n(self) -> int:
         return len(self.trial_id)
+
+    @property
+    def dt_s(self) -> float:
+        """Output sample interval."""
+        return float(self.t_s[1] - self.t_s[0]) if self.t_s.size > 1 else 0.0
+
+    def row_times_s(self, i: int) -> FloatArray:
+        """Sample times of keystroke i (its frames' own clock phase)."""
+        return np.asarray(self.t_s + self.t_offset_s[i], dtype=np.float64)
 
     def subset(self, index: npt.ArrayLike) -> KeystrokeBatch:
         """Keystrokes `index` (an int array; repeats allowed, for the bootstrap)."""
@@ -47,6 +102,11 @@ class KeystrokeBatch:
             self.x0_m[idx],
             self.x1_m[idx],
             self.x2_m[idx],
+            self.distance_m[idx],
+            self.t_offset_s[idx],
+            self.input_t_s,
+            self.input_x0_m[idx],
+            self.input_noise_m,
         )
 
 
@@ -65,19 +125,45 @@ def _rest(t_s: FloatArray, values: FloatArray) -> float:
     return float(values[np.argmax(finite)])
 
 
-def _on_grid(t: FloatArray, x: FloatArray, grid: FloatArray, *, hold: bool) -> FloatArray:
+def _phase_s(times: FloatArray, origin_s: float, dt_s: float) -> float:
+    """Clock phase in [0, dt) of samples on a uniform clock of period dt (circular mean, so a
+    phase near 0 and one near dt agree instead of averaging to dt/2)."""
+    angle = 2.0 * math.pi * (times - origin_s) / dt_s
+    phase = math.atan2(float(np.mean(np.sin(angle))), float(np.mean(np.cos(angle))))
+    return (phase / (2.0 * math.pi) % 1.0) * dt_s
+
+
+def _frames_on(t: FloatArray, x: FloatArray, times: FloatArray) -> FloatArray:
+    """Measured values at `times`; NaN where no finite frame lies within half a frame.
+
+    On the row's own clock phase this picks the frames themselves (no interpolation); a dropped
+    frame or a time past the trace is NaN rather than invented.
+    """
     good = np.isfinite(x)
+    out = np.full(times.shape, np.nan)
     if good.sum() < 2:
-        return np.full(grid.shape, np.nan)
-    out = np.interp(grid, t[good], x[good])
-    if not hold:
-        # Outputs: no invention of data beyond the trace or across long dropouts (> 3 frames).
-        dt = np.median(np.diff(t))
-        outside = (grid < t[good][0]) | (grid > t[good][-1])
-        nearest = np.searchsorted(t[good], grid).clip(1, good.sum() - 1)
-        gap = t[good][nearest] - t[good][nearest - 1]
-        out[outside | (gap > 3.5 * dt)] = np.nan
+        return out
+    tg, xg = t[good], x[good]
+    half = 0.5 * float(np.median(np.diff(t)))
+    j = np.searchsorted(tg, times).clip(1, tg.size - 1)
+    nearest = np.minimum(np.abs(times - tg[j - 1]), np.abs(tg[j] - times))
+    inside = nearest <= half * (1.0 + 1e-6)
+    out[inside] = np.interp(times[inside], tg, xg)
     return out
+
+
+def _pooled_noise_m(traces: list[FloatArray]) -> float:
+    """Noise σ of traces of different lengths: their second differences pooled."""
+    d2 = [np.diff(x[np.isfinite(x)], n=2) for x in traces]
+    return sigma_from_second_differences(np.concatenate(d2)) if d2 else 0.0
+
+
+def _uniform_dt(times_by_trial: list[FloatArray]) -> float:
+    diffs = np.concatenate([np.diff(t) for t in times_by_trial if t.size > 1])
+    diffs = diffs[diffs > 0]
+    if diffs.size == 0:
+        raise InputError("trajectories need at least two samples per keystroke", "identify")
+    return float(np.median(diffs))
 
 
 def keystroke_batch(
@@ -91,7 +177,8 @@ def keystroke_batch(
 
     Args:
         samples: long form `trial_id, source, t_s, x0_m, x1_m, x2_m`.
-        trials: `trial_id, vacuum_kpa` (and `status`; failed trials are skipped).
+        trials: `trial_id, vacuum_kpa`, optionally `distance_m` (missing or NaN: 0) and
+            `status` (failed trials are skipped).
         x0_source: where the arm trace comes from: "arm", "mocap", "sim-truth" or "auto"
             (the arm log if present, else the mocap arm marker, else the simulator's truth).
         max_duration_s: cut every trace after this time (None: the longest trace).
@@ -118,41 +205,63 @@ def keystroke_batch(
     ok = trials
     if "status" in trials:
         ok = trials[trials["status"] != "failed"]
-    vac = ok.set_index("trial_id")["vacuum_kpa"].astype(float)
+    ok = ok.drop_duplicates("trial_id", keep="last").set_index("trial_id")
+    vac = ok["vacuum_kpa"].astype(float)
+    gap = ok["distance_m"].astype(float).fillna(0.0) if "distance_m" in ok else pd.Series(0.0, index=ok.index)
 
     outs = samples[samples["source"] == out_source]
     ins = samples[(samples["source"] == x0_source) & samples["x0_m"].notna()]
-    ids = [tid for tid in outs["trial_id"].unique() if tid in vac.index and tid in set(ins["trial_id"])]
+    if max_duration_s is not None:
+        outs = outs[outs["t_s"] <= max_duration_s]
+    in_ids = set(ins["trial_id"])
+    ids = [tid for tid in outs["trial_id"].unique() if tid in vac.index and tid in in_ids]
     if not ids:
         raise InputError(
             f"no trial has both an arm trace ({x0_source}) and a key trajectory ({out_source})",
             "identify",
         )
-    dt = float(np.median(np.diff(np.sort(outs[outs["trial_id"] == ids[0]]["t_s"].to_numpy()))))
-    t_end = float(outs["t_s"].max()) if max_duration_s is None else max_duration_s
-    t_start = float(outs["t_s"].min())
-    grid: FloatArray = t_start + dt * np.arange(int(np.floor((t_end - t_start) / dt)) + 1, dtype=np.float64)
+    by_out = {tid: g.sort_values("t_s") for tid, g in outs.groupby("trial_id", sort=False)}
+    by_in = {tid: g.sort_values("t_s") for tid, g in ins.groupby("trial_id", sort=False)}
+    t_outs = [by_out[tid]["t_s"].to_numpy(float) for tid in ids]
+    t_ins = [by_in[tid]["t_s"].to_numpy(float) for tid in ids]
 
-    by_out = dict(tuple(outs.groupby("trial_id", sort=False)))
-    by_in = dict(tuple(ins.groupby("trial_id", sort=False)))
-    x0 = np.empty((len(ids), grid.size))
-    x1 = np.empty_like(x0)
-    x2 = np.empty_like(x0)
+    # Output grid: one frame period, each row on its own clock phase.
+    dt = _uniform_dt(t_outs)
+    t_start = min(float(t[0]) for t in t_outs)
+    t_end = max(float(t[-1]) for t in t_outs)
+    grid: FloatArray = t_start + dt * np.arange(int(np.floor((t_end - t_start) / dt + 1e-6)) + 1, dtype=np.float64)
+    offsets = np.array([_phase_s(t, t_start, dt) for t in t_outs])
+    # Input grid: the input's own rate, from its earliest sample (the arm is at rest before it).
+    dt_in = _uniform_dt(t_ins)
+    in_start = min(min(float(t[0]) for t in t_ins), t_start)
+    in_end = max(max(float(t[-1]) for t in t_ins), t_end + dt)
+    in_grid: FloatArray = in_start + dt_in * np.arange(int(np.ceil((in_end - in_start) / dt_in)) + 1, dtype=np.float64)
+
+    n, T = len(ids), grid.size
+    x0, x1, x2 = np.empty((n, T)), np.empty((n, T)), np.empty((n, T))
+    x0_in = np.empty((n, in_grid.size))
     for i, tid in enumerate(ids):
-        g_out = by_out[tid].sort_values("t_s")
-        g_in = by_in[tid].sort_values("t_s")
-        t_in = g_in["t_s"].to_numpy(float)
-        a = g_in["x0_m"].to_numpy(float)
-        x0[i] = _on_grid(t_in, a - _rest(t_in, a), grid, hold=True)
-        t_out = g_out["t_s"].to_numpy(float)
+        a = by_in[tid]["x0_m"].to_numpy(float)
+        a = a - _rest(t_ins[i], a)
+        # The arm is a held, continuous input: interpolated, and held at its ends.
+        x0_in[i] = np.interp(in_grid, t_ins[i], a)
+        row_t = grid + offsets[i]
+        x0[i] = np.interp(row_t, t_ins[i], a)
+        g_out = by_out[tid]
         for target, col in ((x1, "x1_m"), (x2, "x2_m")):
-            v = g_out[col].to_numpy(float) if col in g_out else np.full(t_out.shape, np.nan)
-            target[i] = _on_grid(t_out, v - _rest(t_out, v), grid, hold=False)
-    keep = np.isfinite(x0).all(axis=1)
+            v = g_out[col].to_numpy(float) if col in g_out else np.full(t_outs[i].shape, np.nan)
+            target[i] = _frames_on(t_outs[i], v - _rest(t_outs[i], v), row_t)
+    # Noise of the arm trace from its own samples (the held ends would read as noise-free).
+    noise_in = _pooled_noise_m([by_in[tid]["x0_m"].to_numpy(float) for tid in ids])
+    keep = np.isfinite(x0_in).all(axis=1) & np.isfinite(x0).all(axis=1)
     if not keep.any():
         raise InputError("no arm trace could be put on a uniform grid", "identify")
     idx = np.flatnonzero(keep)
+    kept = [ids[i] for i in idx]
     return KeystrokeBatch(
-        tuple(str(ids[i]) for i in idx), np.asarray(vac.loc[[ids[i] for i in idx]].to_numpy(float), dtype=np.float64),
+        tuple(str(t) for t in kept),
+        np.asarray(vac.loc[kept].to_numpy(float), dtype=np.float64),
         grid, x0[idx], x1[idx], x2[idx],
+        np.asarray(gap.loc[kept].to_numpy(float), dtype=np.float64),
+        offsets[idx], in_grid, x0_in[idx], noise_in,
     )

@@ -1,0 +1,142 @@
+"""The forward model that identification fits: the physical keystroke, driven by the measured arm.
+
+A keystroke does not start in contact. The fingertip starts `distance_m` above the key and hangs
+from the arm on (k0, c0) while it approaches; the finger-key coupling (k1, c1) acts only from the
+instant the gap closes (x1 − x2 ≥ distance_m); from then on the study's bilateral linear coupling
+holds. Driving the study's in-contact state space with the arm trace from t = 0 instead would
+push the key down from the first millimetre of the approach, and a fit would bend every
+parameter to explain 5 cm of key travel that never happened.
+
+`pianobot.physics.simulate.simulate_arm` integrates exactly this (the `KeystrokeModel` without
+effects is the study's model with its free approach), thousands of keystrokes per second, which
+is fast enough to sit inside `least_squares`. What this module adds is the sampling: each
+keystroke's frames have their own clock phase (`KeystrokeBatch.t_offset_s`), and since the
+system is time-invariant and at rest before the arm moves, row i is simulated with its input
+advanced by its offset, so the simulator's output grid falls on that row's frames exactly. The
+input is resampled for this once, finely enough (≤ 0.5 ms and ≤ half the input's own period)
+that the piecewise-linear arm trace the simulator interpolates is unchanged.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from pianobot.analysis.keystroke_batch import KeystrokeBatch
+from pianobot.physics.effects import Effects
+from pianobot.physics.model import KeystrokeModel
+from pianobot.physics.msd import MSDParams
+from pianobot.physics.simulate import simulate_arm
+
+FloatArray = npt.NDArray[np.float64]
+
+#: Largest internal integration step. The fastest mode of the published model is near 20 Hz;
+#: at 0.1 ms the semi-implicit scheme's phase error over a keystroke stays far below mocap noise.
+SIM_STEP_S = 2e-4
+#: Largest spacing of the resampled input.
+INPUT_STEP_S = 5e-4
+#: Keystrokes simulated side by side (the simulator's SIMD block): rows are grouped by length,
+#: so short keystrokes are not integrated through the long ones' rest.
+GROUP = 16
+
+
+@dataclass(frozen=True, eq=False)
+class ForwardModel:
+    """Parameter-independent preparation of a batch's simulation (build with `of`).
+
+    Rows that repeat a keystroke (a bootstrap draw) are simulated once: `batch` holds the
+    distinct keystrokes and `rows` maps the caller's rows onto them.
+    """
+
+    batch: KeystrokeBatch
+    t_sim_s: FloatArray  # (M,) uniform simulation input grid, from rest
+    lead: int  # output samples simulated before batch.t_s[0]
+    lo: npt.NDArray[np.intp]  # (n, M) input-grid interval of each shifted sample
+    frac: FloatArray  # (n, M) position inside it
+    arm_sim_m: FloatArray  # (n, M) the batch's shifted input (parameter-independent, kept)
+    last: npt.NDArray[np.intp]  # (n,) each row's last measured output sample
+    rows: npt.NDArray[np.intp]  # (n_caller,) the distinct keystroke behind each caller's row
+
+    @classmethod
+    def of(cls, batch: KeystrokeBatch) -> ForwardModel:
+        _, first, rows = np.unique(np.asarray(batch.trial_id), return_index=True, return_inverse=True)
+        if first.size < batch.n:
+            batch = batch.subset(first)
+        else:
+            rows = np.arange(batch.n)
+        dt = batch.dt_s
+        if not dt > 0:
+            raise ValueError("a keystroke batch needs at least two output samples to simulate.")
+        t_in = batch.input_t_s
+        # Start the simulation a whole number of output periods early, at or before the first
+        # input sample, where the arm is at rest (the model starts at rest).
+        lead = max(0, math.ceil((batch.t_s[0] - t_in[0]) / dt - 1e-9))
+        t0 = float(batch.t_s[0] - lead * dt)
+        dt_in = float(t_in[1] - t_in[0]) if t_in.size > 1 else dt
+        per_out = max(1, math.ceil(dt / min(INPUT_STEP_S, 0.5 * dt_in) - 1e-9))
+        step = dt / per_out
+        t_end = float(batch.t_s[-1]) + dt
+        t_sim = t0 + step * np.arange(int(math.ceil((t_end - t0) / step)) + 1, dtype=np.float64)
+        # Row i's input advanced by its offset: its output samples land on its own frames.
+        shifted = t_sim[None, :] + batch.t_offset_s[:, None]
+        if t_in.size > 1:
+            u = np.clip((shifted - t_in[0]) / dt_in, 0.0, t_in.size - 1.0)
+            lo = np.minimum(u.astype(np.intp), t_in.size - 2)
+            frac = u - lo
+        else:
+            lo = np.zeros(shifted.shape, dtype=np.intp)
+            frac = np.zeros(shifted.shape)
+        measured = np.isfinite(batch.x1_m) | np.isfinite(batch.x2_m)
+        last = np.where(measured.any(axis=1), batch.t_s.size - 1 - np.argmax(measured[:, ::-1], axis=1), 0)
+        return cls(batch, t_sim, int(lead), lo, frac, _resample(batch.input_x0_m, lo, frac),
+                   np.asarray(last, dtype=np.intp), np.asarray(rows, dtype=np.intp).ravel())
+
+    def arm_m(self, input_x0_m: FloatArray | None = None) -> FloatArray:
+        """The (shifted) arm input on the simulation grid; `input_x0_m` (the caller's rows)
+        replaces the batch's (a repeated keystroke takes its first row's)."""
+        if input_x0_m is None:
+            return self.arm_sim_m
+        first = np.zeros(self.batch.n, dtype=np.intp)
+        first[self.rows[::-1]] = np.arange(self.rows.size)[::-1]
+        return _resample(input_x0_m[first], self.lo, self.frac)
+
+    def simulate(self, params: MSDParams, input_x0_m: FloatArray | None = None) -> tuple[FloatArray, FloatArray]:
+        """Simulated fingertip x1 and key x2 (n, T) at each row's sample times, NaN after the
+        row's last measured sample (a keystroke is simulated only as long as it was measured)."""
+        batch = self.batch
+        model = KeystrokeModel(msd=params, effects=Effects.none())
+        arm = self.arm_m(input_x0_m)
+        dt = batch.dt_s
+        x1, x2 = np.full(batch.x1_m.shape, np.nan), np.full(batch.x2_m.shape, np.nan)
+        order = np.argsort(-self.last, kind="stable")
+        for start in range(0, order.size, GROUP):
+            rows = order[start : start + GROUP]
+            n_out = self.lead + int(self.last[rows].max()) + 1
+            n_in = min(self.t_sim_s.size, int(math.ceil(n_out * dt / (self.t_sim_s[1] - self.t_sim_s[0]))) + 2)
+            with np.errstate(over="ignore", invalid="ignore"):  # trial parameters may be unstable
+                sim = simulate_arm(self.t_sim_s[:n_in], arm[rows, :n_in], batch.vacuum_kpa[rows], model,
+                                   distance_m=batch.distance_m[rows], out_dt_s=dt,
+                                   duration_s=(n_out - 1) * dt, step_s=SIM_STEP_S)
+            x1[rows, : n_out - self.lead] = sim.x1_m[:, self.lead :]
+            x2[rows, : n_out - self.lead] = sim.x2_m[:, self.lead :]
+        after = np.arange(batch.t_s.size)[None, :] > self.last[:, None]
+        x1[after] = np.nan
+        x2[after] = np.nan
+        return x1[self.rows], x2[self.rows]
+
+
+def _resample(x: FloatArray, lo: npt.NDArray[np.intp], frac: FloatArray) -> FloatArray:
+    """Rows of x (n, T_in) linearly interpolated at fractional indices lo + frac (n, M)."""
+    if x.shape[1] == 1:
+        return np.repeat(x, lo.shape[1], axis=1)
+    a = np.take_along_axis(x, lo, axis=1)
+    b = np.take_along_axis(x, lo + 1, axis=1)
+    return np.asarray(a + frac * (b - a), dtype=np.float64)
+
+
+def simulate_batch(batch: KeystrokeBatch, params: MSDParams) -> tuple[FloatArray, FloatArray]:
+    """Simulated x1, x2 (n, T) of the keystroke model driven by the batch's arm traces."""
+    return ForwardModel.of(batch).simulate(params)
