@@ -63,3 +63,30 @@ def write_run(data_dir: Path, trials: pd.DataFrame, samples: pd.DataFrame | None
     writer.append(trials, samples=samples)
     writer.finish("completed")
     return writer.run_id
+
+
+def linear_sweep(data_dir: Path, *, seed: int, levels_kpa: tuple[float, ...] = (-20.0, -60.0),
+                 speeds_mps: tuple[float, ...] = (0.03, 0.06), depths_m: tuple[float, ...] = (0.025, 0.03),
+                 distance_m: float = 0.05, repeats: int = 2, truth: MSDParams | None = None) -> str:
+    """A sweep of the simulated world's linear preset (the study's model + observation noise)
+    through the real runner: rig file, spec file, `run_sweep`, stored run. Returns the run id.
+
+    The fingertip starts `distance_m` above the key, as in every sweep of the lab. `truth`
+    replaces the world's published parameters.
+    """
+    from pianobot.run import run_sweep
+
+    folder = data_dir.parent / f"linear-sweep-{seed}"
+    folder.mkdir(parents=True, exist_ok=True)
+    msd = "" if truth is None else ", msd: {" + ", ".join(
+        f"{k}: {v}" for k, v in truth.to_dict().items() if v is not None and k != "k1_table") + "}"
+    (folder / "rig.yaml").write_text(f"kind: sim\nseed: {seed}\nworld: {{preset: linear{msd}}}\n")
+    (folder / "spec.yaml").write_text(
+        "name: linear-sweep\nrig: rig.yaml\nfinger: soft\nnote: 57\n"
+        "sweep:\n  mode: grid\n"
+        f"  params: {{vacuum_kpa: {list(levels_kpa)}, down_velocity_mps: {list(speeds_mps)}, depth_m: {list(depths_m)}}}\n"
+        f"  fixed: {{distance_m: {distance_m}, acceleration_mps2: 1.0}}\n"
+        f"  repeats: {repeats}\n"
+        "record: [midi, arm, mocap]\n"
+    )
+    return run_sweep(folder / "spec.yaml", data_dir=data_dir, progress=False).run_id

@@ -8,9 +8,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from _synthetic_runs import linear_keystrokes
+from _synthetic_runs import linear_keystrokes, linear_sweep
 
-from pianobot.analysis.identify import identify_trajectories, rms_x2_m, split_holdout
+from pianobot.analysis.identify import (
+    identify_trajectories,
+    rms_x2_m,
+    simulate_batch,
+    split_holdout,
+)
+from pianobot.analysis.identify_run import identify_runs, load_batch_trials
 from pianobot.analysis.keystroke_batch import keystroke_batch
 from pianobot.analysis.static_stiffness import force_log_levels, static_stiffness_from_logs
 from pianobot.errors import InputError
@@ -26,6 +32,77 @@ def _truth_value(name: str) -> float:
     return {"c1_nspm": TRUTH.c1_nspm, "k2_npm": TRUTH.k2_npm, "c2_nspm": TRUTH.c2_nspm,
             "c1_over_m1_per_s": TRUTH.c1_nspm / TRUTH.m1_kg, "c2_over_m2_per_s": TRUTH.c2_nspm / TRUTH.m2_kg,
             "k1_a_npm": TRUTH.k1_a_npm, "k1_b_npm_per_kpa": TRUTH.k1_b_npm_per_kpa}.get(name, math.nan)
+
+
+@pytest.fixture(scope="module")
+def hover_sweep(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
+    """16 keystrokes of the linear world (truth: TRUTH) at two vacuum levels, finger 5 cm above
+    the key at the start, through the real runner and store."""
+    data = tmp_path_factory.mktemp("hover") / "data"
+    data.mkdir()
+    return data, linear_sweep(data, seed=11, truth=TRUTH, distance_m=0.05)
+
+
+def test_identify_recovers_the_linear_world_from_a_sweep_with_hover(hover_sweep: tuple[Path, str]) -> None:
+    """The regression: with the finger starting above the key, identification used to drive the
+    in-contact model from t = 0 and returned k1 ≈ 0.1 N/m, c2 at its bound and 3.7 Hz."""
+    data, run = hover_sweep
+    result = identify_runs([run], data, out=None, bootstrap=0)
+    fit = result.fit
+    assert fit.n_keystrokes == 16 and fit.coupling == "tied"
+    for p in (-20.0, -60.0):
+        assert fit.estimate(f"k1_npm@{p:g}kPa").value == pytest.approx(TRUTH.k1_npm(p), rel=0.05)
+    assert fit.estimate("k2_npm").value == pytest.approx(TRUTH.k2_npm, rel=0.05)
+    assert fit.estimate("c1_over_m1_per_s").value == pytest.approx(TRUTH.c1_nspm / TRUTH.m1_kg, rel=0.15)
+    assert fit.estimate("c2_over_m2_per_s").value == pytest.approx(TRUTH.c2_nspm / TRUTH.m2_kg, rel=0.15)
+    for e in fit.estimates:
+        truth = _truth_value(e.name)
+        if not math.isnan(truth):
+            assert e.ci95[0] <= truth <= e.ci95[1], (e.name, e.value, e.ci95, truth)
+    # The model is the one that made the data: what is left is the 3 µm mocap noise.
+    assert fit.rms_m < 4.5e-6
+    assert result.holdout_rms_identified_m < 0.1 * result.holdout_rms_published_m
+    assert result.peak_hz["-60"] == pytest.approx(peak_response(TRUTH.at(-60.0))[0], rel=0.02)
+
+
+def test_forward_model_leaves_the_key_at_rest_until_the_finger_touches(hover_sweep: tuple[Path, str]) -> None:
+    data, run = hover_sweep
+    batch, _, _ = load_batch_trials([run], data)
+    assert np.all(batch.distance_m == 0.05)
+    x1, x2 = simulate_batch(batch, TRUTH)
+    for i in range(batch.n):
+        apart = x1[i] - x2[i] < 0.05 - 1e-4  # the gap is still open (0.1 mm margin)
+        touched = np.flatnonzero(~apart & np.isfinite(x1[i]))
+        before = np.arange(x1.shape[1]) < touched[0]
+        assert before.sum() > 10 and np.all(x2[i, before] == 0.0)
+        # ... while the arm has already moved most of the 5 cm by then.
+        assert batch.x0_m[i, touched[0]] > 0.04
+    # At the truth the residual is the mocap noise (3 µm), offsets aside.
+    r = x2 - batch.x2_m
+    r -= np.nanmean(r, axis=1, keepdims=True)
+    assert float(np.sqrt(np.nanmean(r**2))) < 4.5e-6
+
+
+def test_batch_keeps_each_keystrokes_frames_and_its_gap(hover_sweep: tuple[Path, str]) -> None:
+    from pianobot.store import load_run
+
+    data, run = hover_sweep
+    stored = load_run(run, data)
+    batch, _, _ = load_batch_trials([run], data)
+    mocap = stored.samples[stored.samples["source"] == "mocap"]
+    for i in (0, batch.n - 1):
+        frames = mocap[mocap["trial_id"] == batch.trial_id[i].split("/", 1)[1]].sort_values("t_s")
+        t = batch.row_times_s(i)
+        measured = np.isfinite(batch.x2_m[i])
+        # Every measured sample is a stored frame at its own time, not an interpolation.
+        assert np.abs(t[measured][:, None] - frames["t_s"].to_numpy()[None, :]).min(axis=1).max() < 1e-9
+        assert measured.sum() == frames["x2_m"].notna().sum()
+    # The arm log (500 Hz) drives the model at its own rate, not resampled to the mocap's.
+    assert batch.input_t_s[1] - batch.input_t_s[0] == pytest.approx(0.002)
+    trials = stored.trials.drop(columns="distance_m")
+    assert np.all(keystroke_batch(stored.samples, trials).distance_m == 0.0)
+    trials = stored.trials.assign(distance_m=np.nan)
+    assert np.all(keystroke_batch(stored.samples, trials).distance_m == 0.0)
 
 
 def test_recovers_linear_parameters_within_tolerance() -> None:
@@ -125,7 +202,6 @@ def test_static_stiffness_on_study_force_logs(zhang2022: Path) -> None:
 
 
 def test_zzz40_identified_model_beats_published(zhang2022: Path, data_dir: Path) -> None:
-    from pianobot.analysis.identify_run import identify_runs
     from pianobot.io.importers import import_mocap
 
     run = import_mocap(zhang2022 / "zzz" / "zzz40.csv", data_dir, vacuum_kpa=-40.0).run_id
@@ -140,7 +216,6 @@ def test_identify_writes_readout_and_damping_into_the_model_file(data_dir: Path,
     from _synthetic_runs import write_run
 
     from pianobot.analysis.features import keystroke_features
-    from pianobot.analysis.identify_run import identify_runs
 
     trials, samples = linear_keystrokes(TRUTH, seed=4, speeds_mps=(0.01, 0.02, 0.03, 0.04, 0.05))
     speed = {tid: keystroke_features(g.t_s.to_numpy(), g.x2_m.to_numpy(), trigger_depth_m=0.001).key_speed_at_trigger_mps
