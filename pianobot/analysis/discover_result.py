@@ -97,8 +97,8 @@ def verdict(
 ) -> tuple[str, bool]:
     """The closing sentence and whether the remaining held-out residual looks like noise.
 
-    It does when its lag-1 autocorrelation is low (white) or its systematic part is within
-    `noise_fraction` of the noise level; otherwise the worst phases are named.
+    It does when its systematic part is within `noise_fraction` of the noise level, or within
+    three times that and white (low lag-1 autocorrelation); otherwise the worst phases are named.
     """
     accepted = [it.accepted.effect for it in iterations if it.accepted]
     found = (
@@ -108,7 +108,11 @@ def verdict(
     noisy_shape = not lags or float(np.median(lags)) < noise_lag1
     g = final.gap
     if np.isfinite(g.position_m):
-        small = g.position_m <= noise_fraction * max(g.sigma_m, 1e-12) or noisy_shape
+        # Within the noise level, or a little above it but white (no structure left to model).
+        sigma = max(g.sigma_m, 1e-12)
+        small = g.position_m <= noise_fraction * sigma or (
+            g.position_m <= 3.0 * noise_fraction * sigma and noisy_shape
+        )
     else:
         small = not np.isfinite(g.on_velocity) or g.on_velocity <= 1.0
     if small:
