@@ -37,12 +37,7 @@ from typing import Any, Literal
 import numpy as np
 import numpy.typing as npt
 
-from pianobot.analysis.identify_covariance import (
-    hac_covariance,
-    larger_variances,
-    noise_covariance,
-    noise_sigma_m,
-)
+from pianobot.analysis.identify_covariance import hac_covariance, larger_variances, noise_covariance
 from pianobot.analysis.identify_forward import simulate_batch
 from pianobot.analysis.identify_problem import RESIDUAL_SCALE_M, Layout, Problem, k1_law, k1_name
 from pianobot.analysis.keystroke_batch import KeystrokeBatch
@@ -165,8 +160,7 @@ def identify_trajectories(
     # error, blind to errors the fit absorbs) and the measurement-noise propagation (right when
     # the model is correct, including noise on the arm trace that drives it).
     hac = hac_covariance(problem.mask, J, r)
-    s1, s2 = (noise_sigma_m(x) / RESIDUAL_SCALE_M for x in (batch.x1_m, batch.x2_m))
-    noise = noise_covariance(problem.mask, J, (s1, s2), problem.input_noise_scores(theta, J, seed))
+    noise = noise_covariance(problem.mask, J, problem.output_noise(theta), problem.input_noise_scores(theta, J, seed))
     cov = larger_variances(hac, noise)
     point = _derived(theta, layout, prior)
     jac_ci = _delta_intervals(theta, cov, layout, prior, point)

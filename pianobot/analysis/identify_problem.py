@@ -20,6 +20,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.optimize import least_squares
 
+from pianobot.analysis.identify_covariance import noise_sigma_m
 from pianobot.analysis.identify_forward import ForwardModel
 from pianobot.analysis.keystroke_batch import KeystrokeBatch
 from pianobot.physics.msd import MSDParams
@@ -171,6 +172,19 @@ class Problem:
     def bic(self, theta: FloatArray) -> float:
         r = self.residuals(theta)
         return float(r.size * math.log(float(r @ r) / r.size + 1e-300) + theta.size * math.log(r.size))
+
+    def output_noise(self, theta: FloatArray) -> tuple[float, float]:
+        """White-noise σ of the measured x1 and x2 (residual units), from the residuals' second
+        differences at theta.
+
+        The traces' own second differences would count the motion's curvature as noise (at
+        120 frames/s the finger's and key's ringing curves by several µm per frame); what the
+        model explains is gone from the residuals, and differencing removes what is left of
+        any smooth model error, so this reads the noise alone.
+        """
+        with np.errstate(over="ignore", invalid="ignore"):
+            full = np.where(self.mask, self.simulate(theta) - self.measured_grid, np.nan)
+        return noise_sigma_m(full[:, 0]), noise_sigma_m(full[:, 1])
 
     def input_noise_scores(self, theta: FloatArray, J: FloatArray, seed: int = 0) -> FloatArray:
         """Jᵀ·(model response to one draw of the arm trace's noise), one row per seeded draw.
