@@ -74,7 +74,7 @@ def build_run_report(run_ids: Sequence[str], data_dir: Path, out: Path, *, model
     out_sec = Section("Sound")
     out_sec.add(table_html(sound_by_level(trials), caption="keystrokes per vacuum level"))
     out_sec.add(figure_html(figures.velocity_vs_speed(trials), "on-velocity vs arm speed per vacuum level"))
-    out_sec.add(figure_html(figures.silent_map(trials), "silent-keystroke map"))
+    out_sec.add(figure_html(figures.silent_map(trials), "silent keystrokes per setting (silent/keystrokes)"))
     sections.append(out_sec)
 
     traj = Section("Keystroke stages: measured vs model")
@@ -84,9 +84,13 @@ def build_run_report(run_ids: Sequence[str], data_dir: Path, out: Path, *, model
         traj.add(paragraph(f"No trajectories: {exc.message}.", note=True))
     else:
         x1m, x2m = simulate_batch(batch, params)
-        i = int(np.nanargmax(np.nanmax(batch.x2_m, axis=1)))
-        traj.add(figure_html(figures.stages(batch.t_s, batch.x0_m[i], batch.x1_m[i], batch.x2_m[i], x1m[i], x2m[i]),
-                             f"keystroke {batch.trial_id[i]}: measured (solid) and model (dashed)"))
+        i = int(np.nanargmax(np.nanmax(np.nan_to_num(batch.x2_m, nan=-np.inf), axis=1)))
+        traj.add(figure_html(
+            figures.stages(batch.row_times_s(i), batch.x0_m[i], batch.x1_m[i], batch.x2_m[i], x1m[i], x2m[i],
+                           distance_m=float(batch.distance_m[i])),
+            f"keystroke {batch.trial_id[i]} (the deepest key travel): measured (solid) and model (dashed); "
+            "the model is driven by the measured arm trace, with the fingertip starting "
+            f"{1e3 * batch.distance_m[i]:g} mm above the key"))
         traj.add(figure_html(figures.residuals(batch.t_s, batch.x2_m - x2m), "x2 residuals, all keystrokes"))
     sections.append(traj)
 
