@@ -189,7 +189,8 @@ class Problem:
     def input_noise_scores(self, theta: FloatArray, J: FloatArray, seed: int = 0) -> FloatArray:
         """Jᵀ·(model response to one draw of the arm trace's noise), one row per seeded draw.
 
-        White noise of the measured level on every input sample, pushed through the model. The
+        White noise of the measured level on every input sample, referred to its rest level as
+        the measured trace was, pushed through the model. The
         response is linear in the noise; it is computed for amplified noise and scaled back, so
         that it stands clear of the touch instant's step granularity.
         """
@@ -199,9 +200,15 @@ class Problem:
             return np.zeros((0, theta.size))
         rng = np.random.default_rng(seed)
         base = self.simulate(theta)
+        before = batch.input_t_s < 0.0
         scores = []
         for _ in range(INPUT_NOISE_DRAWS):
             noise = rng.normal(0.0, INPUT_NOISE_GAIN * sigma, batch.input_x0_m.shape)
+            # The trace is measured relative to a rest level read from the same noisy samples
+            # (the median before motion start, else the first sample): that error shifts the
+            # whole trace, and with it the instant the fingertip reaches the key.
+            rest = np.median(noise[:, before], axis=1) if before.any() else noise[:, 0]
+            noise -= rest[:, None]
             with np.errstate(over="ignore", invalid="ignore"):
                 dy = self.profiled(self.simulate(theta, batch.input_x0_m + noise) - base) / INPUT_NOISE_GAIN
             scores.append(J.T @ np.where(np.isfinite(dy), dy, 0.0))
