@@ -7,6 +7,14 @@ holds. Driving the study's in-contact state space with the arm trace from t = 0 
 push the key down from the first millimetre of the approach, and a fit would bend every
 parameter to explain 5 cm of key travel that never happened.
 
+Where the model applies: from rest, through the approach and the press, until the fingertip
+leaves the key. The study's coupling is a bilateral spring: once engaged it never lets go, so on
+the way up it pulls the key above its rest position and stretches the finger between key and
+arm. A real finger lets go of the key (and a real key rests on its stop), so the model says
+nothing true after lift-off; `model_window` ends each keystroke there (measured: after the key's
+deepest point, when the fingertip-key gap has reopened by `LIFT_OFF_M` beyond the gap at which
+the key started to move, or the key is back at rest), and outputs are NaN after it.
+
 `pianobot.physics.simulate.simulate_arm` integrates exactly this (the `KeystrokeModel` without
 effects is the study's model with its free approach), thousands of keystrokes per second, which
 is fast enough to sit inside `least_squares`. What this module adds is the sampling: each
@@ -26,6 +34,7 @@ import numpy as np
 import numpy.typing as npt
 
 from pianobot.analysis.keystroke_batch import KeystrokeBatch
+from pianobot.analysis.segment import KEY_MOTION_THRESHOLD_M, fill_gaps
 from pianobot.physics.effects import Effects
 from pianobot.physics.model import KeystrokeModel
 from pianobot.physics.msd import MSDParams
@@ -34,10 +43,17 @@ from pianobot.physics.simulate import simulate_arm
 FloatArray = npt.NDArray[np.float64]
 
 #: Largest internal integration step. The fastest mode of the published model is near 20 Hz;
-#: at 0.1 ms the semi-implicit scheme's phase error over a keystroke stays far below mocap noise.
+#: at 0.2 ms the semi-implicit scheme's phase error over a keystroke stays far below mocap noise.
 SIM_STEP_S = 2e-4
+#: The step is also kept below this fraction of the model's fastest time scale (1/ω of its
+#: stiffest mode, m/c of its heaviest damping): the explicit scheme is stable and accurate only
+#: well inside h·ω < 2 and h·c/m < 1, and a fit may try stiff or heavily damped parameters.
+STEP_PER_TIME_SCALE = 0.2
 #: Largest spacing of the resampled input.
 INPUT_STEP_S = 5e-4
+#: The fingertip has left the key once the fingertip-key gap has reopened by this much (well
+#: above mocap noise, well below a finger's compression in a press).
+LIFT_OFF_M = 5e-4
 #: Keystrokes simulated side by side (the simulator's SIMD block): rows are grouped by length,
 #: so short keystrokes are not integrated through the long ones' rest.
 GROUP = 16
@@ -91,6 +107,7 @@ class ForwardModel:
             frac = np.zeros(shifted.shape)
         measured = np.isfinite(batch.x1_m) | np.isfinite(batch.x2_m)
         last = np.where(measured.any(axis=1), batch.t_s.size - 1 - np.argmax(measured[:, ::-1], axis=1), 0)
+        last = np.minimum(last, model_window(batch))
         return cls(batch, t_sim, int(lead), lo, frac, _resample(batch.input_x0_m, lo, frac),
                    np.asarray(last, dtype=np.intp), np.asarray(rows, dtype=np.intp).ravel())
 
@@ -108,6 +125,7 @@ class ForwardModel:
         row's last measured sample (a keystroke is simulated only as long as it was measured)."""
         batch = self.batch
         model = KeystrokeModel(msd=params, effects=Effects.none())
+        step_s = min(SIM_STEP_S, STEP_PER_TIME_SCALE / _fastest_rate(params, batch.vacuum_kpa))
         arm = self.arm_m(input_x0_m)
         dt = batch.dt_s
         x1, x2 = np.full(batch.x1_m.shape, np.nan), np.full(batch.x2_m.shape, np.nan)
@@ -119,13 +137,44 @@ class ForwardModel:
             with np.errstate(over="ignore", invalid="ignore"):  # trial parameters may be unstable
                 sim = simulate_arm(self.t_sim_s[:n_in], arm[rows, :n_in], batch.vacuum_kpa[rows], model,
                                    distance_m=batch.distance_m[rows], out_dt_s=dt,
-                                   duration_s=(n_out - 1) * dt, step_s=SIM_STEP_S)
+                                   duration_s=(n_out - 1) * dt, step_s=step_s)
             x1[rows, : n_out - self.lead] = sim.x1_m[:, self.lead :]
             x2[rows, : n_out - self.lead] = sim.x2_m[:, self.lead :]
         after = np.arange(batch.t_s.size)[None, :] > self.last[:, None]
         x1[after] = np.nan
         x2[after] = np.nan
         return x1[self.rows], x2[self.rows]
+
+
+def model_window(batch: KeystrokeBatch) -> npt.NDArray[np.intp]:
+    """Per keystroke, the last output sample the model describes: before the fingertip lifts
+    off the key (see the module docstring); the whole trace when the key never moved."""
+    out = np.full(batch.n, batch.t_s.size - 1, dtype=np.intp)
+    for i in range(batch.n):
+        t = batch.row_times_s(i)
+        x2 = fill_gaps(t, batch.x2_m[i])
+        moved = np.flatnonzero(x2 > KEY_MOTION_THRESHOLD_M)
+        if moved.size == 0 or not np.isfinite(batch.x1_m[i]).any():
+            continue
+        touch = int(moved[0])
+        gap = fill_gaps(t, batch.x1_m[i]) - x2
+        peak = touch + int(np.nanargmax(x2[touch:]))
+        after = np.arange(x2.size) > peak
+        off = np.flatnonzero(after & ((gap < gap[touch] - LIFT_OFF_M) | (x2 < KEY_MOTION_THRESHOLD_M)))
+        if off.size:
+            out[i] = int(off[0]) - 1
+    return out
+
+
+def _fastest_rate(params: MSDParams, vacuum_kpa: FloatArray) -> float:
+    """The fastest rate (1/s) of the model at the batch's vacuum levels: the natural frequency
+    of each mass on all its springs, and each mass's damping over its mass."""
+    rate = 1.0
+    for p in np.unique(vacuum_kpa):
+        lp = params.at(float(p))
+        rate = max(rate, math.sqrt((lp.k0_npm + lp.k1_npm) / lp.m1_kg), math.sqrt((lp.k1_npm + lp.k2_npm) / lp.m2_kg),
+                   (lp.c0_nspm + lp.c1_nspm) / lp.m1_kg, (lp.c1_nspm + lp.c2_nspm) / lp.m2_kg)
+    return rate
 
 
 def _resample(x: FloatArray, lo: npt.NDArray[np.intp], frac: FloatArray) -> FloatArray:

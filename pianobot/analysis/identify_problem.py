@@ -29,6 +29,8 @@ FloatArray = npt.NDArray[np.float64]
 
 #: Residuals are in millimetres so the robust loss scale reads naturally (0.05 mm ≈ mocap noise ×10).
 RESIDUAL_SCALE_M = 1.0e-3
+#: Residuals are capped here (1 m in residual units): far beyond any keystroke's travel.
+MAX_RESIDUAL = 1e3
 #: Central-difference step in log-parameters (see the module docstring).
 JAC_STEP = 1e-2
 #: Noise draws that propagate the arm trace's noise through the model, and their amplification
@@ -104,7 +106,9 @@ class Problem:
     def __post_init__(self) -> None:
         self.forward = ForwardModel.of(self.batch)
         y = np.stack([self.batch.x1_m, self.batch.x2_m], axis=1)  # (n, 2, T)
-        self.mask = np.isfinite(y)
+        # Measured samples inside the model's domain (before lift-off: `model_window`).
+        inside = np.arange(y.shape[2])[None, :] <= self.forward.last[self.forward.rows][:, None]
+        self.mask = np.isfinite(y) & inside[:, None, :]
         self.measured_grid = np.where(self.mask, y, 0.0) / RESIDUAL_SCALE_M
 
     def simulate(self, theta: FloatArray, input_x0_m: FloatArray | None = None) -> FloatArray:
@@ -129,7 +133,8 @@ class Problem:
         """Model minus measurement (mm) at every measured sample, rest offsets profiled out."""
         with np.errstate(over="ignore", invalid="ignore"):  # trial steps may be unstable
             r = self.profiled(self.simulate(theta) - self.measured_grid)
-        r = np.where(np.isfinite(r), r, 1e6)
+        # A diverged trial simulation reads as a uniformly bad fit, never as NaN or overflow.
+        r = np.clip(np.where(np.isfinite(r), r, MAX_RESIDUAL), -MAX_RESIDUAL, MAX_RESIDUAL)
         self._last = (theta.copy(), r)
         return r
 

@@ -138,7 +138,8 @@ def stages(t_s: FloatArray, x0: FloatArray, x1: FloatArray, x2: FloatArray,
 
     Top: arm, fingertip and key surface in one frame — depth below the key's rest surface, so
     the fingertip starts `distance_m` above it and touches where its line meets the key's.
-    Bottom: the key alone, at its own scale. Stage names are in the legend below the axes.
+    Bottom: the key alone, at its own scale. Stage names are in the legend below the axes; the
+    model traces end where the model does (lift-off: NaN from there, see `model_window`).
     """
     t = np.asarray(t_s, dtype=np.float64)
     edges = _stage_edges(t, x0, x1, x2, distance_m)
@@ -155,6 +156,12 @@ def stages(t_s: FloatArray, x0: FloatArray, x1: FloatArray, x2: FloatArray,
         top.plot(t[show], 1e3 * x1_model[show] - d_mm, color="C0", ls="--", lw=1.2, label="fingertip model")
         top.plot(t[show], 1e3 * x2_model[show], color="C3", ls="--", lw=1.2, label="key model")
         bottom.plot(t[show], 1e3 * x2_model[show], color="k", ls="--", lw=1.0, label="key model")
+        # The study's model describes the keystroke until the fingertip leaves the key.
+        modelled = np.flatnonzero(np.isfinite(x2_model) & show)
+        if modelled.size and modelled[-1] < np.flatnonzero(show)[-1]:
+            for ax in (top, bottom):
+                ax.axvline(t[modelled[-1]], color="k", ls=":", lw=1.0,
+                           label="lift-off: model ends" if ax is bottom else None)
     handles = []
     for i, name in enumerate(STAGE_NAMES):
         a, b = edges[i], edges[i + 1]

@@ -16,6 +16,7 @@ from pianobot.analysis.identify import (
     simulate_batch,
     split_holdout,
 )
+from pianobot.analysis.identify_forward import model_window
 from pianobot.analysis.identify_run import identify_runs, load_batch_trials
 from pianobot.analysis.keystroke_batch import keystroke_batch
 from pianobot.analysis.static_stiffness import force_log_levels, static_stiffness_from_logs
@@ -63,6 +64,23 @@ def test_identify_recovers_the_linear_world_from_a_sweep_with_hover(hover_sweep:
     assert fit.rms_m < 4.5e-6
     assert result.holdout_rms_identified_m < 0.1 * result.holdout_rms_published_m
     assert result.peak_hz["-60"] == pytest.approx(peak_response(TRUTH.at(-60.0))[0], rel=0.02)
+
+
+def test_identify_a_finger_that_lets_go_of_the_key(data_dir: Path) -> None:
+    """A real finger pushes and never pulls: after lift-off the key returns on its own while the
+    study's bilateral spring would drag it up. Identification fits up to lift-off only."""
+    run = linear_sweep(data_dir, seed=12, truth=TRUTH, effects=("contact",), speeds_mps=(0.04, 0.06), repeats=1)
+    batch, _, _ = load_batch_trials([run], data_dir)
+    window = model_window(batch)
+    assert np.all(window < np.isfinite(batch.x2_m).sum(axis=1) - 10)  # the release is left out ...
+    assert np.all(batch.x2_m[np.arange(batch.n), window] > 0.0)  # ... not the press
+    fit = identify_trajectories(batch, coupling="tied")
+    for p in (-20.0, -60.0):
+        assert fit.estimate(f"k1_npm@{p:g}kPa").value == pytest.approx(TRUTH.k1_npm(p), rel=0.05)
+    assert fit.estimate("k2_npm").value == pytest.approx(TRUTH.k2_npm, rel=0.05)
+    assert fit.estimate("c1_nspm").value == pytest.approx(TRUTH.c1_nspm, rel=0.15)
+    assert fit.estimate("c2_nspm").value == pytest.approx(TRUTH.c2_nspm, rel=0.15)
+    assert fit.rms_m < 4.5e-6
 
 
 def test_forward_model_leaves_the_key_at_rest_until_the_finger_touches(hover_sweep: tuple[Path, str]) -> None:
