@@ -1,7 +1,7 @@
 """Damping cross-check by logarithmic decrement of the key's free ringing.
 
-Once the arm has stopped (x0 constant after the press), whatever the key still does is the free
-response of the finger–key system: a decaying oscillation. For a mode with damping ratio ζ the
+While the arm stands still (a hold at the bottom, or after the press), whatever the key does is
+the free response of the finger–key system: a decaying oscillation. For a mode with damping ratio ζ the
 amplitude falls by the same factor every cycle, δ = ln(A_i / A_{i+1}) = 2πζ / √(1 − ζ²), so
 ζ = δ / √(4π² + δ²), and the cycle length gives the damped frequency f_d. This needs no model
 and no fit of the press itself, so it checks the dampings the trajectory fit identified: the
@@ -29,6 +29,8 @@ FloatArray = npt.NDArray[np.float64]
 MIN_EXTREMA = 4
 #: The arm counts as stopped once within this fraction of its travel from its final level.
 ARM_SETTLED_FRACTION = 0.01
+#: A still period shorter than this holds too few cycles of the key's 7-20 Hz ringing.
+MIN_FREE_S = 0.15
 
 
 @dataclass(frozen=True)
@@ -130,24 +132,55 @@ def model_modes(params: MSDParams, vacuum_kpa: float) -> list[tuple[float, float
     return modes
 
 
+def _still_runs(x0: FloatArray, min_samples: int) -> list[tuple[int, int]]:
+    """(start, end) index ranges where the arm stands still for at least `min_samples` samples.
+
+    Still: each step smaller than the larger of 6 noise σ and `ARM_SETTLED_FRACTION` of the
+    travel per 100 samples (a moving arm covers that in a few frames), and the run stays within
+    `ARM_SETTLED_FRACTION` of the travel of its final level.
+    """
+    travel = float(np.nanmax(x0) - np.nanmin(x0))
+    if not travel > 0:
+        return []
+    step_tol = max(6.0 * noise_sigma_m(x0), 0.01 * ARM_SETTLED_FRACTION * travel)
+    still = np.r_[False, np.abs(np.diff(x0)) < step_tol]
+    runs: list[tuple[int, int]] = []
+    edges = np.flatnonzero(np.diff(np.r_[0, still.astype(np.int8), 0]))
+    for start, end in zip(edges[::2], edges[1::2], strict=True):
+        level = x0[end - 1]
+        inside = np.flatnonzero(np.abs(x0[start:end] - level) <= ARM_SETTLED_FRACTION * travel)
+        if inside.size:
+            start = start + int(inside[0])
+        if end - start >= min_samples:
+            runs.append((int(start), int(end)))
+    return runs
+
+
 def damping_check(batch: KeystrokeBatch, params: MSDParams, *, seed: int = 0) -> DampingCheck | None:
-    """Log decrement of the key (x2) after each keystroke's arm motion ends; None if no ringing."""
+    """Log decrement of the key (x2) while the arm stands still; None if it never rings there.
+
+    The arm stands still during a hold at the bottom (the key rings under the finger) and
+    after the keystroke (a finger still on the key, as in the study's takes, keeps it ringing;
+    one that has left it leaves a key at rest). Of a keystroke's still periods the one with the
+    longest measurable decay is used.
+    """
     noise = noise_sigma_m(batch.x2_m)
+    dt = batch.dt_s
+    min_samples = max(8, int(round(MIN_FREE_S / dt))) if dt > 0 else 8
     found: list[Ringing] = []
     for i in range(batch.n):
-        x0 = batch.x0_m[i]
-        travel = float(np.nanmax(np.abs(x0 - x0[-1])))
-        if not travel > 0:
-            continue
-        moving = np.flatnonzero(np.abs(x0 - x0[-1]) > ARM_SETTLED_FRACTION * travel)
-        if moving.size == 0 or moving[-1] + 2 >= batch.t_s.size:
-            continue
-        start = int(moving[-1]) + 1
-        x2 = batch.x2_m[i, start:]
-        peak = float(np.nanmax(np.abs(x2 - np.nanmedian(x2)))) if np.isfinite(x2).any() else 0.0
-        f, zeta, n = log_decrement(batch.t_s[start:], x2, min_amplitude_m=max(5.0 * noise, 0.05 * peak))
-        if math.isfinite(zeta):
-            found.append(Ringing(batch.trial_id[i], float(batch.vacuum_kpa[i]), f, zeta, n))
+        t = batch.row_times_s(i)
+        best: tuple[float, float, int] | None = None
+        for start, end in _still_runs(batch.x0_m[i], min_samples):
+            x2 = batch.x2_m[i, start:end]
+            if not np.isfinite(x2).any():
+                continue
+            peak = float(np.nanmax(np.abs(x2 - np.nanmedian(x2))))
+            f, zeta, n = log_decrement(t[start:end], x2, min_amplitude_m=max(5.0 * noise, 0.05 * peak))
+            if math.isfinite(zeta) and (best is None or n > best[2]):
+                best = (f, zeta, n)
+        if best is not None:
+            found.append(Ringing(batch.trial_id[i], float(batch.vacuum_kpa[i]), *best))
     if not found:
         return None
     freq = float(np.median([r.frequency_hz for r in found]))

@@ -68,7 +68,7 @@ def write_run(data_dir: Path, trials: pd.DataFrame, samples: pd.DataFrame | None
 def linear_sweep(data_dir: Path, *, seed: int, levels_kpa: tuple[float, ...] = (-20.0, -60.0),
                  speeds_mps: tuple[float, ...] = (0.03, 0.06), depths_m: tuple[float, ...] = (0.025, 0.03),
                  distance_m: float = 0.05, repeats: int = 2, truth: MSDParams | None = None,
-                 effects: tuple[str, ...] = ()) -> str:
+                 effects: tuple[str, ...] = (), hold_s: float = 0.0) -> str:
     """A sweep of the simulated world's linear preset (the study's model + observation noise)
     through the real runner: rig file, spec file, `run_sweep`, stored run. Returns the run id.
 
@@ -88,7 +88,7 @@ def linear_sweep(data_dir: Path, *, seed: int, levels_kpa: tuple[float, ...] = (
         "name: linear-sweep\nrig: rig.yaml\nfinger: soft\nnote: 57\n"
         "sweep:\n  mode: grid\n"
         f"  params: {{vacuum_kpa: {list(levels_kpa)}, down_velocity_mps: {list(speeds_mps)}, depth_m: {list(depths_m)}}}\n"
-        f"  fixed: {{distance_m: {distance_m}, acceleration_mps2: 1.0}}\n"
+        f"  fixed: {{distance_m: {distance_m}, acceleration_mps2: 1.0, hold_s: {hold_s}}}\n"
         f"  repeats: {repeats}\n"
         "record: [midi, arm, mocap]\n"
     )

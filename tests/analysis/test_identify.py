@@ -248,3 +248,17 @@ def test_identify_writes_readout_and_damping_into_the_model_file(data_dir: Path,
     assert model["model"]["effects"]["velocity_curve"]["curve_exponent"] == pytest.approx(1.5, rel=0.15)
     assert model["provenance"]["readout"]["n_trials"] == int(trials["on_velocity"].notna().sum()) >= 5
     assert "damping_check" in model["provenance"]
+
+
+def test_damping_check_reads_the_key_ringing_during_a_hold(data_dir: Path) -> None:
+    """With a finger that lets go, the key rings freely only while the arm holds at the bottom."""
+    from pianobot.analysis.damping import damping_check
+
+    run = linear_sweep(data_dir, seed=4, truth=TRUTH, effects=("contact",), hold_s=0.5, levels_kpa=(-40.0,),
+                       repeats=1)
+    check = damping_check(load_batch_trials([run], data_dir)[0], TRUTH)
+    assert check is not None and len(check.ringing) == 4
+    assert check.frequency_hz == pytest.approx(check.model_frequency_hz, rel=0.05)
+    assert check.zeta == pytest.approx(check.model_zeta, rel=0.15)
+    no_hold = linear_sweep(data_dir, seed=5, truth=TRUTH, effects=("contact",), levels_kpa=(-40.0,), repeats=1)
+    assert damping_check(load_batch_trials([no_hold], data_dir)[0], TRUTH) is None  # the key just rests
