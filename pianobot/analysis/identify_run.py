@@ -124,7 +124,9 @@ def identify_runs(
                               "bootstrap": None if e.ci_bootstrap is None else list(e.ci_bootstrap)}
                      for e in fit.estimates}
         provenance = {
-            "method": "output-error least squares (soft-L1) on mocap trajectories",
+            "method": "output-error least squares (soft-L1) on mocap trajectories; forward model: the "
+                      "measured arm trace drives the fingertip from distance_m above the key, the study's "
+                      "coupling from touch, each keystroke fitted until the fingertip lifts off",
             "runs": list(hashes), "data_sha256": hashes, "pianobot_version": pianobot.__version__,
             "fixed": fit.fixed, "coupling": fit.coupling, "bootstrap": bootstrap, "seed": seed,
             "holdout_rms_x2_m": {"identified": rms_id, "published": rms_pub},
