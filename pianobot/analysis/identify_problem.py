@@ -201,11 +201,12 @@ class Problem:
         """
         batch = self.batch
         sigma = batch.input_noise_m
-        if not sigma > 0:
+        if not (sigma > 0 or batch.clock_offset_se_s > 0):
             return np.zeros((0, theta.size))
         rng = np.random.default_rng(seed)
         base = self.simulate(theta)
         before = batch.input_t_s < 0.0
+        speed = np.gradient(batch.input_x0_m, batch.input_t_s, axis=1) if batch.input_t_s.size > 1 else 0.0
         scores = []
         for _ in range(INPUT_NOISE_DRAWS):
             noise = rng.normal(0.0, INPUT_NOISE_GAIN * sigma, batch.input_x0_m.shape)
@@ -214,6 +215,9 @@ class Problem:
             # whole trace, and with it the instant the fingertip reaches the key.
             rest = np.median(noise[:, before], axis=1) if before.any() else noise[:, 0]
             noise -= rest[:, None]
+            # The clock offset that put the arm log on the mocap clock is estimated too: one
+            # error shifts every keystroke's input in time, x0(t − δτ) ≈ x0(t) − δτ·ẋ0(t).
+            noise -= rng.normal(0.0, INPUT_NOISE_GAIN * batch.clock_offset_se_s) * speed
             with np.errstate(over="ignore", invalid="ignore"):
                 dy = self.profiled(self.simulate(theta, batch.input_x0_m + noise) - base) / INPUT_NOISE_GAIN
             scores.append(J.T @ np.where(np.isfinite(dy), dy, 0.0))

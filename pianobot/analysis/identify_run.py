@@ -36,12 +36,14 @@ class IdentifyResult:
     model_path: Path | None
     damping: DampingCheck | None = None
     readout: ReadoutFit | None = None
+    clock_offset_s: float = 0.0  # mocap clock behind the arm log's (the arm log was shifted by it)
 
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {
             "parameters": {e.name: e.row() for e in self.fit.estimates},
             "coupling": self.fit.coupling,
             "fixed": self.fit.fixed,
+            "clock_offset_s": self.clock_offset_s,
             "rms_m": self.fit.rms_m,
             "n_keystrokes": self.fit.n_keystrokes,
             "holdout_rms_x2_identified_m": self.holdout_rms_identified_m,
@@ -124,6 +126,7 @@ def identify_runs(
                               "bootstrap": None if e.ci_bootstrap is None else list(e.ci_bootstrap)}
                      for e in fit.estimates}
         provenance = {
+            "clock_offset_s": {"value": batch.clock_offset_s, "se": batch.clock_offset_se_s},
             "method": "output-error least squares (soft-L1) on mocap trajectories; forward model: the "
                       "measured arm trace drives the fingertip from distance_m above the key, the study's "
                       "coupling from touch, each keystroke fitted until the fingertip lifts off",
@@ -136,4 +139,4 @@ def identify_runs(
         if static is not None:
             provenance["static_stiffness"] = static.to_dict()
         path = save_model(model, out, intervals=intervals, provenance=provenance)
-    return IdentifyResult(fit, model, rms_id, rms_pub, peaks, static, path, damping, readout)
+    return IdentifyResult(fit, model, rms_id, rms_pub, peaks, static, path, damping, readout, batch.clock_offset_s)

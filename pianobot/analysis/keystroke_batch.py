@@ -16,6 +16,13 @@ data can reproduce it to the noise level:
 - The input is kept at its own rate (the UR controller logs at 125 or 500 Hz) on its own grid
   `input_t_s`, held at its last value past the end of a trace; `x0_m` is that trace at the
   output times, for plots and model-free checks.
+- Input and outputs share one clock. The arm log runs on the controller's clock and motion
+  capture on its own, which may lag by milliseconds — at 60 mm/s, 5 ms is 0.3 mm, a hundred
+  times the mocap noise. When the output instrument also tracked the arm (the mocap arm marker),
+  the arm log is shifted onto the mocap clock by the one delay that best overlays the two arm
+  traces over all keystrokes (`clock_offset_s`, with its standard error: a delay is a property
+  of the set-up, and one keystroke alone pins it only to ~10 µs, which the fingertip's lag
+  behind the arm, a few ms, would feel).
 
 Each keystroke also carries its fingertip-key gap at the start (`distance_m`, from the trials'
 column of that name; 0 when not recorded: the finger starts on the key, as in the study's takes).
@@ -63,6 +70,8 @@ class KeystrokeBatch:
     input_t_s: FloatArray = field(default_factory=_empty)  # (T_in,) uniform
     input_x0_m: FloatArray = field(default_factory=_empty)  # (n, T_in) finite
     input_noise_m: float = math.nan  # white noise σ of the arm trace as sampled (NaN: from input_x0_m)
+    clock_offset_s: float = 0.0  # output clock minus input clock (the input is already shifted)
+    clock_offset_se_s: float = 0.0  # its standard error
 
     def __post_init__(self) -> None:
         n = len(self.trial_id)
@@ -107,6 +116,8 @@ class KeystrokeBatch:
             self.input_t_s,
             self.input_x0_m[idx],
             self.input_noise_m,
+            self.clock_offset_s,
+            self.clock_offset_se_s,
         )
 
 
@@ -156,6 +167,44 @@ def _pooled_noise_m(traces: list[FloatArray]) -> float:
     """Noise σ of traces of different lengths: their second differences pooled."""
     d2 = [np.diff(x[np.isfinite(x)], n=2) for x in traces]
     return sigma_from_second_differences(np.concatenate(d2)) if d2 else 0.0
+
+
+def _clock_offset_s(traces: list[tuple[FloatArray, FloatArray, FloatArray, FloatArray]],
+                    max_offset_s: float = 0.1) -> tuple[float, float]:
+    """(τ, its standard error): the delay of the reference clock behind the input's, so that
+    x_in(t − τ) best overlays x_ref(t) in every keystroke (input time, input, reference time,
+    reference arm trace).
+
+    Least squares with a free constant per keystroke (the instruments' rest levels differ), by a
+    1 ms scan over ±`max_offset_s` and a bounded refinement. The error is the regression's: the
+    residual σ over the root sum of squared arm speeds. (0, 0) when no trace overlaps.
+    """
+    from scipy.optimize import minimize_scalar
+
+    pairs = []
+    for t_in, x_in, t_ref, x_ref in traces:
+        ok_in, good = np.isfinite(x_in), np.isfinite(x_ref)
+        if good.sum() >= 10 and ok_in.sum() >= 2 and np.ptp(x_in[ok_in]) > 0:
+            pairs.append((t_in[ok_in], x_in[ok_in], t_ref[good], x_ref[good]))
+    if not pairs:
+        return 0.0, 0.0
+
+    def cost(tau: float) -> float:
+        return float(sum(np.sum((d - d.mean()) ** 2) for d in
+                         (np.interp(tr - tau, ti, xi) - xr for ti, xi, tr, xr in pairs)))
+
+    scan = np.arange(-max_offset_s, max_offset_s + 5e-4, 1e-3)
+    best = float(scan[int(np.argmin([cost(float(tau)) for tau in scan]))])
+    tau = float(minimize_scalar(cost, bounds=(best - 1e-3, best + 1e-3), method="bounded",
+                                options={"xatol": 1e-8}).x)
+    speed2, count = 0.0, 0
+    for ti, xi, tr, _ in pairs:
+        v = np.interp(tr - tau, ti, np.gradient(xi, ti))
+        speed2 += float(np.sum((v - v.mean()) ** 2))
+        count += tr.size - 1
+    dof = max(count - 1, 1)
+    se = math.sqrt(cost(tau) / dof / speed2) if speed2 > 0 else 0.0
+    return tau, se
 
 
 def _uniform_dt(times_by_trial: list[FloatArray]) -> float:
@@ -224,6 +273,12 @@ def keystroke_batch(
     by_in = {tid: g.sort_values("t_s") for tid, g in ins.groupby("trial_id", sort=False)}
     t_outs = [by_out[tid]["t_s"].to_numpy(float) for tid in ids]
     t_ins = [by_in[tid]["t_s"].to_numpy(float) for tid in ids]
+    # One clock: the arm log shifted onto the output instrument's, where that also saw the arm.
+    clock, clock_se = 0.0, 0.0
+    if x0_source != out_source and "x0_m" in outs:
+        clock, clock_se = _clock_offset_s([(t_ins[i], by_in[tid]["x0_m"].to_numpy(float), t_outs[i],
+                                            by_out[tid]["x0_m"].to_numpy(float)) for i, tid in enumerate(ids)])
+        t_ins = [t + clock for t in t_ins]
 
     # Output grid: one frame period, each row on its own clock phase.
     dt = _uniform_dt(t_outs)
@@ -263,5 +318,5 @@ def keystroke_batch(
         np.asarray(vac.loc[kept].to_numpy(float), dtype=np.float64),
         grid, x0[idx], x1[idx], x2[idx],
         np.asarray(gap.loc[kept].to_numpy(float), dtype=np.float64),
-        offsets[idx], in_grid, x0_in[idx], noise_in,
+        offsets[idx], in_grid, x0_in[idx], noise_in, clock, clock_se,
     )

@@ -68,13 +68,14 @@ def write_run(data_dir: Path, trials: pd.DataFrame, samples: pd.DataFrame | None
 def linear_sweep(data_dir: Path, *, seed: int, levels_kpa: tuple[float, ...] = (-20.0, -60.0),
                  speeds_mps: tuple[float, ...] = (0.03, 0.06), depths_m: tuple[float, ...] = (0.025, 0.03),
                  distance_m: float = 0.05, repeats: int = 2, truth: MSDParams | None = None,
-                 effects: tuple[str, ...] = (), hold_s: float = 0.0) -> str:
+                 effects: tuple[str, ...] = (), hold_s: float = 0.0, mocap_lag_s: float = 0.0) -> str:
     """A sweep of the simulated world's linear preset (the study's model + observation noise)
     through the real runner: rig file, spec file, `run_sweep`, stored run. Returns the run id.
 
     The fingertip starts `distance_m` above the key, as in every sweep of the lab. `truth`
     replaces the world's published parameters; `effects` switches effects on (default values),
-    e.g. ("contact",) for a finger that lets go of the key instead of the study's bilateral spring.
+    e.g. ("contact",) for a finger that lets go of the key instead of the study's bilateral spring;
+    `mocap_lag_s` sets the motion capture clock behind the arm's.
     """
     from pianobot.run import run_sweep
 
@@ -83,6 +84,7 @@ def linear_sweep(data_dir: Path, *, seed: int, levels_kpa: tuple[float, ...] = (
     msd = "" if truth is None else ", msd: {" + ", ".join(
         f"{k}: {v}" for k, v in truth.to_dict().items() if v is not None and k != "k1_table") + "}"
     extra = "" if not effects else ", effects: {" + ", ".join(f"{name}: {{}}" for name in effects) + "}"
+    extra += f", mocap: {{clock_offset_s: {mocap_lag_s}}}" if mocap_lag_s else ""
     (folder / "rig.yaml").write_text(f"kind: sim\nseed: {seed}\nworld: {{preset: linear{msd}{extra}}}\n")
     (folder / "spec.yaml").write_text(
         "name: linear-sweep\nrig: rig.yaml\nfinger: soft\nnote: 57\n"
