@@ -3,7 +3,8 @@
 The measured arm trace x0 drives the physical keystroke model (`identify_forward`: the fingertip
 hangs from the arm on k0, c0 while it approaches the key from `distance_m` above, and the study's
 2-DoF coupling acts from the instant it touches); the simulated fingertip x1 and key x2 are
-compared with the measured ones at every frame of every keystroke, and
+compared with the measured ones at every frame of every keystroke until the fingertip lifts off
+the key (where the study's bilateral coupling stops describing a real finger), and
 `scipy.optimize.least_squares` (robust soft-L1 loss, `identify_problem`) adjusts
 
     k1 per vacuum level, c1, k2, c2     and, with coupling="free", k0 and c0

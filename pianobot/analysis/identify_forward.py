@@ -73,7 +73,7 @@ class ForwardModel:
     lo: npt.NDArray[np.intp]  # (n, M) input-grid interval of each shifted sample
     frac: FloatArray  # (n, M) position inside it
     arm_sim_m: FloatArray  # (n, M) the batch's shifted input (parameter-independent, kept)
-    last: npt.NDArray[np.intp]  # (n,) each row's last measured output sample
+    last: npt.NDArray[np.intp]  # (n,) each row's last modelled sample (measured, before lift-off)
     rows: npt.NDArray[np.intp]  # (n_caller,) the distinct keystroke behind each caller's row
 
     @classmethod
