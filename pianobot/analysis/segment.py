@@ -91,10 +91,17 @@ def _last_crossing_down_s(t_s: FloatArray, x: FloatArray, level: float, start: i
     return float(t_s[i - 1] + frac * (t_s[i] - t_s[i - 1]))
 
 
-def _baseline(x: FloatArray) -> float:
-    """Rest level: the median of the first samples (traces start at rest)."""
-    head = x[: max(3, x.size // 20)]
-    head = head[np.isfinite(head)]
+def _baseline(t: FloatArray, x: FloatArray) -> float:
+    """Rest level: the median before motion start (t < 0) if recorded, else of the first 10 ms.
+
+    Stored traces start at motion start (t = 0), so only their first instants are surely at
+    rest: a fixed fraction of the trace would reach into the approach and shift the level.
+    """
+    head_mask = t < 0.0 if (t < 0.0).any() else t <= t[0] + 0.010
+    head = x[head_mask & np.isfinite(x)]
+    if head.size == 0:
+        finite = x[np.isfinite(x)]
+        head = finite[:1]
     return float(np.median(head)) if head.size else 0.0
 
 
@@ -122,13 +129,13 @@ def segment_keystroke(
     nan = float("nan")
     if t.size < 3 or not np.isfinite(x2).any():
         return Stages(nan, nan, nan, nan, nan, nan)
-    x2 = x2 - _baseline(x2)
+    x2 = x2 - _baseline(t, x2)
 
     t_motion = float(t[0])
     if x0_m is not None:
         x0 = fill_gaps(t, np.asarray(x0_m, dtype=np.float64))
         if np.isfinite(x0).any():
-            x0 = x0 - _baseline(x0)
+            x0 = x0 - _baseline(t, x0)
             travel = float(np.nanmax(x0))
             # 2 % of the stroke (at least the key threshold) separates motion from noise.
             level = max(key_threshold_m, 0.02 * travel)
@@ -146,7 +153,7 @@ def segment_keystroke(
     if x1_m is not None and distance_m is not None and distance_m > 0:
         x1 = fill_gaps(t, np.asarray(x1_m, dtype=np.float64))
         if np.isfinite(x1).any():
-            gap_closed = (x1 - _baseline(x1)) - x2
+            gap_closed = (x1 - _baseline(t, x1)) - x2
             t_found = first_crossing_s(t, gap_closed, distance_m - key_threshold_m)
             if np.isfinite(t_found) and t_found <= t_key_move:
                 t_contact = t_found

@@ -45,3 +45,19 @@ def test_key_that_never_moves_has_only_approach() -> None:
     t = np.linspace(0, 1, 120)
     st = segment_keystroke(t, np.zeros_like(t), x0_m=t * 0.01)
     assert np.isnan(st.t_key_move_s) and np.isfinite(st.t_motion_s)
+
+
+def test_hovering_finger_traces_that_start_at_motion_start_find_the_contact() -> None:
+    """Stored sweep traces begin at motion start (no rest samples before it): the rest level
+    must come from their first instants, not from a fraction that reaches into the approach."""
+    from pianobot.physics.world import World
+
+    distance_m = 0.05
+    ks = World.linear(0).keystroke(Press(distance_m, 0.03, 0.04, 0.04, 0.5, 0.2), -60.0, key="seg")
+    t = ks.truth_t_s - ks.t0_s
+    x0, x1, x2 = ks.truth_x0_m, ks.truth_x1_m, ks.truth_x2_m
+    st = segment_keystroke(t, x2, x0_m=x0, x1_m=x1, distance_m=distance_m)
+    touch = float(t[np.argmax(x1 - x2 >= distance_m)])  # the fingertip reaches the key
+    assert 0.0 <= st.t_motion_s < 0.1  # a 2 % travel threshold at 0.5 m/s² is crossed late
+    assert np.isfinite(st.t_contact_s) and abs(st.t_contact_s - touch) < 0.02
+    assert st.t_contact_s > 0.5  # 50 mm of approach at ≤ 0.04 m/s: not the first instant
