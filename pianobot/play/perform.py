@@ -24,7 +24,8 @@ import numpy as np
 import pandas as pd
 
 from pianobot.io.midifile import Note
-from pianobot.physics.trajectory import Press, press_duration_s
+from pianobot.physics.trajectory import press_duration_s
+from pianobot.plan import Trial
 from pianobot.play.adapt import Forecast, OnlineAdapter
 from pianobot.play.plan import Plan
 from pianobot.rig import open_rig
@@ -38,27 +39,6 @@ from pianobot.store import RunWriter
 BATCH_NOTES = 16
 FEASIBILITY_GRID = 200  # down velocities checked for an on-time start when adapting
 TAIL_S = 1.0  # listen this long after the last press for a late note-off
-
-
-@dataclass(frozen=True)
-class NoteStroke:
-    """One note's keystroke, shaped like a planned trial (what the rig and the store read)."""
-
-    trial_id: str
-    index: int
-    note: int
-    vacuum_kpa: float
-    down_velocity_mps: float
-    up_velocity_mps: float
-    acceleration_mps2: float
-    depth_m: float
-    distance_m: float
-    hold_s: float
-    finger_angle_deg: float = 0.0
-
-    def press(self) -> Press:
-        return Press(self.distance_m, self.depth_m, self.down_velocity_mps, self.up_velocity_mps,
-                     self.acceleration_mps2, self.hold_s)
 
 
 @dataclass(frozen=True)
@@ -178,9 +158,10 @@ class _Loop:
         # Move as soon as the arm is free: the plan left room for the move before `start`.
         self._move(int(row.pitch), float(row.distance_m))
         gap = self._collect_gap()
-        stroke = NoteStroke(str(row.trial_id), int(row.note_index), int(row.pitch), float(row.vacuum_kpa),
-                            speed, float(row.up_velocity_mps), float(row.acceleration_mps2), float(row.depth_m),
-                            float(row.distance_m), hold)
+        # A played note is a planned trial like any other (repeat 0), so the rig and store read it.
+        stroke = Trial(str(row.trial_id), int(row.note_index), 0, int(row.pitch), float(row.vacuum_kpa),
+                       speed, float(row.up_velocity_mps), float(row.acceleration_mps2), float(row.depth_m),
+                       float(row.distance_m), hold, 0.0)
         data = self._keystroke(stroke, start)
         data = dataclasses.replace(data, midi=tuple(gap) + data.midi)
         on_velocity = data.row.get("on_velocity", math.nan)
@@ -246,7 +227,7 @@ class _Loop:
         grid = np.linspace(table.speeds_mps[0], table.speeds_mps[-1], FEASIBILITY_GRID)
         return self.adapter.forecast(float(row.vacuum_kpa), grid, table.predict_velocity(grid), table.lead(grid))
 
-    def _keystroke(self, stroke: NoteStroke, start_s: float) -> TrialData:
+    def _keystroke(self, stroke: Trial, start_s: float) -> TrialData:
         """One timed keystroke; a dropped link is re-opened and the note tried once more."""
         for attempt in (1, 2):
             t0 = self.clock.now()
