@@ -11,6 +11,8 @@ from __future__ import annotations
 import pandas as pd
 import pyarrow as pa
 
+from pianobot.spec.parameters import PARAMETER_NAMES
+
 SCHEMA_VERSION = "1"
 METADATA_VERSION_KEY = b"pianobot.schema_version"
 METADATA_TABLE_KEY = b"pianobot.table"
@@ -21,17 +23,8 @@ RUN_STATUSES = ("running", "completed", "stopped", "interrupted", "failed")
 RUN_KINDS = ("sweep", "import", "play")
 SAMPLE_SOURCES = ("arm", "mocap", "sim-truth")
 
-PARAMETER_COLUMNS = (
-    "note",
-    "vacuum_kpa",
-    "down_velocity_mps",
-    "up_velocity_mps",
-    "acceleration_mps2",
-    "depth_m",
-    "distance_m",
-    "hold_s",
-    "finger_angle_deg",
-)
+# The trials table has one column per spec parameter, in the spec's order.
+PARAMETER_COLUMNS = PARAMETER_NAMES
 
 TRIALS_SCHEMA = pa.schema(
     [
