@@ -3,13 +3,12 @@
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_runner import invoke_cli as cli
 
-from pianobot.cli import main
 from pianobot.spec import load_rig
 from pianobot.store import load_run
 
@@ -18,15 +17,6 @@ QUICKSTART = REPO / "experiments" / "quickstart.yaml"
 FAULTY = REPO / "experiments" / "rigs" / "sim-faulty.yaml"
 
 
-def cli(args: list[str], capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> tuple[int, str, str]:
-    monkeypatch.setattr(sys, "argv", ["pianobot", *args])
-    code = 0
-    try:
-        main()
-    except SystemExit as exc:
-        code = int(exc.code or 0)
-    out, err = capsys.readouterr()
-    return code, out, err
 
 
 def test_faulty_rig_retries_stops_and_resumes_to_completion(

@@ -3,28 +3,18 @@
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
 import mido
 import pytest
+from cli_runner import invoke_cli as cli
 
-from pianobot.cli import main
 from pianobot.io.midifile import Note, write_song
 
 SONGS = Path(__file__).resolve().parents[2] / "experiments" / "songs"
 PLAY_RIG = Path(__file__).resolve().parents[2] / "experiments" / "rigs" / "sim-play.yaml"
 
 
-def cli(args: list[str], capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> tuple[int, str, str]:
-    monkeypatch.setattr(sys, "argv", ["pianobot", *args])
-    code = 0
-    try:
-        main()
-    except SystemExit as exc:
-        code = int(exc.code or 0)
-    out, err = capsys.readouterr()
-    return code, out, err
 
 
 def _type2(path: Path) -> Path:

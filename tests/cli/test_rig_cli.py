@@ -11,8 +11,8 @@ from types import ModuleType
 from typing import Any
 
 import pytest
+from cli_runner import invoke_cli as cli
 
-from pianobot.cli import main
 from pianobot.cli import rig as rig_cli
 from pianobot.rig.calibrate import calibrate_reference_pose
 from pianobot.rig.check import check_rig
@@ -54,16 +54,6 @@ midi:
 POSE = [-0.5, -0.1, 0.1, 0.0, 3.14159, 0.0]
 
 
-def cli(args: list[str], capsys: pytest.CaptureFixture[str],
-        monkeypatch: pytest.MonkeyPatch) -> tuple[int, str, str]:
-    monkeypatch.setattr(sys, "argv", ["pianobot", *args])
-    code = 0
-    try:
-        main()
-    except SystemExit as exc:
-        code = int(exc.code or 0)
-    out, err = capsys.readouterr()
-    return code, out, err
 
 
 def rig_file(tmp_path: Path, host: str = "192.0.2.10", calibrated: bool = True) -> Path:
