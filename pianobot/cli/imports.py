@@ -128,6 +128,8 @@ def _show(result: ImportResult, json: bool) -> None:
         emit_json(result.to_dict())
         return
     table = Table(title=f"imported {result.kind}", show_header=False)
+    table.add_column(no_wrap=True)
+    table.add_column(overflow="fold")  # run ids are copied by hand: never cut them with "…"
     for key, value in result.to_dict().items():
         if key == "skipped_lines":
             continue
