@@ -58,7 +58,9 @@ def register(app: typer.Typer) -> None:
         console = Console()
         console.print(table)
         console.print(f"held-out RMS x2: identified {1e3 * result.holdout_rms_identified_m:.4f} mm, "
-                      f"published {1e3 * result.holdout_rms_published_m:.4f} mm; x2/x0 peak (Hz): {result.peak_hz}")
+                      f"published {1e3 * result.holdout_rms_published_m:.4f} mm")
+        peaks = ", ".join(f"{hz:.2f} Hz at {level} kPa" for level, hz in result.peak_hz.items())
+        console.print(f"x2/x0 resonance peak: {peaks}")
         if result.damping is not None:
             d = result.damping
             console.print(f"damping cross-check (log decrement, {len(d.ringing)} keystrokes): "
