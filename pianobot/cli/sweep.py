@@ -17,6 +17,7 @@ from rich.console import Console
 from rich.table import Table
 
 from pianobot.cli.common import DEFAULT_DATA, DataDir, JsonFlag, emit_json, print_error
+from pianobot.plan import format_duration
 from pianobot.run import RunOutcome, dry_run, run_sweep
 from pianobot.store import RunSummary, list_runs, load_run, summarize_run
 from pianobot.store.tables import trial_status_counts
@@ -28,19 +29,6 @@ def _console() -> Console:
     """A console; piped output gets wide lines instead of rich's 80-column default."""
     console = Console()
     return console if console.is_terminal else Console(width=200)
-
-
-def _duration(seconds: float) -> str:
-    if not math.isfinite(seconds):
-        return "-"
-    total = int(round(seconds))
-    hours, rest = divmod(total, 3600)
-    minutes, secs = divmod(rest, 60)
-    if hours:
-        return f"{hours} h {minutes:02d} min"
-    if minutes:
-        return f"{minutes} min {secs:02d} s"
-    return f"{seconds:.1f} s"
 
 
 def _how_to_look(outcome: RunOutcome, data: Path, spec: Path | None) -> list[str]:
@@ -62,7 +50,7 @@ def _print_outcome(outcome: RunOutcome, data: Path, spec: Path | None) -> None:
     console.print(
         f"run [bold]{outcome.run_id}[/]: [{style}]{outcome.status}[/] — "
         f"{outcome.trials}/{outcome.planned} trials ({outcome.silent} silent, {outcome.failed} failed, "
-        f"{outcome.retries} retries this session), lab time {_duration(outcome.lab_time_s)}",
+        f"{outcome.retries} retries this session), lab time {format_duration(outcome.lab_time_s)}",
         highlight=False,
     )
     if outcome.reason:
@@ -80,7 +68,7 @@ def _print_summaries(summaries: list[RunSummary]) -> None:
     for s in summaries:
         planned = "?" if s.trials_planned is None else str(s.trials_planned)
         silent = "-" if math.isnan(s.silent_pct) else f"{s.silent_pct:.0f}%"
-        table.add_row(s.run_id, s.name, s.kind, s.status, f"{s.trials_done}/{planned}", silent, _duration(s.lab_time_s))
+        table.add_row(s.run_id, s.name, s.kind, s.status, f"{s.trials_done}/{planned}", silent, format_duration(s.lab_time_s))
     _console().print(table)
 
 
@@ -130,7 +118,7 @@ def _print_details(details: dict[str, Any]) -> None:
         ("status", details["status"] + (f" — {details['reason']}" if details["reason"] else "")),
         ("trials", f"{details['trials_done']}/{details['trials_planned']} done: {counts['ok']} ok, "
                    f"{counts['silent']} silent, {counts['failed']} failed"),
-        ("lab time", _duration(details["lab_time_s"])),
+        ("lab time", format_duration(details["lab_time_s"])),
         ("started / ended", f"{details['start_utc']} / {details['end_utc'] or '-'}"),
         ("spec", f"{details['spec_path']} (sha256 {str(details['spec_sha256'])[:12]})"),
         ("rig / seed", f"{details['rig_kind']} / {details['seed']}"),

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -149,7 +150,9 @@ def summarize(
 
 
 def format_duration(seconds: float) -> str:
-    """`42 s`, `3 min 05 s`, `1 h 23 min`."""
+    """`42 s`, `3 min 05 s`, `1 h 23 min`; `-` when unknown (NaN)."""
+    if not math.isfinite(seconds):
+        return "-"
     s = int(round(seconds))
     if s < 60:
         return f"{seconds:.1f} s" if seconds < 10 else f"{s} s"
