@@ -1,6 +1,6 @@
 """Benchmark `pianobot discover`: time per 24-keystroke dataset and hit rates of the scenario suite.
 
-Runs every scenario of `pianobot.analysis.discover_scenarios.full_suite()` (hidden effects strong
+Runs every scenario of `tests/analysis/own_world.py full_suite()` (hidden effects strong
 and weak, structural mismatch, controls, MIDI-only, several effects at once), scores it, and
 writes JSON to benchmarks/results/discover.json (and stdout).
 
@@ -17,11 +17,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import own_world as sc  # noqa: E402
 
-from pianobot.analysis import discover_scenarios as sc
-from pianobot.analysis.discover import discover
-from pianobot.analysis.discover_decide import family_of
-from pianobot.analysis.discover_result import DiscoveryResult
+from pianobot.analysis.discover.decide import family_of
+from pianobot.analysis.discover.loop import discover
+from pianobot.analysis.discover.result import DiscoveryResult
 
 RESULTS = Path(__file__).resolve().parent / "results" / "discover.json"
 

@@ -25,8 +25,8 @@ from typing import Any
 
 import numpy as np
 
-from pianobot.analysis.learn import LearnedPredictor, training_set
-from pianobot.analysis.predictors import PhysicsPredictor, StrokePredictor
+from pianobot.analysis.learn.predictors import PhysicsPredictor, StrokePredictor
+from pianobot.analysis.learn.training import LearnedPredictor, training_set
 from pianobot.play.adapt import OnlineAdapter
 from pianobot.play.library import etude
 from pianobot.play.perform import FEASIBILITY_GRID

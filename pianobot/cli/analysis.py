@@ -10,13 +10,13 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from pianobot.analysis.fit_run import fit_runs
-from pianobot.analysis.identify_run import identify_runs
-from pianobot.analysis.static_stiffness import (
+from pianobot.analysis.identify.run import identify_runs
+from pianobot.analysis.identify.static_stiffness import (
     STUDY_COMPRESSION_M,
     force_log_levels,
     static_stiffness_from_logs,
 )
+from pianobot.analysis.learn.run import fit_runs
 from pianobot.cli.common import DEFAULT_DATA, DataDir, JsonFlag, emit_json
 from pianobot.errors import InputError
 from pianobot.reports.run_report import build_run_report

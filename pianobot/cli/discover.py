@@ -9,8 +9,8 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from pianobot.analysis.discover import discover_runs
-from pianobot.analysis.discover_result import DiscoveryResult
+from pianobot.analysis.discover.loop import discover_runs
+from pianobot.analysis.discover.result import DiscoveryResult
 from pianobot.cli.common import DEFAULT_DATA, DataDir, JsonFlag, emit_json
 from pianobot.reports.discover_report import build_discover_report
 

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from pianobot.analysis.predictors import PhysicsPredictor, StrokePredictor, load_predictor
+from pianobot.analysis.learn.predictors import PhysicsPredictor, StrokePredictor, load_predictor
 from pianobot.errors import InputError
 from pianobot.io.midifile import Melody, Song, melody, read_song, write_performance
 from pianobot.play.adapt import OnlineAdapter

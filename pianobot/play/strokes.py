@@ -15,7 +15,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
-from pianobot.analysis.predictors import StrokePredictor
+from pianobot.analysis.learn.predictors import StrokePredictor
 from pianobot.physics.trajectory import Press, press_duration_s
 from pianobot.play.settings import PlaySettings
 

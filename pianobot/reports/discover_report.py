@@ -8,8 +8,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
-from pianobot.analysis.discover_data import SIGNALS
-from pianobot.analysis.discover_result import DiscoveryResult
+from pianobot.analysis.discover.data import SIGNALS
+from pianobot.analysis.discover.result import DiscoveryResult
 from pianobot.reports.html import Section, figure_html, paragraph, table_html, write_page
 
 

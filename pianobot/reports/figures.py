@@ -10,7 +10,7 @@ import pandas as pd
 from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 
-from pianobot.analysis.segment import STAGE_NAMES, segment_keystroke
+from pianobot.analysis.greybox.phases import STAGE_NAMES, segment_keystroke
 from pianobot.physics.msd import MSDParams, frequency_response
 
 FloatArray = npt.NDArray[np.float64]

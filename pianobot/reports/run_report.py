@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pianobot.analysis.identify import simulate_batch
-from pianobot.analysis.identify_run import load_batch
-from pianobot.analysis.predictors import INPUT_COLUMNS
+from pianobot.analysis.identify.fit import simulate_batch
+from pianobot.analysis.identify.run import load_batch
+from pianobot.analysis.learn.predictors import INPUT_COLUMNS
 from pianobot.errors import InputError
 from pianobot.physics.model import read_model_file
 from pianobot.physics.msd import MSDParams

@@ -9,9 +9,9 @@ import pandas as pd
 import pytest
 from _synthetic_runs import linear_keystrokes
 
-from pianobot.analysis.damping import damping_check, log_decrement, model_modes
-from pianobot.analysis.keystroke_batch import KeystrokeBatch, keystroke_batch
-from pianobot.analysis.readout_fit import fit_readout
+from pianobot.analysis.greybox.keystrokes import KeystrokeBatch, keystroke_batch
+from pianobot.analysis.identify.damping import damping_check, log_decrement, model_modes
+from pianobot.analysis.identify.readout import fit_readout
 from pianobot.physics.msd import MSDParams
 from pianobot.physics.piano import PianoParams
 

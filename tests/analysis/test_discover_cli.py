@@ -5,11 +5,11 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import own_world as sc
 import pytest
 from typer.testing import CliRunner
 
-from pianobot.analysis import discover_scenarios as sc
-from pianobot.analysis.discover_decide import family_of
+from pianobot.analysis.discover.decide import family_of
 from pianobot.cli import _register, app
 from pianobot.physics.model import load_model, save_model
 

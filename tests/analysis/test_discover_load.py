@@ -5,11 +5,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import own_world as sc
 import pandas as pd
 import pytest
 
-from pianobot.analysis import discover_scenarios as sc
-from pianobot.analysis.discover_load import (
+from pianobot.analysis.discover.load import (
     DEFAULT_ACCELERATION_MPS2,
     load_keystrokes,
     resolve_model,

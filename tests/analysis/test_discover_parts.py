@@ -5,18 +5,18 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pianobot.analysis.discover_data import (
+from pianobot.analysis.discover.data import (
     PHASES,
     Keystroke,
     Prediction,
     phase_labels,
     stratified_split,
 )
-from pianobot.analysis.discover_decide import Candidate, DecisionRule, choose, family_of
-from pianobot.analysis.discover_fit import ParamSpec, fit
-from pianobot.analysis.discover_localise import gap, localise
-from pianobot.analysis.discover_noise import lag1_autocorrelation, noise_sigma, systematic_rms
-from pianobot.analysis.sparse_terms import KeyState, propose_terms, proposed_families, stlsq
+from pianobot.analysis.discover.decide import Candidate, DecisionRule, choose, family_of
+from pianobot.analysis.discover.fit import ParamSpec, fit
+from pianobot.analysis.discover.localise import gap, localise
+from pianobot.analysis.discover.noise import lag1_autocorrelation, noise_sigma, systematic_rms
+from pianobot.analysis.discover.sparse import KeyState, propose_terms, proposed_families, stlsq
 from pianobot.physics.trajectory import Press
 
 
@@ -68,7 +68,7 @@ def test_fit_recovers_parameter_and_interval_excludes_off() -> None:
 
 
 def _candidate(effect: str, dbic: float, after: float, n: int = 1, ci: float = 0.1) -> Candidate:
-    from pianobot.analysis.discover_fit import FitResult
+    from pianobot.analysis.discover.fit import FitResult
 
     names = tuple(f"p{i}" for i in range(n))
     fr = FitResult(names, (1.0,) * n, (1.0 - ci,) * n, (1.0 + ci,) * n, 100.0, 1000, 0.0, True)
@@ -158,8 +158,8 @@ def test_a_switch_without_parameters_can_be_accepted() -> None:
 
 
 def test_decision_values_are_shown_in_readable_units() -> None:
-    from pianobot.analysis.discover_fit import FitResult
-    from pianobot.analysis.discover_params import format_value
+    from pianobot.analysis.discover.fit import FitResult
+    from pianobot.analysis.discover.params import format_value
 
     fr = FitResult(
         ("a.bed_depth_m", "a.stiffening_per_m"),

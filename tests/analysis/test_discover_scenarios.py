@@ -6,12 +6,12 @@ dropped frames and MIDI quantisation, so every test here is one full discovery r
 
 from __future__ import annotations
 
+import own_world as sc
 import pytest
 
-from pianobot.analysis import discover_scenarios as sc
-from pianobot.analysis.discover import discover
-from pianobot.analysis.discover_decide import family_of
-from pianobot.analysis.discover_result import DiscoveryResult
+from pianobot.analysis.discover.decide import family_of
+from pianobot.analysis.discover.loop import discover
+from pianobot.analysis.discover.result import DiscoveryResult
 
 
 def _run(scenario: sc.Scenario) -> DiscoveryResult:

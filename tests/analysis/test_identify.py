@@ -10,16 +10,16 @@ import numpy as np
 import pytest
 from _synthetic_runs import linear_keystrokes, linear_sweep
 
-from pianobot.analysis.identify import (
+from pianobot.analysis.greybox.forward import model_window
+from pianobot.analysis.greybox.keystrokes import keystroke_batch
+from pianobot.analysis.identify.fit import (
     identify_trajectories,
     rms_x2_m,
     simulate_batch,
     split_holdout,
 )
-from pianobot.analysis.identify_forward import model_window
-from pianobot.analysis.identify_run import identify_runs, load_batch_trials
-from pianobot.analysis.keystroke_batch import keystroke_batch
-from pianobot.analysis.static_stiffness import force_log_levels, static_stiffness_from_logs
+from pianobot.analysis.identify.run import identify_runs, load_batch_trials
+from pianobot.analysis.identify.static_stiffness import force_log_levels, static_stiffness_from_logs
 from pianobot.errors import InputError
 from pianobot.physics.msd import MSDParams, peak_response
 
@@ -247,7 +247,7 @@ def test_identify_writes_readout_and_damping_into_the_model_file(data_dir: Path,
 
     from _synthetic_runs import write_run
 
-    from pianobot.analysis.features import keystroke_features
+    from pianobot.analysis.greybox.features import keystroke_features
 
     trials, samples = linear_keystrokes(TRUTH, seed=4, speeds_mps=(0.01, 0.02, 0.03, 0.04, 0.05))
     speed = {tid: keystroke_features(g.t_s.to_numpy(), g.x2_m.to_numpy(), trigger_depth_m=0.001).key_speed_at_trigger_mps
@@ -277,7 +277,7 @@ def test_arm_log_is_put_on_the_mocap_clock(data_dir: Path) -> None:
 
 def test_damping_check_reads_the_key_ringing_during_a_hold(data_dir: Path) -> None:
     """With a finger that lets go, the key rings freely only while the arm holds at the bottom."""
-    from pianobot.analysis.damping import damping_check
+    from pianobot.analysis.identify.damping import damping_check
 
     run = linear_sweep(data_dir, seed=4, truth=TRUTH, effects=("contact",), hold_s=0.5, levels_kpa=(-40.0,),
                        repeats=1)

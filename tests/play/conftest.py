@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from pianobot.analysis.learn import LearnedPredictor, training_set
+from pianobot.analysis.learn.training import LearnedPredictor, training_set
 from pianobot.run import run_sweep
 from pianobot.store import load_run
 

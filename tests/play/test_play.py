@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pianobot.analysis.learn import LearnedPredictor
+from pianobot.analysis.learn.training import LearnedPredictor
 from pianobot.errors import InputError
 from pianobot.io.midifile import Note, read_song, write_song
 from pianobot.physics.trajectory import press_duration_s

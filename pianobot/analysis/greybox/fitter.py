@@ -20,9 +20,9 @@ import numpy as np
 import numpy.typing as npt
 from scipy.optimize import least_squares
 
-from pianobot.analysis.identify_covariance import noise_sigma_m
-from pianobot.analysis.identify_forward import ForwardModel
-from pianobot.analysis.keystroke_batch import KeystrokeBatch
+from pianobot.analysis.greybox.covariance import noise_sigma_m
+from pianobot.analysis.greybox.forward import ForwardModel
+from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
 from pianobot.physics.msd import MSDParams
 
 FloatArray = npt.NDArray[np.float64]

@@ -20,14 +20,14 @@ from pathlib import Path
 
 import numpy as np
 
-from pianobot.analysis import discover_model as dm
-from pianobot.analysis import discover_params as dp
-from pianobot.analysis.discover_data import Keystroke, stratified_split
-from pianobot.analysis.discover_decide import Candidate, DecisionRule, choose
-from pianobot.analysis.discover_fit import FitResult, bic, fit
-from pianobot.analysis.discover_load import load_keystrokes, resolve_model
-from pianobot.analysis.discover_localise import Localisation, localise
-from pianobot.analysis.discover_result import DiscoveryResult, Iteration, decision_line, verdict
+from pianobot.analysis.discover import model as dm
+from pianobot.analysis.discover import params as dp
+from pianobot.analysis.discover.data import Keystroke, stratified_split
+from pianobot.analysis.discover.decide import Candidate, DecisionRule, choose
+from pianobot.analysis.discover.fit import FitResult, bic, fit
+from pianobot.analysis.discover.load import load_keystrokes, resolve_model
+from pianobot.analysis.discover.localise import Localisation, localise
+from pianobot.analysis.discover.result import DiscoveryResult, Iteration, decision_line, verdict
 from pianobot.errors import InputError
 from pianobot.physics.model import KeystrokeModel, save_model
 

@@ -39,10 +39,10 @@ from typing import Any, Literal
 import numpy as np
 import numpy.typing as npt
 
-from pianobot.analysis.identify_covariance import hac_covariance, larger_variances, noise_covariance
-from pianobot.analysis.identify_forward import simulate_batch
-from pianobot.analysis.identify_problem import RESIDUAL_SCALE_M, Layout, Problem, k1_law, k1_name
-from pianobot.analysis.keystroke_batch import KeystrokeBatch
+from pianobot.analysis.greybox.covariance import hac_covariance, larger_variances, noise_covariance
+from pianobot.analysis.greybox.fitter import RESIDUAL_SCALE_M, Layout, Problem, k1_law, k1_name
+from pianobot.analysis.greybox.forward import simulate_batch
+from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
 from pianobot.physics.msd import MSDParams
 
 FloatArray = npt.NDArray[np.float64]

@@ -14,8 +14,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from pianobot.analysis.discover_data import PHASES, SIGNALS, Keystroke, Prediction
-from pianobot.analysis.discover_noise import (
+from pianobot.analysis.discover.data import PHASES, SIGNALS, Keystroke, Prediction
+from pianobot.analysis.discover.noise import (
     lag1_autocorrelation,
     noise_sigma,
     quantisation_sigma,

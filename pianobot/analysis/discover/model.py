@@ -15,9 +15,9 @@ import numpy as np
 import numpy.typing as npt
 from scipy.signal import savgol_filter
 
-from pianobot.analysis.discover_data import Keystroke, Prediction, phase_labels
-from pianobot.analysis.discover_localise import estimate_sigma, position_residuals
-from pianobot.analysis.sparse_terms import KeyState, Proposal, propose_terms
+from pianobot.analysis.discover.data import Keystroke, Prediction, phase_labels
+from pianobot.analysis.discover.localise import estimate_sigma, position_residuals
+from pianobot.analysis.discover.sparse import KeyState, Proposal, propose_terms
 from pianobot.physics.model import KeystrokeModel
 from pianobot.physics.piano import PianoParams
 from pianobot.physics.simulate import simulate_presses

@@ -22,9 +22,9 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
-from pianobot.analysis.features import speed_at_s
-from pianobot.analysis.keystroke_batch import KeystrokeBatch
-from pianobot.analysis.segment import first_crossing_s
+from pianobot.analysis.greybox.features import speed_at_s
+from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
+from pianobot.analysis.greybox.phases import first_crossing_s
 from pianobot.physics.piano import PianoParams
 
 FloatArray = npt.NDArray[np.float64]

@@ -5,7 +5,7 @@ start to note-on (`t_on_s`), and the probability that a keystroke is silent. Cro
 grouped (`GroupKFold`) by setting, so the repeats of one setting never sit on both sides of a
 split — otherwise a model could score by remembering a setting's repeats.
 
-A fitted `LearnedPredictor` is a `StrokePredictor` (`pianobot.analysis.predictors`): `play` loads
+A fitted `LearnedPredictor` is a `StrokePredictor` (`pianobot.analysis.learn.predictors`): `play` loads
 it with `load_predictor`. Files: `<name>.json` (schema `pianobot.predictor/1`: kind, inputs,
 ranges, CV table, training runs, hash of the estimator file) beside `<name>.joblib`.
 """
@@ -26,8 +26,8 @@ import numpy.typing as npt
 import pandas as pd
 from sklearn.model_selection import GroupKFold
 
-from pianobot.analysis.learn_models import fit_classifier, make_regressor, p_silent
-from pianobot.analysis.predictors import (
+from pianobot.analysis.learn.models import fit_classifier, make_regressor, p_silent
+from pianobot.analysis.learn.predictors import (
     INPUT_COLUMNS,
     OUTPUT_COLUMNS,
     FloatArray,

@@ -8,11 +8,11 @@ from typing import Any
 
 import numpy as np
 
-from pianobot.analysis import discover_params as dp
-from pianobot.analysis.discover_data import Keystroke, Prediction
-from pianobot.analysis.discover_decide import Candidate, family_of
-from pianobot.analysis.discover_localise import Localisation
-from pianobot.analysis.sparse_terms import Proposal
+from pianobot.analysis.discover import params as dp
+from pianobot.analysis.discover.data import Keystroke, Prediction
+from pianobot.analysis.discover.decide import Candidate, family_of
+from pianobot.analysis.discover.localise import Localisation
+from pianobot.analysis.discover.sparse import Proposal
 from pianobot.physics.model import KeystrokeModel
 
 

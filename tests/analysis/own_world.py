@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pianobot.analysis.discover_data import Keystroke
-from pianobot.analysis.discover_decide import family_of
+from pianobot.analysis.discover.data import Keystroke
+from pianobot.analysis.discover.decide import family_of
 from pianobot.physics.model import KeystrokeModel
 from pianobot.physics.trajectory import Press
 from pianobot.physics.world import MocapConfig, World, WorldConfig

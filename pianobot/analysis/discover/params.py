@@ -13,9 +13,9 @@ from typing import Any
 
 import numpy as np
 
-from pianobot.analysis.discover_data import Keystroke
-from pianobot.analysis.discover_fit import FitResult, ParamSpec
-from pianobot.analysis.sparse_terms import Proposal
+from pianobot.analysis.discover.data import Keystroke
+from pianobot.analysis.discover.fit import FitResult, ParamSpec
+from pianobot.analysis.discover.sparse import Proposal
 from pianobot.physics.effects import EFFECT_NAMES, EFFECTS
 from pianobot.physics.model import KeystrokeModel
 

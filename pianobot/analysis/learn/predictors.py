@@ -272,7 +272,7 @@ def load_predictor(path: str | Path) -> StrokePredictor:
         return PhysicsPredictor(load_model(source))
     if schema == "pianobot.predictor/1":
         # Imported here: learn builds on this module's protocol and helpers.
-        from pianobot.analysis.learn import load_learned
+        from pianobot.analysis.learn.training import load_learned
 
         return load_learned(source, payload)
     raise InputError(

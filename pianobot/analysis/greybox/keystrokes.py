@@ -37,7 +37,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
-from pianobot.analysis.identify_covariance import noise_sigma_m, sigma_from_second_differences
+from pianobot.analysis.greybox.covariance import noise_sigma_m, sigma_from_second_differences
 from pianobot.errors import InputError
 
 FloatArray = npt.NDArray[np.float64]

@@ -15,7 +15,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
-from pianobot.analysis.segment import (
+from pianobot.analysis.greybox.phases import (
     KEY_MOTION_THRESHOLD_M,
     fill_gaps,
     first_crossing_s,

@@ -12,11 +12,16 @@ import numpy as np
 import pandas as pd
 
 import pianobot
-from pianobot.analysis.damping import DampingCheck, damping_check
-from pianobot.analysis.identify import TrajectoryFit, identify_trajectories, rms_x2_m, split_holdout
-from pianobot.analysis.keystroke_batch import KeystrokeBatch, keystroke_batch
-from pianobot.analysis.readout_fit import ReadoutFit, fit_readout
-from pianobot.analysis.static_stiffness import StaticStiffness
+from pianobot.analysis.greybox.keystrokes import KeystrokeBatch, keystroke_batch
+from pianobot.analysis.identify.damping import DampingCheck, damping_check
+from pianobot.analysis.identify.fit import (
+    TrajectoryFit,
+    identify_trajectories,
+    rms_x2_m,
+    split_holdout,
+)
+from pianobot.analysis.identify.readout import ReadoutFit, fit_readout
+from pianobot.analysis.identify.static_stiffness import StaticStiffness
 from pianobot.errors import InputError
 from pianobot.physics.model import KeystrokeModel, save_model
 from pianobot.physics.msd import MSDParams, peak_response

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from pianobot.analysis.discover_fit import FitResult
+from pianobot.analysis.discover.fit import FitResult
 
 # Effects that are alternative explanations of the same observation; naming any member counts
 # as naming the family (e.g. a trapezoid input and a lagging arm both delay the key).

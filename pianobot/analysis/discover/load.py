@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pianobot.analysis.discover_data import Keystroke
+from pianobot.analysis.discover.data import Keystroke
 from pianobot.errors import InputError
 from pianobot.physics.model import KeystrokeModel, load_model
 from pianobot.physics.trajectory import Press

@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pandas as pd
 
-from pianobot.analysis.learn import cross_validate_models, save_predictor, training_set
-from pianobot.analysis.learn_models import MODEL_KINDS
-from pianobot.analysis.predictors import PhysicsPredictor, load_predictor
+from pianobot.analysis.learn.models import MODEL_KINDS
+from pianobot.analysis.learn.predictors import PhysicsPredictor, load_predictor
+from pianobot.analysis.learn.training import cross_validate_models, save_predictor, training_set
 from pianobot.errors import InputError
 from pianobot.store import load_run
 
