@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, cast
 
 import pandas as pd
 import typer
 from rich.console import Console
 from rich.table import Table
 
+from pianobot.analysis.identify.fit import Coupling
 from pianobot.analysis.identify.run import identify_runs
 from pianobot.analysis.identify.static_stiffness import (
     STUDY_COMPRESSION_M,
@@ -46,7 +47,7 @@ def register(app: typer.Typer) -> None:
             raise InputError(f"expected tied, free or auto, got {coupling!r}", "--coupling")
         levels = force_log_levels(force_log or [])
         static = static_stiffness_from_logs(levels, compression_m=compression_m) if levels else None
-        result = identify_runs(runs, data, out=out, coupling=coupling, bootstrap=bootstrap, seed=seed,
+        result = identify_runs(runs, data, out=out, coupling=cast(Coupling, coupling), bootstrap=bootstrap, seed=seed,
                                x0_source=x0_source, vacuum_kpa=vacuum_kpa, static=static)
         if json_out:
             emit_json(result.to_dict())

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Annotated
 
@@ -9,10 +10,11 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from pianobot.analysis.discover.loop import discover_runs
 from pianobot.analysis.discover.result import DiscoveryResult
+from pianobot.analysis.discover.run import discover_runs
 from pianobot.cli.common import DEFAULT_DATA, DataDir, JsonFlag, emit_json
-from pianobot.reports.discover_report import build_discover_report
+from pianobot.progress import progress_display
+from pianobot.reports.discover_report import build_discover_report, gap_cell
 
 RunIds = Annotated[
     list[str], typer.Argument(help="Run ids (or unique prefixes) with mocap and/or MIDI.")
@@ -24,21 +26,24 @@ def _print(result: DiscoveryResult, report: Path | None, model_out: Path | None)
     for line in result.decision_line.splitlines():
         console.print(f"[bold]{line}[/bold]")
     console.print(f"Verdict: {result.verdict}")
+    for finding in result.findings:
+        console.print(f"Measured: {finding.text}")
+    if result.base_on_bounds:
+        console.print(f"[yellow]Base parameters on a bound (not pinned by the data): "
+                      f"{', '.join(result.base_on_bounds)}[/yellow]")
     for note in result.notes:
-        console.print(f"[dim]Assumed: {note}[/dim]")
+        console.print(f"[dim]Data: {note}[/dim]")
     for it in result.iterations:
-        table = Table(title=f"Iteration {it.index + 1} (ΔBIC threshold {it.threshold:.1f})")
-        for column in ("effect", "ΔBIC", "gap before", "gap after", "status"):
+        table = Table(title=f"Iteration {it.index + 1}: held-out gap of the current model {it.gap_before.text()}")
+        for column in ("candidate", "ΔIC", "held-out gap after", "shrink", "consistent", "status", "why not"):
             table.add_column(column)
-        for c in it.candidates:
-            table.add_row(
-                c.effect,
-                f"{c.delta_bic:.1f}",
-                f"{c.gap_before:.3g}",
-                f"{c.gap_after:.3g}",
-                c.status,
-            )
+        for v in it.verdicts[:12]:
+            ratio = "∞" if not math.isfinite(v.ratio) else f"{v.ratio:.2g}×"
+            table.add_row(v.label, f"{v.delta_ic:.1f}", gap_cell(v.gap_after), f"{100 * v.shrink:.0f} % ({ratio})",
+                          f"{100 * v.consistency:.0f} %", v.status, "; ".join(v.reasons))
         console.print(table)
+    console.print(f"[dim]{result.n_train} training / {result.n_held_out} held-out keystrokes, "
+                  f"{result.seconds:.1f} s[/dim]")
     if model_out is not None:
         console.print(f"Model: {model_out}")
     if report is not None:
@@ -61,18 +66,18 @@ def register(app: typer.Typer) -> None:
             Path | None, typer.Option("--model-out", help="Where to write the updated model file.")
         ] = None,
         seed: Annotated[
-            int, typer.Option("--seed", help="Seed of the split and the bootstrap.")
+            int, typer.Option("--seed", help="Seed of the held-out split.")
         ] = 0,
         vacuum_kpa: Annotated[
             float | None, typer.Option("--vacuum-kpa", help="Vacuum of runs that do not record it.")
         ] = None,
+        no_progress: Annotated[bool, typer.Option("--no-progress", help="No progress display.")] = False,
     ) -> None:
         """Localise where the model and the measurements disagree, name the missing effect, refit."""
         if model_out is None and out is not None:
             model_out = out.with_suffix(".model.json")
-        result = discover_runs(
-            runs, data, model, seed=seed, model_out=model_out, vacuum_kpa=vacuum_kpa
-        )
+        result = discover_runs(runs, data, model, seed=seed, model_out=model_out, vacuum_kpa=vacuum_kpa,
+                               progress=progress_display(not (json_out or no_progress)))
         if out is not None:
             build_discover_report(result, out, model_path=model_out)
         if json_out:

@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from pianobot.analysis.greybox.load import load_batch
 from pianobot.analysis.identify.fit import simulate_batch
-from pianobot.analysis.identify.run import load_batch
 from pianobot.analysis.learn.predictors import INPUT_COLUMNS
 from pianobot.errors import InputError
 from pianobot.physics.model import read_model_file

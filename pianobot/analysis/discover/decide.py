@@ -1,179 +1,140 @@
 """The acceptance rule: when is a candidate effect real rather than a better fit to noise?
 
-A candidate is accepted only when all of these hold:
+A candidate (the current model plus one effect, refitted jointly) is accepted only when all hold:
 
-1. ΔBIC (base − candidate, on training keystrokes) exceeds a threshold: a fixed margin, raised to
-   the largest ΔBIC a parametric bootstrap of the fitted base model produced (data simulated
-   without the effect, so whatever ΔBIC the candidate wins there is what noise alone can buy);
-2. the held-out systematic error shrinks by at least `min_gap_reduction` (a fraction);
-3. the 95 % interval of at least one of its parameters excludes that parameter's "off" value.
+1. **evidence**: ΔIC (current − candidate, on the training keystrokes, `greybox.criterion`)
+   exceeds `ic_margin`: strong evidence on a likelihood whose error is the model's actual
+   systematic-plus-noise error and whose sample size is the effective one;
+2. **something to explain**: the current model's held-out systematic error is above the noise
+   (`floor_sigmas` × σ with trajectories; a MIDI gap above the rounding floor);
+3. **held-out gap shrink**: the candidate removes at least `min_shrink` of it on keystrokes it
+   was not fitted to;
+4. **consistency**: of the held-out keystrokes it changes, at least `min_consistency` improve
+   (one keystroke cannot carry a discovery);
+5. **size**: the 95 % interval of the effect's size parameter excludes its "off" value
+   (switch-like effects without parameters are judged by 1–4 alone).
 
-Among the candidates that pass, a simpler one (fewer parameters) within `nested_tolerance` of
-the best ΔBIC is preferred: of nested families the simpler member explains the data as well.
+Among the candidates that pass, the largest ΔIC wins; a simpler one (fewer parameters) within
+`nested_tolerance` of it is preferred: of nested alternatives the simpler explains as well.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-import numpy as np
-
-from pianobot.analysis.discover.fit import FitResult
-
-# Effects that are alternative explanations of the same observation; naming any member counts
-# as naming the family (e.g. a trapezoid input and a lagging arm both delay the key).
-FAMILIES: dict[str, str] = {
-    "contact": "contact",
-    "adhesion": "contact",
-    "keybed": "key_stop",
-    "letoff": "key_stop",
-    "key_preload": "key_action",
-    "key_friction": "key_action",
-    "finger_stiffening": "finger",
-    "stiffness_drift": "finger",
-    "arm_lag": "arm",
-    "arm_acceleration": "arm",
-    "velocity_curve": "piano",
-    "mocap_delay": "mocap",
-}
-
-
-def family_of(effect: str | None) -> str | None:
-    """The family an effect belongs to (itself when unlisted)."""
-    return None if effect is None else FAMILIES.get(effect, effect)
+from pianobot.analysis.discover.candidates import family_of
+from pianobot.analysis.discover.gap import Gap, consistency, measures, score
 
 
 @dataclass(frozen=True)
-class DecisionRule:
-    """Thresholds of the acceptance rule (the stated fractions are part of the report)."""
+class Rule:
+    """Thresholds of the acceptance rule (stated in the report)."""
 
-    bic_margin: float = 10.0
-    min_gap_reduction: float = 0.1
+    ic_margin: float = 10.0
+    floor_sigmas: float = 1.0
+    min_shrink: float = 0.3
+    min_consistency: float = 0.7
     nested_tolerance: float = 10.0
-    bootstrap_factor: float = 2.0  # threshold ≥ factor × largest bootstrap ΔBIC
 
-    def threshold(self, bootstrap_delta_bic: Sequence[float] = ()) -> float:
-        """The ΔBIC a candidate must beat, given null ΔBICs from the bootstrap."""
-        null = [x for x in bootstrap_delta_bic if np.isfinite(x)]
-        return max(self.bic_margin, self.bootstrap_factor * max(null, default=0.0))
+    def describe(self) -> str:
+        return (f"ΔIC > {self.ic_margin:g}; held-out systematic error above {self.floor_sigmas:g} σ of noise; "
+                f"shrinks by ≥ {100 * self.min_shrink:.0f} %; ≥ {100 * self.min_consistency:.0f} % of the held-out "
+                "keystrokes it changes improve; the effect's size interval excludes 'off'")
 
 
 @dataclass(frozen=True)
-class Candidate:
-    """One candidate effect fitted jointly with the base parameters."""
+class Verdict:
+    """One candidate judged (JSON-ready figures; the fitted model lives in the search)."""
 
+    label: str
     effect: str
-    fit: FitResult
-    effect_params: tuple[str, ...]
-    off_values: tuple[float, ...]
-    delta_bic: float
-    gap_before: float  # held-out primary gap of the base model
-    gap_after: float  # held-out primary gap with this effect
-    proposed_by: tuple[str, ...] = ()  # e.g. ("sparse",) when STLSQ pointed at it
-    # Other held-out measures above their noise floor: (name, before, after), e.g. on-velocity.
-    other_gaps: tuple[tuple[str, float, float], ...] = ()
+    form: str
+    params: dict[str, float]
+    intervals: dict[str, tuple[float, float]]
+    on_bounds: tuple[str, ...]
+    delta_ic: float
+    gap_before: Gap
+    gap_after: Gap
+    shrink: float  # 1 − score: fraction of the held-out gap removed
+    consistency: float
+    size_excludes_off: bool
+    joint: bool
+    measure: str = ""  # the held-out measure the shrink is read on
     status: str = "pending"
     reasons: tuple[str, ...] = field(default_factory=tuple)
 
     @property
+    def family(self) -> str | None:
+        return family_of(self.effect)
+
+    @property
     def n_params(self) -> int:
-        """How many effect parameters the candidate adds."""
-        return len(self.effect_params)
+        return len(self.params)
 
     @property
-    def gap_reduction(self) -> float:
-        """Fraction of the held-out gap removed (negative when it grows).
-
-        Over every measure above its noise floor (position, and MIDI velocity when recorded):
-        the largest reduction counts, unless some measure grows by more than 10 % — an
-        effect that fixes the sound but breaks the motion is not an explanation.
-        """
-        reductions = [
-            1.0 - after / before
-            for _, before, after in (("primary", self.gap_before, self.gap_after), *self.other_gaps)
-            if np.isfinite(before) and before > 0 and np.isfinite(after)
-        ]
-        if not reductions:
-            return 0.0
-        worst = min(reductions)
-        return float(worst if worst < -0.1 else max(reductions))
-
-    @property
-    def off_excluded(self) -> bool:
-        """True when some effect parameter's interval excludes its "off" value.
-
-        A switch without parameters (contact, arm_acceleration) has no interval: for it the
-        information criterion and the held-out gap decide alone.
-        """
-        checks = [
-            (name, off)
-            for name, off in zip(self.effect_params, self.off_values, strict=True)
-            if np.isfinite(off)
-        ]
-        if not checks:
-            return True
-        return any(self.fit.excludes(name, off) for name, off in checks)
+    def ratio(self) -> float:
+        """Held-out gap before / after (∞ when the gap vanished)."""
+        after = 1.0 - self.shrink
+        return 1.0 / after if after > 0 else math.inf
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain JSON-ready values."""
-        params = {}
-        for name in self.effect_params:
-            i = self.fit.names.index(name)
-            params[name] = {
-                "value": self.fit.values[i],
-                "ci95": [self.fit.lower_ci[i], self.fit.upper_ci[i]],
-            }
         return {
-            "effect": self.effect,
-            "family": family_of(self.effect),
-            "params": params,
-            "delta_bic": self.delta_bic,
-            "gap_before": self.gap_before,
-            "gap_after": self.gap_after,
-            "gap_reduction": self.gap_reduction,
-            "other_gaps": [
-                {"measure": name, "before": before, "after": after}
-                for name, before, after in self.other_gaps
-            ],
-            "off_excluded": self.off_excluded,
-            "proposed_by": list(self.proposed_by),
-            "status": self.status,
+            "label": self.label, "effect": self.effect, "form": self.form, "family": self.family,
+            "params": {k: {"value": v, "ci95": list(self.intervals.get(k, (math.nan, math.nan))),
+                           "on_bound": k in self.on_bounds} for k, v in self.params.items()},
+            "delta_ic": self.delta_ic, "gap_before": self.gap_before.to_dict(), "gap_after": self.gap_after.to_dict(),
+            "measures": {k: list(v) for k, v in measures(self.gap_after, self.gap_before).items()},
+            "shrink": self.shrink, "ratio": self.ratio, "measure": self.measure, "consistency": self.consistency,
+            "size_excludes_off": self.size_excludes_off, "joint_fit": self.joint, "status": self.status,
             "reasons": list(self.reasons),
         }
 
 
-def judge(candidate: Candidate, rule: DecisionRule, threshold: float) -> Candidate:
+def something_to_explain(gap: Gap, rule: Rule) -> bool:
+    """True when the held-out gap is above the noise (module docstring, condition 2)."""
+    if math.isfinite(gap.position_m):
+        return gap.position_m > rule.floor_sigmas * gap.sigma_m
+    return (math.isfinite(gap.on_velocity) and gap.on_velocity > 0.5) or gap.sounded_mismatch > 0 or (
+        math.isfinite(gap.hold_s) and gap.hold_s > 0.01)
+
+
+def verdict(label: str, effect: str, form: str, params: dict[str, float], intervals: dict[str, tuple[float, float]],
+            on_bounds: tuple[str, ...], delta_ic: float, before: Gap, after: Gap, size_excludes_off: bool,
+            joint: bool) -> Verdict:
+    """A candidate's figures, not yet judged."""
+    s, measure = score(after, before)
+    return Verdict(label, effect, form, params, intervals, on_bounds, delta_ic, before, after,
+                   1.0 - s if math.isfinite(s) else 0.0, consistency(after, before, measure), size_excludes_off,
+                   joint, measure)
+
+
+def judge(v: Verdict, rule: Rule, explainable: bool) -> Verdict:
     """Mark a candidate as passing or rejected, with every reason it fails."""
     reasons = []
-    if not candidate.delta_bic > threshold:
-        reasons.append(f"ΔBIC {candidate.delta_bic:.1f} ≤ threshold {threshold:.1f}")
-    if not candidate.gap_reduction >= rule.min_gap_reduction:
-        reasons.append(
-            f"held-out gap shrinks {100 * candidate.gap_reduction:.0f} % "
-            f"< {100 * rule.min_gap_reduction:.0f} %"
-        )
-    if not candidate.off_excluded:
-        reasons.append("parameter interval includes 'off'")
-    status = "passes" if not reasons else "rejected"
-    return replace(candidate, status=status, reasons=tuple(reasons))
+    if not v.delta_ic > rule.ic_margin:
+        reasons.append(f"ΔIC {v.delta_ic:.1f} ≤ {rule.ic_margin:g}")
+    if not explainable:
+        reasons.append("held-out error is at the noise level")
+    if not v.shrink >= rule.min_shrink:
+        reasons.append(f"held-out gap shrinks {100 * v.shrink:.0f} % < {100 * rule.min_shrink:.0f} %")
+    if not v.consistency >= rule.min_consistency:
+        reasons.append(f"improves {100 * v.consistency:.0f} % of changed held-out keystrokes "
+                       f"< {100 * rule.min_consistency:.0f} %")
+    if not v.size_excludes_off:
+        reasons.append("size interval includes 'off'")
+    return replace(v, status="passes" if not reasons else "rejected", reasons=tuple(reasons))
 
 
-def choose(
-    candidates: Sequence[Candidate], rule: DecisionRule, threshold: float
-) -> tuple[Candidate | None, list[Candidate]]:
-    """Judge every candidate and pick the accepted one (or None).
-
-    Returns:
-        (accepted, all candidates judged, best ΔBIC first).
-    """
-    judged = sorted((judge(c, rule, threshold) for c in candidates), key=lambda c: -c.delta_bic)
-    passing = [c for c in judged if c.status == "passes"]
+def choose(verdicts: Sequence[Verdict], rule: Rule, explainable: bool) -> tuple[Verdict | None, list[Verdict]]:
+    """Judge every candidate; (accepted or None, all judged, best ΔIC first)."""
+    judged = sorted((judge(v, rule, explainable) for v in verdicts), key=lambda v: -v.delta_ic)
+    passing = [v for v in judged if v.status == "passes"]
     if not passing:
         return None, judged
     best = passing[0]
-    close = [c for c in passing if c.delta_bic >= best.delta_bic - rule.nested_tolerance]
-    chosen = min(close, key=lambda c: (c.n_params, -c.delta_bic))
-    out = [replace(c, status="accepted") if c is chosen else c for c in judged]
-    return replace(chosen, status="accepted"), out
+    close = [v for v in passing if v.delta_ic >= best.delta_ic - rule.nested_tolerance]
+    chosen = min(close, key=lambda v: (v.n_params, -v.delta_ic))
+    return replace(chosen, status="accepted"), [replace(v, status="accepted") if v is chosen else v for v in judged]

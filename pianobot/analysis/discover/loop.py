@@ -2,293 +2,212 @@
 
 The loop (DESIGN.md, "Discovery"):
 
-1. fit the starting model's base parameters on the training keystrokes, so that a wrong
-   stiffness is never mistaken for missing physics;
-2. localise the disagreement on the held-out keystrokes (by phase, region, state, outcome);
-3. fit every effect of the vocabulary that the model lacks, jointly with the base parameters,
-   by simulation error on the training keystrokes; STLSQ on the residual key force proposes
-   which families to look at first (it never decides);
-4. accept the best candidate only if it passes the calibrated rule (`discover_decide`); repeat
-   until nothing passes, then say whether what is left looks like noise.
+1. split the keystrokes into training and held-out ones (`greybox.split`);
+2. check what is measured directly (`measured.py`): the arm's acceleration and lag against the
+   arm trace, the mocap clock against the arm log, the piano's velocity map against the key;
+3. fit the base model on the training keystrokes as identification does (`search.base_fit`),
+   so that a wrong stiffness is never mistaken for missing physics;
+4. localise the disagreement on the held-out keystrokes (`localise.py`);
+5. fit every candidate effect the model lacks (`candidates.py`, `search.py`), judge each with
+   the calibrated rule (`decide.py`), accept the best that passes, and repeat with it in the
+   model until nothing passes;
+6. when nothing passes but the held-out error is above the noise, the sparse residual search
+   names the best-supported term and the discrepancy is reported as unexplained.
+
+Candidate fits are independent pieces of work, run through `mapper` (default: one after the
+other), which is what a parallel executor replaces.
 """
 
 from __future__ import annotations
 
+import math
+import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
-from pathlib import Path
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from pianobot.analysis.discover import model as dm
-from pianobot.analysis.discover import params as dp
-from pianobot.analysis.discover.data import Keystroke, stratified_split
-from pianobot.analysis.discover.decide import Candidate, DecisionRule, choose
-from pianobot.analysis.discover.fit import FitResult, bic, fit
-from pianobot.analysis.discover.load import load_keystrokes, resolve_model
-from pianobot.analysis.discover.localise import Localisation, localise
-from pianobot.analysis.discover.result import DiscoveryResult, Iteration, decision_line, verdict
-from pianobot.errors import InputError
-from pianobot.physics.model import KeystrokeModel, save_model
+from pianobot.analysis.discover import search
+from pianobot.analysis.discover.candidates import CandidateSpec, candidates, size_params
+from pianobot.analysis.discover.decide import Rule, Verdict, choose, something_to_explain, verdict
+from pianobot.analysis.discover.localise import localise
+from pianobot.analysis.discover.measured import Finding, arm_checks, clock_check, readout_check
+from pianobot.analysis.discover.result import DiscoveryResult, Iteration, verdict_text
+from pianobot.analysis.discover.search import Evaluated, Setting
+from pianobot.analysis.discover.sparse import Proposal, outcome_proposals, trajectory_proposals
+from pianobot.analysis.greybox.fitter import GreyBoxFit
+from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
+from pianobot.analysis.greybox.pieces import Mapper, serial_map
+from pianobot.analysis.greybox.split import holdout_indices
+from pianobot.analysis.identify.fit import rms_x2_m
+from pianobot.physics.model import KeystrokeModel
+from pianobot.progress import NO_PROGRESS, Progress
+
+Z95 = 1.959963984540054
 
 
 @dataclass(frozen=True)
-class DiscoverySettings:
-    """Knobs of the discovery loop; the defaults are what the scenario suite is tested with."""
+class Settings:
+    """Knobs of the discovery loop; the defaults are what the benchmark suites run."""
 
-    held_out_fraction: float = 0.33
-    rule: DecisionRule = field(default_factory=DecisionRule)
-    max_iterations: int = 6
-    bootstrap_samples: int = 2
-    max_nfev: int = 20
-    screen_nfev: int = 12  # screening fits (effect parameters only) stop earlier
-    joint_refits: int = 2  # candidates refit jointly with the base after screening
+    rule: Rule = field(default_factory=Rule)
+    holdout_every: int = 3  # every 3rd keystroke (per level, by speed) is held out
+    max_iterations: int = 3
+    joint_refits: int = 3  # candidates refitted jointly with the base after screening
     seed: int = 0
-    # Lag-1 autocorrelation of the held-out residual below which it "looks like noise".
-    noise_lag1: float = 0.5
-    # ... and a systematic error below this fraction of the noise level counts as explained.
-    noise_fraction: float = 1.0
 
 
-def _chi2(model: KeystrokeModel, keystrokes: Sequence[Keystroke], weights: dm.Weights) -> float:
-    r = dm.residual_vector(keystrokes, dm.predict(model, keystrokes, states=False), weights)
-    return float(r @ r)
+def _intervals(fit: GreyBoxFit, names: Sequence[str]) -> dict[str, tuple[float, float]]:
+    """95 % intervals of named parameters from the fitter's covariance."""
+    cov = fit.covariance()
+    out = {}
+    for name in names:
+        j = fit.layout.names.index(name)
+        p = fit.layout.params[j]
+        sd = math.sqrt(max(float(cov[j, j]), 0.0))
+        u = float(fit.theta_[j])
+        out[name] = (p.from_internal(u - Z95 * sd), p.from_internal(u + Z95 * sd)) if sd < 50 else (-math.inf, math.inf)
+    return out
 
 
-def _fit_model(
-    model: KeystrokeModel,
-    effect: str | None,
-    keystrokes: Sequence[Keystroke],
-    weights: dm.Weights,
-    max_nfev: int,
-    *,
-    base: bool = True,
-) -> tuple[KeystrokeModel, FitResult]:
-    """Fit base parameters and/or one effect's parameters by simulation error.
-
-    `effect` must already be on in `model` (its current values are the start); `base=False`
-    keeps the base parameters fixed (the screening fit), but the information criterion still
-    counts them, so screened and joint fits compare on one scale.
-    """
-    base_specs = dp.base_specs(model, keystrokes)
-    specs = list(base_specs) if base else []
-    if effect is not None:
-        specs += dp.effect_specs(model, effect)
-
-    def residuals(values: dict[str, float]) -> np.ndarray:
-        trial = dp.apply_values(model, values)
-        return dm.residual_vector(keystrokes, dm.predict(trial, keystrokes, states=False), weights)
-
-    result = (
-        fit(specs, residuals, max_nfev=max_nfev) if max_nfev or not specs else fit([], residuals)
-    )
-    if not base:
-        result = replace(result, bic=bic(result.chi2, len(specs) + len(base_specs), result.n))
-    return dp.apply_values(model, result.as_dict()), result
+def _verdict(e: Evaluated, current: Evaluated, rule: Rule, with_intervals: bool) -> Verdict:
+    spec = e.spec
+    assert spec is not None
+    names = [p.name for p in e.fit.layout.params if p.group == spec.effect]
+    intervals = _intervals(e.fit, names) if with_intervals and names else {}
+    sizes = size_params(e.fit.layout, spec.effect)
+    excludes = True
+    if sizes and intervals:
+        excludes = any(not (intervals[p.name][0] <= (p.off or 0.0) <= intervals[p.name][1]) for p in sizes)
+    elif sizes:
+        excludes = False  # not computed: judged only when the other conditions hold
+    return verdict(spec.label, spec.effect, spec.form, {n: e.fit.params_[n] for n in names}, intervals,
+                   tuple(n for n in e.fit.on_bounds_ if n in names), current.ic - e.ic, current.gap, e.gap,
+                   excludes, e.joint)
 
 
-def _screen(
-    current: KeystrokeModel,
-    effect: str,
-    keystrokes: Sequence[Keystroke],
-    weights: dm.Weights,
-    max_nfev: int,
-) -> tuple[KeystrokeModel, FitResult]:
-    """Fit one effect with the base fixed, from the best of a few starting points."""
-    candidate = dp.with_effect(current, effect)
-    starts = [
-        dp.apply_values(candidate, start)
-        for start in dp.start_points(candidate, effect, keystrokes)
-    ]
-    best = min(starts, key=lambda m: _chi2(m, keystrokes, weights))
-    return _fit_model(best, effect, keystrokes, weights, max_nfev, base=False)
+def _promising(v: Verdict, rule: Rule) -> bool:
+    return v.delta_ic > rule.ic_margin and v.shrink >= rule.min_shrink and v.consistency >= rule.min_consistency
 
 
-def _bootstrap(
-    base: KeystrokeModel,
-    effect: str,
-    train: Sequence[Keystroke],
-    weights: dm.Weights,
-    settings: DiscoverySettings,
-    rng: np.random.Generator,
-) -> tuple[float, ...]:
-    """ΔBIC the candidate wins on data simulated from the base model (no effect): the null."""
-    out = []
-    predictions = dm.predict(base, train)
-    for _ in range(settings.bootstrap_samples):
-        synthetic = dm.synthesise(train, predictions, weights, rng)
-        _, null_base = _fit_model(base, None, synthetic, weights, settings.max_nfev)
-        screened, _ = _screen(base, effect, synthetic, weights, settings.screen_nfev)
-        _, null_cand = _fit_model(screened, effect, synthetic, weights, settings.max_nfev)
-        out.append(null_base.bic - null_cand.bic)
-    return tuple(out)
+def _iterate(setting: Setting, current: GreyBoxFit, start: KeystrokeModel, settings: Settings, sigma_m: float,
+             index: int, progress: Progress, mapper: Mapper) -> tuple[Iteration, GreyBoxFit | None]:
+    rule = settings.rule
+    criterion = search.criterion_of(current)
+    reference = search.evaluate(setting, current, criterion, sigma_m, "current", None)
+    explainable = something_to_explain(reference.gap, rule)
+    held_fit = GreyBoxFit(setting.held_drive, current.layout, channels=current.channels,
+                          sigma=current.sigma).evaluate(current.theta_)
+    before = localise(held_fit, sigma_m)
+    specs = candidates(current.model_, setting.train)
+    total = len(specs) + min(settings.joint_refits, len(specs))
+    with progress.task(f"discover, iteration {index + 1}: candidate fits", total=total) as task:
+        def screen_one(spec: CandidateSpec) -> Evaluated:
+            screened = search.screen(setting, current, spec)
+            full = search.as_full(setting, current, spec, screened)
+            task.advance(note=spec.label)
+            return search.evaluate(setting, full, criterion, sigma_m, spec.label, spec, joint=False)
+
+        evaluated = mapper(screen_one, specs)
+        ranked = sorted(evaluated, key=lambda e: e.ic)[: settings.joint_refits]
+
+        def refit(e: Evaluated) -> Evaluated:
+            assert e.spec is not None
+            fit = search.joint(setting, current, e.spec, e.fit, start)
+            task.advance(note=f"{e.spec.label} (joint)")
+            joint = search.evaluate(setting, fit, criterion, sigma_m, e.label, e.spec)
+            return joint if joint.ic <= e.ic else e
+
+        refitted = {e.label: e for e in mapper(refit, ranked)}
+    final = [refitted.get(e.label, e) for e in evaluated]
+    verdicts = [_verdict(e, reference, rule, False) for e in final]
+    # Intervals (a central Jacobian and noise draws each) only where the rest of the rule holds.
+    verdicts = [_verdict(e, reference, rule, True) if _promising(v, rule) else v for e, v in zip(final, verdicts, strict=True)]
+    accepted, judged = choose(verdicts, rule, explainable)
+    chosen = next((e.fit for e in final if accepted is not None and e.label == accepted.label), None)
+    after = None
+    if chosen is not None:
+        after = localise(GreyBoxFit(setting.held_drive, chosen.layout, channels=chosen.channels,
+                                    sigma=chosen.sigma).evaluate(chosen.theta_), sigma_m)
+    return Iteration(index, reference.gap, before, tuple(judged), accepted, after, explainable), chosen
 
 
-# Below these a held-out measure is at its noise floor and its ratio means nothing.
-_POSITION_FLOOR_SIGMAS = 0.3
-_VELOCITY_FLOOR = 0.3
+def _residual_search(setting: Setting, fit: GreyBoxFit) -> tuple[Proposal, ...]:
+    """The sparse search over what the current model leaves in the training keystrokes."""
+    batch, pred = fit.batch, fit.prediction_
+    if setting.mode == "trajectories":
+        times = batch.t_s[None, :] + batch.t_offset_s[:, None]
+        return trajectory_proposals(times, batch.x0_m, batch.x1_m, batch.x2_m, batch.distance_m, pred.x1_m, pred.x2_m,
+                                    pred.v2_mps, pred.force_n, fit.model_.msd.m2_kg)
+    residual = np.full(batch.n, np.nan)
+    res = fit.residuals_
+    if "on_velocity" in res.values:
+        residual[res.keystroke["on_velocity"]] = res.values["on_velocity"]
+    return outcome_proposals(batch.down_velocity_mps, batch.acceleration_mps2, batch.depth_m, batch.vacuum_kpa, residual)
 
 
-def _primary_or_nan(before: Localisation, weights: dm.Weights) -> float:
-    """The primary gap, or NaN when it is at the noise floor (then other measures decide)."""
-    g = before.gap
-    floor = (
-        _POSITION_FLOOR_SIGMAS * weights.sigma_m
-        if g.primary_name == "position_m"
-        else _VELOCITY_FLOOR
-    )
-    return g.primary if g.primary > floor else float("nan")
+def _with_findings(model: KeystrokeModel, findings: Sequence[Finding]) -> KeystrokeModel:
+    """The model with the effects measured on the set-up switched on (they do not change what the
+    measured-arm drive predicts, but a commanded press, as `play` sends, needs them)."""
+    for f in findings:
+        if f.accepted and f.effect not in model.effects:
+            model = model.replace(effects=model.effects.with_effect(f.effect, form=None, **f.params))
+    return model
 
 
-def _other_gaps(before: Localisation, after: Localisation) -> tuple[tuple[str, float, float], ...]:
-    """On-velocity gap before/after when it is not the primary and above its floor."""
-    b, a = before.gap, after.gap
-    if (
-        b.primary_name == "on_velocity"
-        or not np.isfinite(b.on_velocity)
-        or b.on_velocity <= _VELOCITY_FLOOR
-    ):
-        return ()
-    return (("on_velocity", b.on_velocity, a.on_velocity),)
-
-
-def discover(
-    keystrokes: Sequence[Keystroke],
-    model: KeystrokeModel,
-    settings: DiscoverySettings | None = None,
-) -> DiscoveryResult:
-    """Run the discovery loop on measured keystrokes, starting from `model`."""
-    settings = settings or DiscoverySettings()
-    keystrokes = list(keystrokes)
-    train_idx, held_idx = stratified_split(keystrokes, settings.held_out_fraction, settings.seed)
-    train = [keystrokes[i] for i in train_idx]
-    held = [keystrokes[i] for i in held_idx]
-    rng = np.random.default_rng(settings.seed)
-
-    weights = dm.estimate_weights(train, dm.predict(model, train))
-    base, _ = _fit_model(model, None, train, weights, settings.max_nfev)
-    weights = dm.estimate_weights(train, dm.predict(base, train))
-    current, current_fit = base, None
-    held_before = tuple(dm.predict(base, held))
+def discover(batch: KeystrokeBatch, start: KeystrokeModel | None = None, settings: Settings | None = None, *,
+             notes: Sequence[str] = (), progress: Progress = NO_PROGRESS, mapper: Mapper | None = None) -> DiscoveryResult:
+    """Run discovery on a batch (trajectories or MIDI only) from `start` (default: the study's
+    linear model)."""
+    t0 = time.perf_counter()
+    settings = settings or Settings()
+    start = start or KeystrokeModel.study()
+    mapper = mapper or serial_map
+    train_idx, held_idx = holdout_indices(batch, settings.holdout_every, settings.seed)
+    if held_idx.size == 0:
+        raise ValueError(f"cannot split {batch.n} keystrokes into training and held-out ones")
+    setting = Setting.of(batch.subset(train_idx), batch.subset(held_idx))
+    findings: list[Finding] = []
+    if setting.mode == "trajectories":
+        findings += arm_checks(batch)
+        findings += [f for f in (clock_check(batch), readout_check(batch)) if f is not None]
+    timings: dict[str, float] = {}
+    with progress.task("discover: base fit", total=None):
+        base = search.base_fit(setting, start)
+    timings["base_fit_s"] = time.perf_counter() - t0
+    sigma_m = search.held_noise_m(setting, base)
+    held_base = GreyBoxFit(setting.held_drive, base.layout, channels=base.channels, sigma=base.sigma).evaluate(base.theta_)
+    current = base
     iterations: list[Iteration] = []
+    unexplained: Proposal | None = None
     for index in range(settings.max_iterations):
-        # The current model is already fitted (base first, then jointly with each accepted
-        # effect): its χ² with the base parameters counted is the reference for ΔBIC.
-        _, current_fit = _fit_model(current, None, train, weights, 0, base=False)
-        predictions_held = dm.predict(current, held)
-        before = localise(held, predictions_held, sigma_m=weights.sigma_m)
-        proposals = dm.sparse_proposals(current, train, dm.predict(current, train))
-        pending: list[Candidate] = []
-        fitted: dict[str, KeystrokeModel] = {}
-        screened: dict[str, tuple[KeystrokeModel, FitResult]] = {}
-        for effect in dp.candidate_effects(current, train, proposals):
-            screened[effect] = _screen(current, effect, train, weights, settings.screen_nfev)
-        # Joint refits (base + effect) for the most promising candidates only: screening with
-        # the base fixed already ranks them, and the decision uses the joint fit.
-        ranked = sorted(screened, key=lambda e: screened[e][1].bic)
-        for effect in ranked:
-            cand_model, cand_fit = screened[effect]
-            if effect in ranked[: settings.joint_refits] and current_fit.bic - cand_fit.bic > 0:
-                cand_model, cand_fit = _fit_model(
-                    cand_model, effect, train, weights, settings.max_nfev
-                )
-            after = localise(held, dm.predict(cand_model, held), sigma_m=weights.sigma_m)
-            names = tuple(n for n in cand_fit.names if n.startswith(effect + "."))
-            pending.append(
-                Candidate(
-                    effect=effect,
-                    fit=cand_fit,
-                    effect_params=names,
-                    off_values=dp.off_values(names),
-                    delta_bic=current_fit.bic - cand_fit.bic,
-                    gap_before=_primary_or_nan(before, weights),
-                    gap_after=after.gap.primary,
-                    other_gaps=_other_gaps(before, after),
-                    proposed_by=("sparse",) if any(p.family == effect for p in proposals) else (),
-                )
-            )
-            fitted[effect] = cand_model
-        best = max(pending, key=lambda c: c.delta_bic, default=None)
-        null: tuple[float, ...] = ()
-        if (
-            best is not None
-            and best.delta_bic > settings.rule.bic_margin
-            and settings.bootstrap_samples
-        ):
-            null = _bootstrap(current, best.effect, train, weights, settings, rng)
-        threshold = settings.rule.threshold(null)
-        accepted, judged = choose(pending, settings.rule, threshold)
-        after_loc = None
-        if accepted is not None:
-            current = fitted[accepted.effect]
-            after_loc = localise(held, dm.predict(current, held), sigma_m=weights.sigma_m)
-        iterations.append(
-            Iteration(index, before, after_loc, tuple(judged), accepted, threshold, null, proposals)
-        )
-        if accepted is None:
+        iteration, chosen = _iterate(setting, current, start, settings, sigma_m, index, progress, mapper)
+        if chosen is None:
+            proposals = _residual_search(setting, current) if iteration.explainable else ()
+            iteration = Iteration(iteration.index, iteration.gap_before, iteration.before, iteration.verdicts,
+                                  None, None, iteration.explainable, proposals)
+            unexplained = next((p for p in proposals if p.family is not None), proposals[0] if proposals else None)
+        iterations.append(iteration)
+        if chosen is None:
             break
-    held_after = tuple(dm.predict(current, held))
-    final = localise(held, list(held_after), sigma_m=weights.sigma_m)
-    text, explained = verdict(iterations, final, settings.noise_lag1, settings.noise_fraction)
+        current = chosen
+    timings["candidates_s"] = time.perf_counter() - t0 - timings["base_fit_s"]
+    held_final = GreyBoxFit(setting.held_drive, current.layout, channels=current.channels,
+                            sigma=current.sigma).evaluate(current.theta_)
+    last = iterations[-1]
+    final_gap = last.accepted.gap_after if last.accepted else last.gap_before
+    explainable = something_to_explain(final_gap, settings.rule)
+    final_loc = last.after if last.accepted and last.after is not None else last.before
+    text, explained = verdict_text(iterations, findings, final_gap, unexplained if explainable else None,
+                                   explainable, final_loc.worst_stages())
+    if not explainable:
+        unexplained = None
+    base_rms = rms_x2_m(setting.held, base.model_) if setting.mode == "trajectories" else math.nan
     return DiscoveryResult(
-        iterations=tuple(iterations),
-        start_model=model,
-        base_model=base,
-        final_model=current,
-        verdict=text,
-        explained=explained,
-        decision_line=decision_line(iterations),
-        n_train=len(train),
-        n_held_out=len(held),
-        held_out_ids=tuple(k.key_id for k in held),
-        predictions_before=held_before,
-        predictions_after=held_after,
-        held_out=tuple(held),
-    )
-
-
-def discover_runs(
-    run_ids: Sequence[str],
-    data_dir: Path,
-    model: str = "study",
-    *,
-    seed: int = 0,
-    model_out: Path | None = None,
-    vacuum_kpa: float | None = None,
-) -> DiscoveryResult:
-    """Load runs, run discovery from `model` ("study" or a model file), save the final model.
-
-    Raises:
-        InputError: unknown runs, runs without mocap or MIDI, a bad model file.
-    """
-    notes: set[str] = set()
-    keystrokes = load_keystrokes(run_ids, data_dir, vacuum_kpa, notes)
-    if len(keystrokes) < 6:
-        raise InputError(f"discovery needs at least 6 keystrokes, got {len(keystrokes)}", "RUN_ID")
-    result = discover(keystrokes, resolve_model(model), DiscoverySettings(seed=seed))
-    result = replace(result, notes=tuple(sorted(notes)))
-    if model_out is not None:
-        intervals = {
-            name: [lo, hi]
-            for it in result.iterations
-            if it.accepted
-            for name, lo, hi in zip(
-                it.accepted.fit.names,
-                it.accepted.fit.lower_ci,
-                it.accepted.fit.upper_ci,
-                strict=True,
-            )
-        }
-        save_model(
-            result.final_model,
-            model_out,
-            intervals=intervals,
-            provenance={
-                "command": "discover",
-                "runs": list(run_ids),
-                "start_model": model,
-                "accepted_effects": list(result.accepted_effects),
-                "verdict": result.verdict,
-            },
-        )
-    return result
+        mode=setting.mode, iterations=tuple(iterations), findings=tuple(findings), start_model=start,
+        base_model=base.model_, final_model=_with_findings(current.model_, findings), base_params=dict(base.params_),
+        base_on_bounds=base.on_bounds_, verdict=text, explained=explained, rule=settings.rule,
+        n_train=setting.train.n, n_held_out=setting.held.n, held_out=setting.held,
+        predictions_before=held_base.prediction_, predictions_after=held_final.prediction_,
+        base_holdout_rms_x2_m=base_rms, unexplained=unexplained, notes=tuple(notes),
+        seconds=time.perf_counter() - t0, timings=timings)

@@ -177,3 +177,66 @@ def proposed_families(proposals: tuple[Proposal, ...], min_share: float = 0.1) -
         if proposal.family and proposal.share >= min_share and proposal.family not in families:
             families.append(proposal.family)
     return tuple(families)
+
+
+# ---- the residual search over a fitted model ----------------------------------------------------
+
+
+def _second_derivative(t: FloatArray, x: FloatArray) -> FloatArray:
+    from scipy.signal import savgol_filter
+
+    ok = np.isfinite(x)
+    if ok.sum() < 11:
+        return np.full_like(x, np.nan)
+    filled = np.interp(t, t[ok], x[ok])
+    acc = np.asarray(savgol_filter(filled, 9, 3, deriv=2, delta=float(np.median(np.diff(t)))), dtype=np.float64)
+    acc[~ok] = np.nan
+    return acc
+
+
+def trajectory_proposals(t_s: FloatArray, x0_m: FloatArray, x1_m: FloatArray, x2_m: FloatArray,
+                         distance_m: FloatArray, model_x1_m: FloatArray, model_x2_m: FloatArray,
+                         model_v2_mps: FloatArray, model_force_n: FloatArray, m2_kg: float) -> tuple[Proposal, ...]:
+    """STLSQ on the key force the model lacks, m2·(ẍ2 measured − ẍ2 model), over the model's
+    states along the keystrokes (rows; NaN where not modelled)."""
+    force, x2, v2, comp, fc, down = [], [], [], [], [], []
+    for i in range(x2_m.shape[0]):
+        t = t_s[i] if t_s.ndim == 2 else t_s
+        ok = np.isfinite(model_x2_m[i])
+        if ok.sum() < 11:
+            continue
+        measured = np.where(ok, x2_m[i], np.nan)
+        force.append(m2_kg * (_second_derivative(t, measured) - _second_derivative(t, np.where(ok, model_x2_m[i], np.nan))))
+        x2.append(model_x2_m[i])
+        v2.append(model_v2_mps[i])
+        comp.append(model_x1_m[i] - model_x2_m[i] - distance_m[i])
+        fc.append(model_force_n[i])
+        down.append((np.gradient(x0_m[i], t) > 0).astype(np.float64))
+    if not force:
+        return ()
+    state = KeyState(*(np.concatenate(a) for a in (x2, v2, comp, fc, down)))
+    return propose_terms(state, np.concatenate(force), key_dip_m=float(np.nanmax(np.concatenate(x2))) or 0.010)
+
+
+def outcome_proposals(speed_mps: FloatArray, acceleration_mps2: FloatArray, depth_m: FloatArray,
+                      vacuum_kpa: FloatArray, residual: FloatArray, threshold: float = 0.1) -> tuple[Proposal, ...]:
+    """STLSQ of an outcome residual (e.g. on-velocity, model − measured) over the press
+    parameters: powers of speed point at the piano's velocity map, the trapezoid's cap
+    min(v, √(a·d)) at the arm's acceleration, depth at an end stop, vacuum at the finger."""
+    ok = np.isfinite(residual) & np.isfinite(speed_mps) & np.isfinite(depth_m)
+    if ok.sum() < 8:
+        return ()
+    v, a, d, p, y = speed_mps[ok], acceleration_mps2[ok], depth_m[ok], np.abs(vacuum_kpa[ok]), residual[ok]
+    a = np.where(np.isfinite(a), a, np.nanmedian(a) if np.isfinite(a).any() else 1.0)
+    cap = np.minimum(v, np.sqrt(a * np.maximum(d, 1e-4)))
+    columns = [("1", None, np.ones_like(v)), ("v", None, v), ("v^2", "velocity_curve", v**2),
+               ("v^3", "velocity_curve", v**3), ("sqrt(v)", "velocity_curve", np.sqrt(v)),
+               ("min(v, sqrt(a d)) - v", "arm_acceleration", cap - v), ("1/a", "arm_acceleration", 1.0 / a),
+               ("depth", "keybed", d), ("|p|", "finger_stiffening", p), ("v |p|", "finger_stiffening", v * p)]
+    theta = np.column_stack([c for _, _, c in columns])
+    xi = stlsq(theta, y, threshold=threshold)
+    contributions = np.sqrt(np.mean((theta * xi) ** 2, axis=0))
+    total = float(contributions.sum()) or 1.0
+    kept = [Proposal(name, family, float(c), float(s / total))
+            for (name, family, _), c, s in zip(columns, xi, contributions, strict=True) if c != 0.0 and name != "1"]
+    return tuple(sorted(kept, key=lambda q: -q.share))

@@ -1,7 +1,7 @@
 """Covariances of identified parameters when residuals are not independent white noise.
 
-Used by `pianobot.analysis.identify`: keystroke residuals are correlated in time (the key rings,
-the arm trace is noisy and drives the model), so s²(JᵀJ)⁻¹ is too narrow. Two estimates:
+Used by the grey-box fitter: keystroke residuals are correlated in time (the key rings, the arm
+trace is noisy and drives the model), so s²(JᵀJ)⁻¹ is too narrow. Two estimates:
 
 - `hac_covariance`: sandwich with a long-run (Newey–West) middle per keystroke, window from the
   scores' own autocorrelation — honest under model error;
@@ -14,40 +14,45 @@ the arm trace is noisy and drives the model), so s²(JᵀJ)⁻¹ is too narrow. 
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import numpy.typing as npt
 
 FloatArray = npt.NDArray[np.float64]
 
 
-def hac_covariance(mask: npt.NDArray[np.bool_], J: FloatArray, r: FloatArray) -> FloatArray:
-    """Covariance of the log-parameters, robust to residuals correlated along each keystroke.
+def hac_covariance(J: FloatArray, r: FloatArray, series: npt.NDArray[np.intp], position: npt.NDArray[np.intp],
+                   n_offsets: int = 0) -> FloatArray:
+    """Covariance of the parameters, robust to residuals correlated along each keystroke.
 
     The residuals of one keystroke are not independent: noise on the measured arm trace is
     filtered by the model into slow, smooth errors on x1 and x2 (and any model error is smooth
     too), so neighbouring samples carry nearly the same information. Counting them as
-    independent (s²(JᵀJ)⁻¹) makes intervals too narrow. Here the score g_t = Σ_channels J_t r_t
-    of each keystroke is treated as a time series and its long-run covariance is estimated with
-    Bartlett (Newey–West) weights up to a lag chosen from the scores' own autocorrelation
-    (`_score_window`); keystrokes are independent of each other. The sandwich
-    (JᵀJ)⁻¹ · meat · (JᵀJ)⁻¹ then equals s²(JᵀJ)⁻¹ for white residuals and widens by the
-    effective-sample-size factor when they are correlated, without needing many keystrokes
-    (a keystroke-cluster sandwich needs dozens of clusters per parameter to be reliable).
+    independent (s²(JᵀJ)⁻¹) makes intervals too narrow. Here the score g_t = Σ J_t r_t of each
+    series (a keystroke's trajectory; x1 and x2 at one instant share a slot: they share the
+    input noise; each MIDI residual is a series of its own) is treated as a time series and its
+    long-run covariance is estimated with Bartlett (Newey–West) weights up to a lag chosen from
+    the scores' own autocorrelation (`_score_window`); series are independent of each other.
+    The sandwich (JᵀJ)⁻¹ · meat · (JᵀJ)⁻¹ then equals s²(JᵀJ)⁻¹ for white residuals and widens
+    by the effective-sample-size factor when they are correlated, without needing many
+    keystrokes (a keystroke-cluster sandwich needs dozens of clusters per parameter).
+
+    Args:
+        series, position: per residual (row of J), its series and its time index in it.
+        n_offsets: nuisance parameters profiled out of the residuals (rest offsets).
     """
-    n, _, T = mask.shape
     p = J.shape[1]
-    scores = np.zeros((n, 2, T, p))
-    scores[mask] = J * r[:, None]
-    g = scores.sum(axis=1)  # (n, T, p): x1 and x2 at one instant share the same input noise
+    if r.size == 0:
+        return np.zeros((p, p))
+    _, s_idx = np.unique(series, return_inverse=True)
+    n, T = int(s_idx.max()) + 1, int(position.max()) + 1
+    g = np.zeros((n, T, p))
+    np.add.at(g, (s_idx.ravel(), position), J * r[:, None])
     lag = _score_window(g)
     meat = np.einsum("ktp,ktq->pq", g, g)
     for ell in range(1, lag + 1):
         gamma = np.einsum("ktp,ktq->pq", g[:, ell:], g[:, :-ell])
         meat += (1.0 - ell / (lag + 1.0)) * (gamma + gamma.T)
     bread = np.linalg.pinv(J.T @ J)
-    n_offsets = int(np.count_nonzero(mask.any(axis=2)))  # profiled rest offsets
     dof = max(r.size - p - n_offsets, 1)
     cov = bread @ meat @ bread * (r.size / dof)  # small-sample correction, as for s²
     return np.asarray(0.5 * (cov + cov.T), dtype=np.float64)
@@ -64,31 +69,8 @@ def larger_variances(a: FloatArray, b: FloatArray) -> FloatArray:
     return np.asarray(corr * np.outer(sd, sd), dtype=np.float64)
 
 
-def noise_sigma_m(x: FloatArray) -> float:
-    """Sample noise σ of smooth traces (rows), from the MAD of second differences.
-
-    Arm, fingertip and key move smoothly at the mocap rate over most samples (rest, hold), so
-    the second difference there is noise only: Var(Δ²e) = 6σ². The median ignores the few
-    samples where the motion itself curves (accelerations, contact, ringing).
-    """
-    return sigma_from_second_differences(np.diff(np.asarray(x, dtype=np.float64), n=2, axis=-1).ravel())
-
-
-def sigma_from_second_differences(d2: FloatArray) -> float:
-    """White-noise σ from second differences Δ²x of smooth traces (NaNs ignored; see `noise_sigma_m`)."""
-    d2 = d2[np.isfinite(d2)]
-    if d2.size == 0:
-        return 0.0
-    return float(1.4826 * np.median(np.abs(d2)) / math.sqrt(6.0))
-
-
-def noise_covariance(
-    mask: npt.NDArray[np.bool_],
-    J: FloatArray,
-    sigma_out: tuple[float, float],
-    input_scores: FloatArray,
-) -> FloatArray:
-    """Covariance of the log-parameters propagated from white measurement noise (linearised).
+def noise_covariance(J: FloatArray, sigma: FloatArray, input_scores: FloatArray) -> FloatArray:
+    """Covariance of the parameters propagated from white measurement noise (linearised).
 
     θ̂ − θ ≈ −(JᵀJ)⁻¹ Jᵀ (G e_in − e_out): output noise e_out enters directly, noise e_in on the
     measured arm trace enters through the model G itself. G e_in rings like the key, i.e. much
@@ -96,20 +78,13 @@ def noise_covariance(
     longer show it (an errors-in-variables effect the residual-based sandwich cannot see).
 
     Args:
-        mask: (n, 2, T) where x1, x2 were measured (J's rows, in order).
         J: Jacobian of the residuals with respect to the parameters.
-        sigma_out: white noise σ of x1 and x2, in the residuals' unit (see `noise_sigma_m`).
+        sigma: white noise σ of each residual, in the residuals' unit.
         input_scores: (draws, p) rows Jᵀ G e_in for simulated draws of the input noise e_in
             (the model is piecewise: before and after touch, so G is simulated, not convolved);
             no rows: no input noise.
     """
-    n, _, T = mask.shape
-    p = J.shape[1]
-    Jfull = np.zeros((n, 2, T, p))
-    Jfull[mask] = J
-    meat = np.zeros((p, p))
-    for c, s_out in enumerate(sigma_out):
-        meat += s_out**2 * np.einsum("ktp,ktq->pq", Jfull[:, c], Jfull[:, c])
+    meat = (J * (sigma**2)[:, None]).T @ J
     if input_scores.shape[0] > 0:
         meat += input_scores.T @ input_scores / input_scores.shape[0]
     bread = np.linalg.pinv(J.T @ J)

@@ -1,4 +1,4 @@
-"""The forward model that identification fits: the physical keystroke, driven by the measured arm.
+"""The measured-arm drive of the forward model: the physical keystroke, driven by the arm trace.
 
 A keystroke does not start in contact. The fingertip starts `distance_m` above the key and hangs
 from the arm on (k0, c0) while it approaches; the finger-key coupling (k1, c1) acts only from the
@@ -35,6 +35,7 @@ import numpy.typing as npt
 
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
 from pianobot.analysis.greybox.phases import KEY_MOTION_THRESHOLD_M, fill_gaps
+from pianobot.analysis.greybox.prediction import Prediction, fastest_rate_per_s
 from pianobot.physics.effects import Effects
 from pianobot.physics.model import KeystrokeModel
 from pianobot.physics.msd import MSDParams
@@ -60,7 +61,7 @@ GROUP = 16
 
 
 @dataclass(frozen=True, eq=False)
-class ForwardModel:
+class MeasuredArm:
     """Parameter-independent preparation of a batch's simulation (build with `of`).
 
     Rows that repeat a keystroke (a bootstrap draw) are simulated once: `batch` holds the
@@ -75,9 +76,11 @@ class ForwardModel:
     arm_sim_m: FloatArray  # (n, M) the batch's shifted input (parameter-independent, kept)
     last: npt.NDArray[np.intp]  # (n,) each row's last modelled sample (measured, before lift-off)
     rows: npt.NDArray[np.intp]  # (n_caller,) the distinct keystroke behind each caller's row
+    observed: KeystrokeBatch  # the caller's batch (rows may repeat), which predictions are for
 
     @classmethod
-    def of(cls, batch: KeystrokeBatch) -> ForwardModel:
+    def of(cls, batch: KeystrokeBatch) -> MeasuredArm:
+        observed = batch
         _, first, rows = np.unique(np.asarray(batch.trial_id), return_index=True, return_inverse=True)
         if first.size < batch.n:
             batch = batch.subset(first)
@@ -109,7 +112,7 @@ class ForwardModel:
         last = np.where(measured.any(axis=1), batch.t_s.size - 1 - np.argmax(measured[:, ::-1], axis=1), 0)
         last = np.minimum(last, model_window(batch))
         return cls(batch, t_sim, int(lead), lo, frac, _resample(batch.input_x0_m, lo, frac),
-                   np.asarray(last, dtype=np.intp), np.asarray(rows, dtype=np.intp).ravel())
+                   np.asarray(last, dtype=np.intp), np.asarray(rows, dtype=np.intp).ravel(), observed)
 
     def arm_m(self, input_x0_m: FloatArray | None = None) -> FloatArray:
         """The (shifted) arm input on the simulation grid; `input_x0_m` (the caller's rows)
@@ -120,15 +123,20 @@ class ForwardModel:
         first[self.rows[::-1]] = np.arange(self.rows.size)[::-1]
         return _resample(input_x0_m[first], self.lo, self.frac)
 
-    def simulate(self, params: MSDParams, input_x0_m: FloatArray | None = None) -> tuple[FloatArray, FloatArray]:
+    def simulate(self, model: KeystrokeModel | MSDParams, input_x0_m: FloatArray | None = None,
+                 *, states: bool = False) -> tuple[FloatArray, ...]:
         """Simulated fingertip x1 and key x2 (n, T) at each row's sample times, NaN after the
-        row's last measured sample (a keystroke is simulated only as long as it was measured)."""
+        row's last modelled sample (a keystroke is simulated only as long as it was measured);
+        with `states` also the key speed and the finger's force on the key.
+
+        Arm-side effects (`arm_lag`, `arm_acceleration`) do not apply: the arm is measured."""
+        if isinstance(model, MSDParams):
+            model = KeystrokeModel(msd=model, effects=Effects.none())
         batch = self.batch
-        model = KeystrokeModel(msd=params, effects=Effects.none())
-        step_s = min(SIM_STEP_S, STEP_PER_TIME_SCALE / _fastest_rate(params, batch.vacuum_kpa))
+        step_s = min(SIM_STEP_S, STEP_PER_TIME_SCALE / fastest_rate_per_s(model, batch.vacuum_kpa))
         arm = self.arm_m(input_x0_m)
         dt = batch.dt_s
-        x1, x2 = np.full(batch.x1_m.shape, np.nan), np.full(batch.x2_m.shape, np.nan)
+        outs = [np.full(batch.x1_m.shape, np.nan) for _ in range(4 if states else 2)]
         order = np.argsort(-self.last, kind="stable")
         for start in range(0, order.size, GROUP):
             rows = order[start : start + GROUP]
@@ -138,12 +146,18 @@ class ForwardModel:
                 sim = simulate_arm(self.t_sim_s[:n_in], arm[rows, :n_in], batch.vacuum_kpa[rows], model,
                                    distance_m=batch.distance_m[rows], out_dt_s=dt,
                                    duration_s=(n_out - 1) * dt, step_s=step_s)
-            x1[rows, : n_out - self.lead] = sim.x1_m[:, self.lead :]
-            x2[rows, : n_out - self.lead] = sim.x2_m[:, self.lead :]
+            sims = (sim.x1_m, sim.x2_m, sim.v2_mps, sim.contact_force_n)
+            for out, values in zip(outs, sims, strict=False):
+                out[rows, : n_out - self.lead] = values[:, self.lead :]
         after = np.arange(batch.t_s.size)[None, :] > self.last[:, None]
-        x1[after] = np.nan
-        x2[after] = np.nan
-        return x1[self.rows], x2[self.rows]
+        for out in outs:
+            out[after] = np.nan
+        return tuple(out[self.rows] for out in outs)
+
+    def predict(self, model: KeystrokeModel, drive: dict[str, float] | None = None) -> Prediction:
+        """The model's trajectories (and key states) at the batch's frames."""
+        x1, x2, v2, force = self.simulate(model, states=True)
+        return Prediction.trajectories(x1, x2, v2, force)
 
 
 def model_window(batch: KeystrokeBatch) -> npt.NDArray[np.intp]:
@@ -166,17 +180,6 @@ def model_window(batch: KeystrokeBatch) -> npt.NDArray[np.intp]:
     return out
 
 
-def _fastest_rate(params: MSDParams, vacuum_kpa: FloatArray) -> float:
-    """The fastest rate (1/s) of the model at the batch's vacuum levels: the natural frequency
-    of each mass on all its springs, and each mass's damping over its mass."""
-    rate = 1.0
-    for p in np.unique(vacuum_kpa):
-        lp = params.at(float(p))
-        rate = max(rate, math.sqrt((lp.k0_npm + lp.k1_npm) / lp.m1_kg), math.sqrt((lp.k1_npm + lp.k2_npm) / lp.m2_kg),
-                   (lp.c0_nspm + lp.c1_nspm) / lp.m1_kg, (lp.c1_nspm + lp.c2_nspm) / lp.m2_kg)
-    return rate
-
-
 def _resample(x: FloatArray, lo: npt.NDArray[np.intp], frac: FloatArray) -> FloatArray:
     """Rows of x (n, T_in) linearly interpolated at fractional indices lo + frac (n, M)."""
     if x.shape[1] == 1:
@@ -186,6 +189,7 @@ def _resample(x: FloatArray, lo: npt.NDArray[np.intp], frac: FloatArray) -> Floa
     return np.asarray(a + frac * (b - a), dtype=np.float64)
 
 
-def simulate_batch(batch: KeystrokeBatch, params: MSDParams) -> tuple[FloatArray, FloatArray]:
+def simulate_batch(batch: KeystrokeBatch, model: KeystrokeModel | MSDParams) -> tuple[FloatArray, FloatArray]:
     """Simulated x1, x2 (n, T) of the keystroke model driven by the batch's arm traces."""
-    return ForwardModel.of(batch).simulate(params)
+    x1, x2 = MeasuredArm.of(batch).simulate(model)
+    return x1, x2

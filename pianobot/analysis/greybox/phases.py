@@ -91,18 +91,24 @@ def _last_crossing_down_s(t_s: FloatArray, x: FloatArray, level: float, start: i
     return float(t_s[i - 1] + frac * (t_s[i] - t_s[i - 1]))
 
 
-def _baseline(t: FloatArray, x: FloatArray) -> float:
-    """Rest level: the median before motion start (t < 0) if recorded, else of the first 10 ms.
+def rest_level(t_s: FloatArray, x: FloatArray) -> float:
+    """The rest level of a trace: the median before motion start (t < 0) if recorded, else its
+    first finite sample.
 
-    Stored traces start at motion start (t = 0), so only their first instants are surely at
-    rest: a fixed fraction of the trace would reach into the approach and shift the level.
+    Times are relative to motion start, so samples at t < 0 are at rest; a trace that starts at
+    t = 0 is surely at rest only at its first sample (at 120 frames/s the next one is 8 ms into
+    the motion, when an arm accelerating at 1 m/s² has already moved 35 µm). The one rule for
+    every trace the analysis references to rest; NaN when the trace has no finite sample.
     """
-    head_mask = t < 0.0 if (t < 0.0).any() else t <= t[0] + 0.010
-    head = x[head_mask & np.isfinite(x)]
-    if head.size == 0:
-        finite = x[np.isfinite(x)]
-        head = finite[:1]
-    return float(np.median(head)) if head.size else 0.0
+    t = np.asarray(t_s, dtype=np.float64)
+    v = np.asarray(x, dtype=np.float64)
+    finite = np.isfinite(v)
+    before = finite & (t < 0.0)
+    if before.any():
+        return float(np.median(v[before]))
+    if not finite.any():
+        return float("nan")
+    return float(v[np.argmax(finite)])
 
 
 def segment_keystroke(
@@ -129,13 +135,13 @@ def segment_keystroke(
     nan = float("nan")
     if t.size < 3 or not np.isfinite(x2).any():
         return Stages(nan, nan, nan, nan, nan, nan)
-    x2 = x2 - _baseline(t, x2)
+    x2 = x2 - rest_level(t, x2)
 
     t_motion = float(t[0])
     if x0_m is not None:
         x0 = fill_gaps(t, np.asarray(x0_m, dtype=np.float64))
         if np.isfinite(x0).any():
-            x0 = x0 - _baseline(t, x0)
+            x0 = x0 - rest_level(t, x0)
             travel = float(np.nanmax(x0))
             # 2 % of the stroke (at least the key threshold) separates motion from noise.
             level = max(key_threshold_m, 0.02 * travel)
@@ -153,7 +159,7 @@ def segment_keystroke(
     if x1_m is not None and distance_m is not None and distance_m > 0:
         x1 = fill_gaps(t, np.asarray(x1_m, dtype=np.float64))
         if np.isfinite(x1).any():
-            gap_closed = (x1 - _baseline(t, x1)) - x2
+            gap_closed = (x1 - rest_level(t, x1)) - x2
             t_found = first_crossing_s(t, gap_closed, distance_m - key_threshold_m)
             if np.isfinite(t_found) and t_found <= t_key_move:
                 t_contact = t_found
@@ -170,3 +176,26 @@ def segment_keystroke(
     if np.isnan(t_release):
         t_release = float(t[-1])
     return Stages(t_motion, t_contact, t_key_move, t_bottom, t_release, t_rest)
+
+
+def stage_labels(t_s: FloatArray, x2_m: FloatArray, x0_m: FloatArray | None = None,
+                 x1_m: FloatArray | None = None, distance_m: FloatArray | None = None) -> npt.NDArray[np.int64]:
+    """Stage index (into `STAGE_NAMES`) of every sample of keystrokes (rows), −1 outside all.
+
+    Args:
+        t_s: (n, T) sample times of each row, or (T,) shared.
+        x2_m, x0_m, x1_m: (n, T) key, arm and fingertip (relative to rest; NaN not measured).
+        distance_m: (n,) fingertip-key gap at the start.
+    """
+    x2 = np.atleast_2d(np.asarray(x2_m, dtype=np.float64))
+    n, T = x2.shape
+    t = np.broadcast_to(np.asarray(t_s, dtype=np.float64), (n, T))
+    out = np.full((n, T), -1, dtype=np.int64)
+    for i in range(n):
+        stages = segment_keystroke(
+            t[i], x2[i], x0_m=None if x0_m is None else x0_m[i], x1_m=None if x1_m is None else x1_m[i],
+            distance_m=None if distance_m is None else float(distance_m[i]))
+        names = stages.label(t[i])
+        for k, name in enumerate(STAGE_NAMES):
+            out[i, names == name] = k
+    return out

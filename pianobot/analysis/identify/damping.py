@@ -21,8 +21,8 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from pianobot.analysis.greybox.covariance import noise_sigma_m
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
+from pianobot.analysis.greybox.noise import noise_sigma_m
 from pianobot.physics.msd import MSDParams, state_space
 
 FloatArray = npt.NDArray[np.float64]

@@ -2,30 +2,23 @@
 
 from __future__ import annotations
 
-import hashlib
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pandas as pd
 
 import pianobot
-from pianobot.analysis.greybox.keystrokes import KeystrokeBatch, keystroke_batch
+from pianobot.analysis.greybox.load import load_keystrokes
+from pianobot.analysis.greybox.split import split_holdout
 from pianobot.analysis.identify.damping import DampingCheck, damping_check
-from pianobot.analysis.identify.fit import (
-    TrajectoryFit,
-    identify_trajectories,
-    rms_x2_m,
-    split_holdout,
-)
+from pianobot.analysis.identify.fit import Coupling, TrajectoryFit, identify_trajectories, rms_x2_m
 from pianobot.analysis.identify.readout import ReadoutFit, fit_readout
 from pianobot.analysis.identify.static_stiffness import StaticStiffness
-from pianobot.errors import InputError
 from pianobot.physics.model import KeystrokeModel, save_model
 from pianobot.physics.msd import MSDParams, peak_response
-from pianobot.store import load_run
+from pianobot.progress import NO_PROGRESS, Progress
 
 
 @dataclass(frozen=True)
@@ -63,58 +56,24 @@ class IdentifyResult:
         return out
 
 
-def _file_hash(path: Path) -> str:
-    digest = hashlib.sha256()
-    for name in ("trials.parquet", "samples.parquet"):
-        file = path / name
-        if file.is_file():
-            digest.update(file.read_bytes())
-    return digest.hexdigest()
-
-
-def load_batch(run_ids: Sequence[str], data_dir: Path, *, x0_source: str = "auto",
-               vacuum_kpa: float | None = None) -> tuple[KeystrokeBatch, dict[str, str]]:
-    """Keystroke batch over several runs (trial ids prefixed by run), and each run's data hash."""
-    batch, hashes, _ = load_batch_trials(run_ids, data_dir, x0_source=x0_source, vacuum_kpa=vacuum_kpa)
-    return batch, hashes
-
-
-def load_batch_trials(run_ids: Sequence[str], data_dir: Path, *, x0_source: str = "auto",
-                      vacuum_kpa: float | None = None) -> tuple[KeystrokeBatch, dict[str, str], pd.DataFrame]:
-    """`load_batch` plus the runs' trials, with the same prefixed trial ids."""
-    samples, trials, hashes = [], [], {}
-    for run_id in run_ids:
-        run = load_run(run_id, data_dir)
-        t, s = run.trials, run.samples
-        if t.empty:
-            raise InputError("the run has no trials", run.run_id)
-        if vacuum_kpa is not None:
-            t = t.assign(vacuum_kpa=vacuum_kpa)
-        if t["vacuum_kpa"].isna().all():
-            raise InputError("the run records no vacuum level; give --vacuum-kpa", run.run_id)
-        prefix = f"{run.run_id}/"
-        trials.append(t.assign(trial_id=prefix + t["trial_id"].astype(str)))
-        samples.append(s.assign(trial_id=prefix + s["trial_id"].astype(str)))
-        hashes[run.run_id] = _file_hash(run.path)
-    all_trials = pd.concat(trials, ignore_index=True)
-    batch = keystroke_batch(pd.concat(samples, ignore_index=True), all_trials, x0_source=x0_source)
-    return batch, hashes, all_trials
-
-
 def identify_runs(
-    run_ids: Sequence[str], data_dir: Path, *, out: Path | None, coupling: str = "auto",
+    run_ids: Sequence[str], data_dir: Path, *, out: Path | None, coupling: Coupling = "auto",
     bootstrap: int = 20, seed: int = 0, x0_source: str = "auto", vacuum_kpa: float | None = None,
-    static: StaticStiffness | None = None,
+    static: StaticStiffness | None = None, progress: Progress = NO_PROGRESS,
 ) -> IdentifyResult:
     """Identify the model from the runs' trajectories; compare with the published parameters on
     held-out keystrokes (every third per level); write the model file when `out` is given."""
-    batch, hashes, trials = load_batch_trials(run_ids, data_dir, x0_source=x0_source, vacuum_kpa=vacuum_kpa)
+    loaded = load_keystrokes(run_ids, data_dir, x0_source=x0_source, vacuum_kpa=vacuum_kpa, need_motion=True)
+    batch, hashes, trials = loaded.batch, loaded.hashes, loaded.trials
     published = MSDParams()
     train, test = split_holdout(batch)
-    held = identify_trajectories(train, prior=published, coupling=coupling)  # type: ignore[arg-type]
+    with progress.task("identify: held-out fit", total=None):
+        held = identify_trajectories(train, prior=published, coupling=coupling)
     rms_id = rms_x2_m(test, held.params)
     rms_pub = rms_x2_m(test, published)
-    fit = identify_trajectories(batch, prior=published, coupling=held.coupling, bootstrap=bootstrap, seed=seed)
+    with progress.task("identify: fit on every keystroke", total=None):
+        fit = identify_trajectories(batch, prior=published, coupling=held.coupling, bootstrap=bootstrap, seed=seed,
+                                    progress=progress)
     model = KeystrokeModel.study().replace(msd=fit.params)
     damping = damping_check(batch, fit.params, seed=seed)
     readout = fit_readout(batch, trials)
@@ -132,11 +91,11 @@ def identify_runs(
                      for e in fit.estimates}
         provenance = {
             "clock_offset_s": {"value": batch.clock_offset_s, "se": batch.clock_offset_se_s},
-            "method": "output-error least squares (soft-L1) on mocap trajectories; forward model: the "
+            "method": "output-error least squares (soft-L1, pianobot.analysis.greybox) on mocap trajectories; forward model: the "
                       "measured arm trace drives the fingertip from distance_m above the key, the study's "
                       "coupling from touch, each keystroke fitted until the fingertip lifts off",
             "runs": list(hashes), "data_sha256": hashes, "pianobot_version": pianobot.__version__,
-            "fixed": fit.fixed, "coupling": fit.coupling, "bootstrap": bootstrap, "seed": seed,
+            "fixed": fit.fixed, "coupling": fit.coupling, "on_bounds": list(fit.on_bounds), "bootstrap": bootstrap, "seed": seed,
             "holdout_rms_x2_m": {"identified": rms_id, "published": rms_pub},
             "damping_check": None if damping is None else damping.to_dict(),
             "readout": None if readout is None else readout.to_dict(),

@@ -1,0 +1,59 @@
+"""`pianobot discover RUN…`: load the runs, discover, write the updated model file."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+from pianobot.analysis.discover.loop import Settings, discover
+from pianobot.analysis.discover.result import DiscoveryResult
+from pianobot.analysis.greybox.load import load_keystrokes
+from pianobot.analysis.greybox.pieces import Mapper
+from pianobot.errors import InputError
+from pianobot.physics.model import KeystrokeModel, load_model, save_model
+from pianobot.progress import NO_PROGRESS, Progress
+
+#: Fewer keystrokes than this cannot be split into a training and a held-out part worth judging.
+MIN_KEYSTROKES = 6
+
+
+def resolve_model(spec: str) -> KeystrokeModel:
+    """`study` (the study's linear model with its constant-speed ramp) or a model file path.
+
+    Raises:
+        InputError: the file is missing or not a model file.
+    """
+    if spec == "study":
+        return KeystrokeModel.study()
+    return load_model(Path(spec))
+
+
+def discover_runs(run_ids: Sequence[str], data_dir: Path, model: str = "study", *, seed: int = 0,
+                  model_out: Path | None = None, vacuum_kpa: float | None = None,
+                  progress: Progress = NO_PROGRESS, mapper: Mapper | None = None) -> DiscoveryResult:
+    """Load runs, run discovery from `model` ("study" or a model file), save the final model.
+
+    Raises:
+        InputError: unknown runs, runs without mocap or MIDI, too few keystrokes, a bad model file.
+    """
+    start = resolve_model(model)
+    loaded = load_keystrokes(run_ids, data_dir, vacuum_kpa=vacuum_kpa)
+    batch = loaded.batch
+    if batch.n < MIN_KEYSTROKES:
+        raise InputError(f"discovery needs at least {MIN_KEYSTROKES} keystrokes, got {batch.n}", "RUN_ID")
+    if not batch.has_motion and not batch.commanded:
+        raise InputError("the runs have MIDI but no commanded speed and depth to drive the model with",
+                         ",".join(run_ids))
+    notes = list(loaded.notes)
+    if not batch.has_motion and "acceleration not recorded" in notes:
+        notes[notes.index("acceleration not recorded")] = "acceleration not recorded: fitted as a drive parameter"
+    elif batch.has_motion:
+        notes = [n for n in notes if n != "acceleration not recorded"]  # the measured arm drives the model
+    result = discover(batch, start, Settings(seed=seed), notes=notes, progress=progress, mapper=mapper)
+    if model_out is not None:
+        intervals = {name: list(ci) for v in result.accepted for name, ci in v.intervals.items()}
+        save_model(result.final_model, model_out, intervals=intervals, provenance={
+            "command": "discover", "runs": list(run_ids), "data_sha256": loaded.hashes, "start_model": model,
+            "accepted_effects": [v.label for v in result.accepted],
+            "measured_effects": list(result.measured_effects), "verdict": result.verdict, "seed": seed})
+    return result
