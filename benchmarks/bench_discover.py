@@ -99,24 +99,42 @@ def own_suite(only: list[str] | None, log: Callable[[str], None]) -> list[dict[s
     return rows
 
 
-def truth_suite(only: list[str] | None, log: Callable[[str], None]) -> list[dict[str, Any]]:
-    """The independent suite (tests/truth), imported the way a lab imports its files."""
-    try:
-        from tests.truth import bench_suite  # type: ignore[import-not-found]
-    except ImportError:
-        log("truth suite: tests/truth is not on this branch yet (skipped)")
-        return []
+def truth_batch(made: Any, data_dir: Path) -> KeystrokeBatch:
+    """A truth scenario's files imported the way a lab imports them: `pianobot import mocap`
+    (with the vacuum the take does not record) plus the script's schedule, or `pianobot import
+    keystroke-log`."""
+    from pianobot.analysis.greybox.load import load_keystrokes, read_schedule
+    from pianobot.io.importers import import_keystroke_log, import_mocap
+
+    if "take" in made.files:
+        run_id = import_mocap(made.files["take"], data_dir, vacuum_kpa=float(made.truth["vacuum_kpa"])).run_id
+        schedule = read_schedule(made.files["presses"]) if "presses" in made.files else None
+        return load_keystrokes([run_id], data_dir, schedule=schedule).batch
+    run_id = import_keystroke_log(made.files["log"], data_dir).run_id
+    return load_keystrokes([run_id], data_dir).batch
+
+
+def truth_suite(only: list[str] | None, log: Callable[[str], None], subset: str = "full") -> list[dict[str, Any]]:
+    """The independent suite (tests/truth): each scenario written to disk, imported, discovered."""
+    from tests.truth import full_suite, materialise, small_suite
+
+    scenarios = full_suite() if subset == "full" else small_suite()
+    if only:
+        scenarios = [sc for sc in scenarios if any(o in sc.name for o in only)]
     rows = []
     with tempfile.TemporaryDirectory() as scratch:
-        for case in bench_suite(Path(scratch)):
-            if only and case.name not in only:
-                continue
-            batch = case.load(Path(scratch) / "data")
+        for scenario in scenarios:
+            made = materialise(scenario, Path(scratch) / "files")
+            batch = truth_batch(made, Path(scratch) / "data")
             result, cpu = run_one(batch)
-            row = {"scenario": case.name, "strength": case.strength, "form_equals_candidate": case.form_equals_candidate,
-                   **score(result, case.family, cpu, batch.n)}
+            truth = made.truth
+            row = {"scenario": scenario.name, "strength": truth["strength"],
+                   "form_equals_candidate": bool(truth.get("form_equals_candidate", True)),
+                   "truth_effect": truth.get("effect"), "truth_form": truth.get("form"),
+                   **score(result, truth.get("family"), cpu, batch.n)}
             rows.append(row)
-            log(f"truth {case.name:30s} {cpu:6.1f}s cpu  found={row['found']} hit={row['hit']}")
+            log(f"truth {scenario.name:42s} {cpu:6.1f}s cpu  found={row['found']} measured={row['measured']} "
+                f"ratio={row['gap_ratio']} hit={row['hit']}")
     return rows
 
 
@@ -188,14 +206,15 @@ def summary(own: list[dict[str, Any]], truth: list[dict[str, Any]]) -> dict[str,
 def main() -> None:
     parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     parser.add_argument("--suite", nargs="*", default=["truth", "own", "real"], choices=["truth", "own", "real"])
-    parser.add_argument("--only", nargs="*", default=None, help="scenario names to run")
+    parser.add_argument("--only", nargs="*", default=None, help="scenario names (or parts of names) to run")
+    parser.add_argument("--truth-subset", default="full", choices=["full", "small"])
     parser.add_argument("--out", type=Path, default=RESULTS)
     args = parser.parse_args()
 
     def log(line: str) -> None:
         print(line, flush=True)
 
-    truth = truth_suite(args.only, log) if "truth" in args.suite else []
+    truth = truth_suite(args.only, log, args.truth_subset) if "truth" in args.suite else []
     own = own_suite(args.only, log) if "own" in args.suite else []
     real = real_suite(log) if "real" in args.suite and not args.only else []
     payload = {"benchmark": "discover", "summary": summary(own, truth), "truth": truth, "own_world": own, "real": real}

@@ -71,12 +71,15 @@ def register(app: typer.Typer) -> None:
         vacuum_kpa: Annotated[
             float | None, typer.Option("--vacuum-kpa", help="Vacuum of runs that do not record it.")
         ] = None,
+        presses: Annotated[Path | None, typer.Option(
+            "--presses", help="CSV of the commanded presses (t_start_s, speeds, acceleration, depth, distance, "
+                              "hold) for runs that do not record them, e.g. an imported Motive take.")] = None,
         no_progress: Annotated[bool, typer.Option("--no-progress", help="No progress display.")] = False,
     ) -> None:
         """Localise where the model and the measurements disagree, name the missing effect, refit."""
         if model_out is None and out is not None:
             model_out = out.with_suffix(".model.json")
-        result = discover_runs(runs, data, model, seed=seed, model_out=model_out, vacuum_kpa=vacuum_kpa,
+        result = discover_runs(runs, data, model, seed=seed, model_out=model_out, vacuum_kpa=vacuum_kpa, schedule=presses,
                                progress=progress_display(not (json_out or no_progress)))
         if out is not None:
             build_discover_report(result, out, model_path=model_out)

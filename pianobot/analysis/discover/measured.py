@@ -7,8 +7,9 @@ instead the arm trace itself is compared with the commanded press:
   trapezoid? One acceleration for every keystroke (the command's), each keystroke's speed,
   travel and start free; the ramp is the limit a → ∞. Judged by the information criterion.
 - `arm_lag`: when the commanded timing is known (an arm log on the run clock, t = 0 at the
-  commanded motion start), how late the measured arm follows it; an imported Motive take
-  defines t = 0 from the arm marker itself, so there a lag cannot be seen.
+  commanded motion start, or a lab script's schedule matched to the keystrokes), how late the
+  measured arm follows it; an imported Motive take alone defines t = 0 from the arm marker
+  itself, so there a lag cannot be seen.
 - `mocap_delay`: the motion-capture clock offset against the arm log, estimated when the batch
   was built from the arm marker seen by both (`trajectories._clock_offset_s`).
 - `velocity_curve`: with the key tracked and MIDI recorded, the piano's key-speed → velocity
@@ -78,11 +79,12 @@ def _move_m(t: FloatArray, d: float, v: float, a: float) -> FloatArray:
     return 0.5 * a * u1**2 + v * (u2 + u3) - 0.5 * a * u3**2
 
 
-def _down_moves(batch: KeystrokeBatch) -> list[tuple[FloatArray, FloatArray]]:
-    """Each keystroke's measured arm from rest to its deepest point (time on the arm's clock)."""
+def _down_moves(batch: KeystrokeBatch) -> list[tuple[int, FloatArray, FloatArray]]:
+    """Each keystroke's measured arm from rest to its deepest point (time on the arm's clock),
+    with the keystroke's row."""
     t = batch.input_t_s - batch.clock_offset_s
     out = []
-    for x in batch.input_x0_m:
+    for i, x in enumerate(batch.input_x0_m):
         bottom = int(np.argmax(x))
         travel = float(x[bottom])
         if travel <= 0:
@@ -90,7 +92,7 @@ def _down_moves(batch: KeystrokeBatch) -> list[tuple[FloatArray, FloatArray]]:
         start = np.flatnonzero(x[:bottom] < 0.02 * travel)
         first = int(start[-1]) if start.size else 0
         lo = max(first - max(int(0.05 / max(t[1] - t[0], 1e-6)), 5), 0)
-        out.append((t[lo : bottom + 1], x[lo : bottom + 1]))
+        out.append((i, t[lo : bottom + 1], x[lo : bottom + 1]))
     return out
 
 
@@ -133,10 +135,14 @@ def arm_checks(batch: KeystrokeBatch) -> list[Finding]:
     """`arm_acceleration` and `arm_lag` against the measured arm trace (empty without one)."""
     if not batch.arm_measured:
         return []
-    moves = _down_moves(batch)
+    found = _down_moves(batch)
+    moves = [(t, x) for _, t, x in found]
+    rows = np.array([i for i, _, _ in found], dtype=np.intp)
     if len(moves) < 3:
         return []
-    timed = batch.arm_source == "arm"  # an arm log on the run clock: t = 0 is the commanded start
+    # The commanded start is known for a run's own arm log (t = 0) or from a schedule.
+    command = batch.command_start_s
+    timed = bool(np.isfinite(command[rows]).all()) if rows.size else False
     rss: list[float] = []
     for a in [math.inf, *_ACCELERATIONS]:
         rss.append(sum(float(np.sum(_fit_move(t, x, a, True)[0] ** 2)) for t, x in moves))
@@ -160,7 +166,10 @@ def arm_checks(batch: KeystrokeBatch) -> list[Finding]:
                                                          f"(ΔIC {delta:.1f} for a trapezoid)")
     out = [Finding("arm_acceleration", a_best, ci, delta, accepted, text, {})]
     if timed:
-        starts = np.array([_fit_move(t, x, a_best, True)[1] for t, x in moves])
+        # Against the command's own profile: its acceleration where recorded (a lag would read
+        # as a gentler acceleration if that were free), started where the command started.
+        a_cmd = float(np.median(recorded)) if recorded.size else a_best
+        starts = np.array([_fit_move(t, x, a_cmd, True)[1] for t, x in moves]) - command[rows]
         lag = float(np.median(starts))
         se = float(1.2533 * np.std(starts, ddof=1) / math.sqrt(starts.size)) if starts.size > 1 else math.inf
         z = lag / se if se > 0 else math.inf

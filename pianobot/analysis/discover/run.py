@@ -7,7 +7,7 @@ from pathlib import Path
 
 from pianobot.analysis.discover.loop import Settings, discover
 from pianobot.analysis.discover.result import DiscoveryResult
-from pianobot.analysis.greybox.load import load_keystrokes
+from pianobot.analysis.greybox.load import load_keystrokes, read_schedule
 from pianobot.analysis.greybox.pieces import Mapper
 from pianobot.errors import InputError
 from pianobot.physics.model import KeystrokeModel, load_model, save_model
@@ -29,15 +29,19 @@ def resolve_model(spec: str) -> KeystrokeModel:
 
 
 def discover_runs(run_ids: Sequence[str], data_dir: Path, model: str = "study", *, seed: int = 0,
-                  model_out: Path | None = None, vacuum_kpa: float | None = None,
+                  model_out: Path | None = None, vacuum_kpa: float | None = None, schedule: Path | None = None,
                   progress: Progress = NO_PROGRESS, mapper: Mapper | None = None) -> DiscoveryResult:
     """Load runs, run discovery from `model` ("study" or a model file), save the final model.
+
+    `schedule` is a CSV of the commanded presses (`greybox.load.SCHEDULE_COLUMNS`) for runs that
+    do not record them, e.g. an imported Motive take and the lab script's log of what it sent.
 
     Raises:
         InputError: unknown runs, runs without mocap or MIDI, too few keystrokes, a bad model file.
     """
     start = resolve_model(model)
-    loaded = load_keystrokes(run_ids, data_dir, vacuum_kpa=vacuum_kpa)
+    loaded = load_keystrokes(run_ids, data_dir, vacuum_kpa=vacuum_kpa,
+                             schedule=None if schedule is None else read_schedule(schedule))
     batch = loaded.batch
     if batch.n < MIN_KEYSTROKES:
         raise InputError(f"discovery needs at least {MIN_KEYSTROKES} keystrokes, got {batch.n}", "RUN_ID")

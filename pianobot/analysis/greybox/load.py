@@ -14,6 +14,7 @@ the key, as in the study's mocap takes), which is noted.
 from __future__ import annotations
 
 import hashlib
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -109,13 +110,16 @@ def _midi(rows: pd.DataFrame, recorded: bool) -> dict[str, np.ndarray]:
 
 
 def load_keystrokes(run_ids: Sequence[str], data_dir: Path, *, x0_source: str = "auto",
-                    vacuum_kpa: float | None = None, need_motion: bool = False) -> Loaded:
+                    vacuum_kpa: float | None = None, need_motion: bool = False,
+                    schedule: pd.DataFrame | None = None) -> Loaded:
     """Load runs as one batch (see the module docstring).
 
     Args:
         x0_source: the arm trace that drives the model: "arm", "mocap", "sim-truth" or "auto".
         vacuum_kpa: the vacuum of runs that do not record one (an imported Motive take).
         need_motion: raise when the runs hold no key trajectories (trajectory identification).
+        schedule: the commanded presses (`read_schedule`) of runs that do not record them (an
+            imported Motive take): matched to keystrokes by motion start.
 
     Raises:
         InputError: no run id, an unknown run, no trials, no vacuum, or (with `need_motion`) no
@@ -162,8 +166,63 @@ def load_keystrokes(run_ids: Sequence[str], data_dir: Path, *, x0_source: str = 
     if "distance_m" not in rows or rows["distance_m"].isna().any():
         notes.add("distance 0 assumed where not recorded (the finger starts on the key)")
     columns: dict[str, Any] = {**_commands(rows, notes), **_midi(rows, midi_recorded)}
+    # A run's own arm log starts at the commanded motion start; an imported take does not know it.
+    columns["command_start_s"] = np.full(batch.n, 0.0 if batch.arm_source == "arm" else np.nan)
     batch = replace(batch, **columns)
+    if schedule is not None:
+        batch = attach_schedule(batch, rows, schedule, notes)
     return Loaded(batch, all_trials.reset_index(drop=True), hashes, tuple(sorted(notes)))
+
+
+#: Columns of a commanded schedule (a lab script's log of what it told the arm).
+SCHEDULE_COLUMNS = ("t_start_s", "down_velocity_mps", "up_velocity_mps", "acceleration_mps2", "depth_m",
+                    "distance_m", "hold_s")
+
+
+def read_schedule(path: Path) -> pd.DataFrame:
+    """A commanded schedule CSV: one row per press with `SCHEDULE_COLUMNS` (times on the clock of
+    the take it belongs to).
+
+    Raises:
+        InputError: the file is missing, not a CSV, or lacks a column.
+    """
+    try:
+        frame = pd.read_csv(path)
+    except (OSError, ValueError, pd.errors.ParserError) as exc:
+        raise InputError(f"cannot read the schedule ({exc})", str(path)) from None
+    missing = [c for c in SCHEDULE_COLUMNS if c not in frame]
+    if missing:
+        raise InputError(f"the schedule lacks column(s) {', '.join(missing)}; expected {', '.join(SCHEDULE_COLUMNS)}",
+                         str(path))
+    return frame
+
+
+def attach_schedule(batch: KeystrokeBatch, rows: pd.DataFrame, schedule: pd.DataFrame,
+                    notes: set[str] | None = None) -> KeystrokeBatch:
+    """The batch with each keystroke's commanded press from a schedule: the command whose start
+    is the latest at or before the keystroke's observed motion start (trials' `t_start_s`, on
+    the schedule's clock), within 1 s; unmatched keystrokes keep what they had."""
+    observed = _column(rows, "t_start_s")
+    starts = schedule["t_start_s"].to_numpy(dtype=np.float64)
+    order = np.argsort(starts)
+    starts = starts[order]
+    out = {name: getattr(batch, name).copy() for name in ("command_start_s", *SCHEDULE_COLUMNS[1:])}
+    matched = 0
+    for i, t in enumerate(observed):
+        k = int(np.searchsorted(starts, t + 0.05, side="right")) - 1  # a command up to 50 ms late
+        if not math.isfinite(t) or k < 0 or t - starts[k] > 1.0:
+            continue
+        row = schedule.iloc[order[k]]
+        out["command_start_s"][i] = float(starts[k] - t)
+        for name in SCHEDULE_COLUMNS[1:]:
+            out[name][i] = float(row[name])
+        matched += 1
+    if notes is not None:
+        notes.discard("acceleration not recorded")
+        notes.discard("down speed taken from the measured arm speed")
+        notes.discard("depth taken from the measured arm travel")
+        notes.add(f"commanded presses from the schedule ({matched} of {batch.n} keystrokes matched)")
+    return replace(batch, **out)
 
 
 def load_batch(run_ids: Sequence[str], data_dir: Path, *, x0_source: str = "auto",
