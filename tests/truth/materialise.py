@@ -97,7 +97,7 @@ def truth_dict(scenario: Scenario) -> dict[str, Any]:
     """The answer and everything a scorer needs (without the simulated outcomes)."""
     e = scenario.effect
     base = BASE_SETS[scenario.base]
-    family = None if e is None else e.info.family
+    family = "none" if e is None else e.info.family
     return {
         "schema": SCHEMA,
         "scenario": scenario.name,
@@ -105,7 +105,7 @@ def truth_dict(scenario: Scenario) -> dict[str, Any]:
         "description": scenario.description,
         "family": family,
         "effect": None if e is None else e.info.effect,
-        "accepted_effects": sorted(n for n, f in FAMILY_OF.items() if f == family),
+        "accepted_effects": sorted(n for n, f in FAMILY_OF.items() if f == family),  # [] if clean
         "truth_kind": None if e is None else e.kind,
         "form": None if e is None else e.form,
         "form_equals_candidate": None if e is None else e.info.equals_candidate,
