@@ -90,6 +90,14 @@ MOCAP_EFFECTS: tuple[tuple[str, str, str, dict[str, Effect]], ...] = (
         "strong": _e("arm_lag", "first_order", tau_s=0.025),
         "weak": _e("arm_lag", "first_order", tau_s=0.008),
     }),
+    ("mocap_delay", "offset", "deep", {
+        "strong": _e("mocap_delay", "offset", delay_s=0.02),
+        "weak": _e("mocap_delay", "offset", delay_s=0.006),
+    }),
+    ("mocap_delay", "drifting", "shallow", {
+        "strong": _e("mocap_delay", "drifting", delay_s=0.005, rate_ppm=300.0),
+        "weak": _e("mocap_delay", "drifting", delay_s=0.0, rate_ppm=100.0),
+    }),
     ("arm_lag", "servo", "deep", {
         "strong": _e("arm_lag", "servo", freq_hz=6.0, zeta=0.5),
         "weak": _e("arm_lag", "servo", freq_hz=10.0, zeta=0.6),
