@@ -145,10 +145,11 @@ def register(app: typer.Typer) -> None:
         seed: Annotated[int | None, typer.Option("--seed", help="Seed of the simulated world (overrides the rig file).")] = None,
         rig: Annotated[Path | None, typer.Option("--rig", help="Rig file to use instead of the spec's.")] = None,
         no_progress: Annotated[bool, typer.Option("--no-progress", help="No progress bar.")] = False,
-        batch_trials: Annotated[int, typer.Option(
+        batch_trials: Annotated[int | None, typer.Option(
             "--batch-trials", min=1,
-            help="Trials per Parquet part (also flushed every 2 s); a crash loses at most one batch.",
-        )] = 50,
+            help="Trials per Parquet part (also flushed every 2 s); a crash loses at most one batch. "
+            "Default 50; on the simulated rig 128, simulated together as one block.",
+        )] = None,
     ) -> None:
         """Run an experiment spec on its rig into data/runs/<run_id>/ (or --dry-run it)."""
         if dry_run_flag:

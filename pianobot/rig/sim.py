@@ -29,7 +29,7 @@ Fault randomness is seeded by (rig seed, key), so it too repeats exactly for a r
 from __future__ import annotations
 
 import hashlib
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -337,6 +337,12 @@ def build_sim_rig(rig_spec: Any, seed: int, *, world: Any | None = None) -> Rig:
     def clear_stop() -> None:
         state.stop_armed = False
 
+    def prepare(trials: Sequence[TrialLike]) -> None:
+        # The block's true trajectories in one vectorised batch; each press then only observes.
+        prefetch = getattr(state.world, "prefetch", None)
+        if callable(prefetch):
+            prefetch([t.press() for t in trials], [t.vacuum_kpa for t in trials])
+
     settle = rig_spec.settle_s
     station = Station(
         arm, vacuum, keyboard, mocap, clock,
@@ -358,6 +364,7 @@ def build_sim_rig(rig_spec: Any, seed: int, *, world: Any | None = None) -> Rig:
         station=station,
         finish=finish,
         clear_stop=clear_stop,
+        prepare=prepare,
         description={
             "seed": seed,
             "world": {"preset": "default", **rig_spec.world},

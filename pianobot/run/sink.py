@@ -1,7 +1,7 @@
 """StoreSink: the subscriber that writes a run's records to its run folder.
 
 Trials are written in batches (every `batch_trials` trials or `batch_s` wall seconds, whichever
-comes first) so a 2,000-trial sim sweep is not 6,000 tiny files, while a kill -9 loses at most
+comes first; on a simulated rig, one batch per block of trials the rig prepared together) so a 2,000-trial sim sweep is not 6,000 tiny files, while a kill -9 loses at most
 the batch in memory. Order on disk, which resume relies on:
 
 1. `started` is journalled before the arm moves (durable with the next flush);
@@ -19,6 +19,7 @@ from typing import Any
 
 from pianobot.run.readout import TrialData, midi_table, samples_table, trials_table
 from pianobot.run.records import (
+    BlockEnded,
     Record,
     RunEnded,
     RunStarted,
@@ -40,6 +41,7 @@ class StoreSink:
         self._batch: list[TrialData] = []
         self._last_flush = time.monotonic()
         self._lab_time_s = 0.0
+        self._blocks = False  # a batching rig: one part per block (BlockEnded), not per count
 
     def __call__(self, record: Record) -> None:
         if isinstance(record, TrialStarted):
@@ -57,8 +59,13 @@ class StoreSink:
             self._lab_time_s = record.lab_time_s
             if record.status == "failed":
                 self.flush()  # a failure is rare and worth having on disk at once
-            elif len(self._batch) >= self.batch_trials or time.monotonic() - self._last_flush >= self.batch_s:
+            elif (not self._blocks and len(self._batch) >= self.batch_trials) or (
+                time.monotonic() - self._last_flush >= self.batch_s
+            ):
                 self.flush()
+        elif isinstance(record, BlockEnded):
+            self._lab_time_s = record.lab_time_s
+            self.flush()
         elif isinstance(record, TrialStopped):
             self.flush()
             self.writer.journal(
@@ -66,6 +73,7 @@ class StoreSink:
                 error=record.reason, kind="safety_stop", t_s=record.t_s,
             )
         elif isinstance(record, RunStarted):
+            self._blocks = record.blocks
             self.writer.journal(
                 "resumed" if record.resumed else "run_started",
                 planned=record.planned, done=record.done, todo=record.todo,

@@ -22,7 +22,7 @@ from pianobot.rig import Rig, open_rig
 from pianobot.rig.errors import DeviceUnavailable
 from pianobot.run.progress import ProgressBar
 from pianobot.run.records import Subscriber
-from pianobot.run.runner import RetryPolicy, Runner, SessionResult
+from pianobot.run.runner import BLOCK_TRIALS, RetryPolicy, Runner, SessionResult
 from pianobot.run.signals import SignalHandlers, StopControl
 from pianobot.run.sink import StoreSink
 from pianobot.spec import (
@@ -36,6 +36,8 @@ from pianobot.spec import (
 )
 from pianobot.store import Run, RunLocked, RunWriter, load_run, read_journal, summarize_run
 from pianobot.store.tables import read_run_table, trial_status_counts
+
+BATCH_TRIALS = 50  # trials per part on a rig that runs keystrokes one at a time
 
 
 @dataclass(frozen=True)
@@ -112,7 +114,7 @@ def run_sweep(
     progress: bool = True,
     subscribers: Iterable[Subscriber] = (),
     control: StopControl | None = None,
-    batch_trials: int = 50,
+    batch_trials: int | None = None,
     batch_s: float = 2.0,
     world: Any | None = None,
 ) -> RunOutcome:
@@ -128,6 +130,8 @@ def run_sweep(
         subscribers: more record consumers (e.g. a test collector).
         control: a stop control (tests); by default SIGINT/SIGTERM drive one.
         batch_trials, batch_s: part batching (a kill loses at most one batch, redone on resume).
+            On a batching rig (the simulator) a batch is also the block of trials simulated
+            together; default 50 trials, 128 on a batching rig.
         world: a physics World for the sim rig instead of the rig file's (tests, benchmarks).
 
     Raises:
@@ -236,7 +240,7 @@ def _session(
     progress: bool,
     subscribers: list[Subscriber],
     control: StopControl,
-    batch_trials: int,
+    batch_trials: int | None,
     batch_s: float,
 ) -> RunOutcome:
     """Run the trials not yet done on an open rig; the run folder records how it ended."""
@@ -245,6 +249,8 @@ def _session(
     if resumed:
         _note_resume(writer, meta, done_ids)
     writer.update_meta(rig={**meta.get("rig", {}), "description": rig.describe()})
+    if batch_trials is None:
+        batch_trials = BLOCK_TRIALS if rig.batches else BATCH_TRIALS
     sink = StoreSink(writer, batch_trials=batch_trials, batch_s=batch_s)
     retry = prepared.rig.retry
     with ExitStack() as stack:
@@ -263,6 +269,7 @@ def _session(
                 control=control,
                 clock_offset_s=float(meta.get("lab_time_s") or 0.0),
                 motion=prepared.spec.approach == "fast",
+                block_trials=batch_trials,
             )
             result = runner.run(
                 writer.run_id, todo, planned=len(prepared.trials), done=len(done_ids)

@@ -123,7 +123,8 @@ def to_table(frame: pd.DataFrame | pa.Table, name: str, run_id: str) -> pa.Table
     arrays: list[pa.Array | pa.ChunkedArray] = []
     for column in schema:
         if column.name == "run_id":
-            arrays.append(pa.array([run_id] * n_rows, type=pa.string()))
+            # pa.repeat, not a Python list of n_rows strings (a samples part has millions).
+            arrays.append(pa.repeat(pa.scalar(run_id, type=pa.string()), n_rows))
         elif column.name in source.column_names:
             arrays.append(source.column(column.name).cast(column.type))
         else:
