@@ -17,6 +17,7 @@ from rich.console import Console
 from rich.table import Table
 
 from pianobot.cli.common import DEFAULT_DATA, DataDir, JsonFlag, emit_json, print_error
+from pianobot.executor import ENV_SCHEDULER, ENV_WORKERS, ExecutorSettings
 from pianobot.plan import format_duration
 from pianobot.run import RunOutcome, dry_run, run_sweep
 from pianobot.store import RunSummary, list_runs, load_run, summarize_run
@@ -150,6 +151,16 @@ def register(app: typer.Typer) -> None:
             help="Trials per Parquet part (also flushed every 2 s); a crash loses at most one batch. "
             "Default 50; on the simulated rig 128, simulated together as one block.",
         )] = None,
+        workers: Annotated[int | None, typer.Option(
+            "--workers", min=1,
+            help="Processes for a simulated sweep (default: the machine's cores for big sweeps, "
+            f"this process for small ones; env {ENV_WORKERS}, config file [executor] workers).",
+        )] = None,
+        scheduler: Annotated[str | None, typer.Option(
+            "--scheduler", metavar="tcp://HOST:PORT",
+            help=f"Run a simulated sweep's blocks on this Dask cluster (env {ENV_SCHEDULER}, "
+            "config file [executor] scheduler). This process keeps the run and writes it.",
+        )] = None,
     ) -> None:
         """Run an experiment spec on its rig into data/runs/<run_id>/ (or --dry-run it)."""
         if dry_run_flag:
@@ -170,6 +181,7 @@ def register(app: typer.Typer) -> None:
         outcome = run_sweep(
             spec, data_dir=data, resume=resume, seed=seed, rig_path=rig,
             progress=not no_progress and not json_out and sys.stderr.isatty(), batch_trials=batch_trials,
+            executor=ExecutorSettings.resolve(workers=workers, scheduler=scheduler),
         )
         if json_out:
             emit_json(outcome.to_dict())

@@ -101,6 +101,7 @@ class WorldKeystroke:
     midi: tuple[PianoEvent, ...]
     key_speed_at_trigger_mps: float
     max_key_travel_m: float
+    rel_t_s: FloatArray | None = None  # the truth samples' times from motion start (exact grid)
 
     @property
     def silent(self) -> bool:
@@ -309,6 +310,7 @@ class World:
             midi=tuple(midi),
             key_speed_at_trigger_mps=speed,
             max_key_travel_m=float(np.max(x2)),
+            rel_t_s=t,
         )
 
 

@@ -82,6 +82,9 @@ class BlockEnded:
 
     trials: int  # trials of the block that were run
     lab_time_s: float
+    # The block's parts already encoded by a worker (table name -> Parquet bytes), or None
+    # when the store writes the block from the trials' records itself.
+    parts: dict[str, bytes] | None = None
 
 
 @dataclass(frozen=True)

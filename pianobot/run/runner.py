@@ -109,7 +109,7 @@ class Runner:
             for block in self._blocks(trials) if blocked else [trials]:
                 if blocked:
                     self.rig.prepare(block)
-                outcome = self._block(block, counts)
+                outcome = self.run_block(block, counts)
                 if blocked:
                     self.publish(BlockEnded(len(block), self.now()))
                 if outcome is not None:
@@ -137,8 +137,11 @@ class Runner:
         size = max(1, self.block_trials)
         return [trials[i : i + size] for i in range(0, len(trials), size)]
 
-    def _block(self, trials: Sequence[TrialLike], counts: dict[str, int]) -> tuple[str, str] | None:
-        """Run trials one by one; (status, reason) if the run must end."""
+    def run_block(self, trials: Sequence[TrialLike], counts: dict[str, int]) -> tuple[str, str] | None:
+        """Run trials one by one, updating `counts`; (status, reason) if the run must end.
+
+        The keys of `counts`: executed, silent, retries, done (see `SessionResult`).
+        """
         for trial in trials:
             if self.control.requested is not None:
                 return "interrupted", self.control.requested

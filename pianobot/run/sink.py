@@ -41,7 +41,7 @@ class StoreSink:
         self._batch: list[TrialData] = []
         self._last_flush = time.monotonic()
         self._lab_time_s = 0.0
-        self._blocks = False  # a batching rig: one part per block (BlockEnded), not per count
+        self._blocks = False  # a batching rig: one part per block (at BlockEnded), whatever it takes
 
     def __call__(self, record: Record) -> None:
         if isinstance(record, TrialStarted):
@@ -57,15 +57,17 @@ class StoreSink:
         elif isinstance(record, TrialDone):
             self._batch.append(record.data)
             self._lab_time_s = record.lab_time_s
-            if record.status == "failed":
+            if self._blocks:
+                pass  # the block is written as one part at its end
+            elif record.status == "failed":
                 self.flush()  # a failure is rare and worth having on disk at once
-            elif (not self._blocks and len(self._batch) >= self.batch_trials) or (
+            elif len(self._batch) >= self.batch_trials or (
                 time.monotonic() - self._last_flush >= self.batch_s
             ):
                 self.flush()
         elif isinstance(record, BlockEnded):
             self._lab_time_s = record.lab_time_s
-            self.flush()
+            self.flush(record.parts)
         elif isinstance(record, TrialStopped):
             self.flush()
             self.writer.journal(
@@ -86,13 +88,19 @@ class StoreSink:
                 retries=record.retries, lab_time_s=record.lab_time_s,
             )
 
-    def flush(self) -> None:
-        """Write the pending batch as one part set, then journal its trials as done/failed."""
+    def flush(self, encoded: dict[str, bytes] | None = None) -> None:
+        """Write the pending batch as one part set, then journal its trials as done/failed.
+
+        `encoded`: the batch's parts as a worker encoded them (its records carry rows only).
+        """
         self._last_flush = time.monotonic()
         if not self._batch:
             return
         batch, self._batch = self._batch, []
-        part = self.writer.append(trials_table(batch), samples_table(batch), midi_table(batch))
+        if encoded is not None:
+            part = self.writer.append_encoded(encoded)
+        else:
+            part = self.writer.append(trials_table(batch), samples_table(batch), midi_table(batch))
         events: list[tuple[str, dict[str, Any]]] = [
             (
                 "failed" if d.status == "failed" else "done",

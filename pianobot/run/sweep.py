@@ -16,10 +16,12 @@ from pathlib import Path
 from typing import Any
 
 from pianobot.errors import InputError
+from pianobot.executor import IN_PROCESS, Executor, ExecutorSettings, open_executor
 from pianobot.plan import PlanSummary, Trial, check_envelope, expand, plan_frame, summarize
 from pianobot.plan.approach import apply_approach
 from pianobot.rig import Rig, open_rig
 from pianobot.rig.errors import DeviceUnavailable
+from pianobot.run.parallel import SweepSetup, run_parallel
 from pianobot.run.progress import ProgressBar
 from pianobot.run.records import Subscriber
 from pianobot.run.runner import BLOCK_TRIALS, RetryPolicy, Runner, SessionResult
@@ -117,6 +119,7 @@ def run_sweep(
     batch_trials: int | None = None,
     batch_s: float = 2.0,
     world: Any | None = None,
+    executor: ExecutorSettings | None = None,
 ) -> RunOutcome:
     """Run a sweep on its rig into a new run folder, or resume run `resume`.
 
@@ -133,6 +136,9 @@ def run_sweep(
             On a batching rig (the simulator) a batch is also the block of trials simulated
             together; default 50 trials, 128 on a batching rig.
         world: a physics World for the sim rig instead of the rig file's (tests, benchmarks).
+        executor: where a simulated sweep's blocks run (`--workers`, `--scheduler`; default: this
+            process for small sweeps, else a local cluster sized to the machine). The driver
+            (this process) keeps the run lock, the journal and every write.
 
     Raises:
         InputError: bad spec, unknown run, a spec that changed since the run started.
@@ -163,6 +169,7 @@ def run_sweep(
             writer, rig, prepared, done_ids,
             resumed=resume is not None, progress=progress, subscribers=list(subscribers),
             control=control or StopControl(), batch_trials=batch_trials, batch_s=batch_s,
+            executor=executor, world=world,
         )
     raise AssertionError("unreachable")  # for type checkers: the with block always returns
 
@@ -242,6 +249,8 @@ def _session(
     control: StopControl,
     batch_trials: int | None,
     batch_s: float,
+    executor: ExecutorSettings | None,
+    world: Any | None,
 ) -> RunOutcome:
     """Run the trials not yet done on an open rig; the run folder records how it ended."""
     meta = writer.meta
@@ -261,19 +270,28 @@ def _session(
                 # Resuming a run a protective stop ended means the operator cleared it.
                 rig.clear_stop()
                 writer.journal("stop_cleared")
-            runner = Runner(
-                rig,
-                subscribers=[sink, *([bar] if bar is not None else []), *subscribers],
-                retry=RetryPolicy(retry.max_attempts, retry.backoff_s, retry.backoff_factor),
-                record=prepared.spec.record,
-                control=control,
-                clock_offset_s=float(meta.get("lab_time_s") or 0.0),
-                motion=prepared.spec.approach == "fast",
-                block_trials=batch_trials,
-            )
-            result = runner.run(
-                writer.run_id, todo, planned=len(prepared.trials), done=len(done_ids)
-            )
+            everyone: list[Subscriber] = [sink, *([bar] if bar is not None else []), *subscribers]
+            policy = RetryPolicy(retry.max_attempts, retry.backoff_s, retry.backoff_factor)
+            offset_s = float(meta.get("lab_time_s") or 0.0)
+            fast = prepared.spec.approach == "fast"
+            pool = _executor(rig, executor, len(todo))
+            writer.update_meta(executor=pool.describe())
+            if pool.kind != "in-process":
+                setup = SweepSetup(writer.run_id, prepared.rig, prepared.seed, world,
+                                   tuple(prepared.spec.record), fast, policy, offset_s)
+                result = run_parallel(
+                    rig, setup, pool, run_id=writer.run_id, trials=todo,
+                    planned=len(prepared.trials), done=len(done_ids), block_trials=batch_trials,
+                    subscribers=everyone, control=control,
+                )
+            else:
+                runner = Runner(
+                    rig, subscribers=everyone, retry=policy, record=prepared.spec.record,
+                    control=control, clock_offset_s=offset_s, motion=fast, block_trials=batch_trials,
+                )
+                result = runner.run(
+                    writer.run_id, todo, planned=len(prepared.trials), done=len(done_ids)
+                )
         except BaseException as exc:
             # A bug, a device failure or a Ctrl-C outside the trial loop: keep what was
             # measured and say why the run ended.
@@ -284,6 +302,19 @@ def _session(
     _record_end(writer, result)
     writer.finish(result.status, result.reason, lab_time_s=result.lab_time_s)
     return _outcome(writer, result, resumed=resumed)
+
+
+# Measured per simulated trial with every stream stored (one core): what the executor weighs
+# against the cost of starting worker processes.
+SIM_TRIAL_COST_S = 3e-3
+
+
+def _executor(rig: Rig, settings: ExecutorSettings | None, todo: int) -> Executor:
+    """Where the keystrokes run: a real rig presses one key at a time, here; the simulator's
+    blocks go to the executor the settings ask for (in this process for small sweeps)."""
+    if not rig.batches:
+        return IN_PROCESS
+    return open_executor(settings, work_s=todo * SIM_TRIAL_COST_S)
 
 
 def _note_resume(writer: RunWriter, meta: dict[str, Any], done_ids: set[str]) -> None:

@@ -11,7 +11,7 @@ from pianobot.store.journal import read_journal
 from pianobot.store.layout import RunPaths, resolve_run, runs_dir
 from pianobot.store.reader import Run, RunSummary, list_runs, load_run, summarize_run
 from pianobot.store.schema import SCHEMA_VERSION, TABLE_SCHEMAS, empty_frame
-from pianobot.store.writer import RunLocked, RunWriter
+from pianobot.store.writer import RunLocked, RunWriter, encode_part
 
 __all__ = [
     "SCHEMA_VERSION",
@@ -21,6 +21,7 @@ __all__ = [
     "RunPaths",
     "RunSummary",
     "RunWriter",
+    "encode_part",
     "empty_frame",
     "list_runs",
     "load_run",

@@ -16,6 +16,7 @@ from pianobot.store.journal import Journal
 from pianobot.store.layout import (
     TABLE_NAMES,
     RunPaths,
+    encode_parquet,
     git_commit,
     new_run_id,
     parquet_options,
@@ -23,6 +24,7 @@ from pianobot.store.layout import (
     resolve_run,
     runs_dir,
     utc_now,
+    write_bytes_atomic,
     write_json_atomic,
     write_parquet_atomic,
 )
@@ -161,6 +163,18 @@ class RunWriter:
         self._next_batch += 1
         return batch
 
+    def append_encoded(self, parts: dict[str, bytes]) -> int:
+        """Write one batch that was encoded elsewhere (`encode_part`): the same order and
+        atomicity as `append` (samples, midi, then the trials part that commits the batch)."""
+        if "trials" not in parts:
+            raise ValueError("an encoded batch needs its trials part")
+        batch = self._next_batch
+        for name in ("samples", "midi", "trials"):
+            if name in parts:
+                write_bytes_atomic(self.paths.part(name, batch), parts[name])
+        self._next_batch += 1
+        return batch
+
     def journal(self, event: str, **fields: Any) -> None:
         """Append one event to journal.jsonl (fsync'd)."""
         self._journal.write(event, fields)
@@ -224,6 +238,11 @@ class RunWriter:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def encode_part(table: pd.DataFrame | pa.Table, name: str, run_id: str) -> bytes:
+    """One part of table `name` of run `run_id`, encoded as `RunWriter.append` would write it."""
+    return encode_parquet(with_metadata(to_table(table, name, run_id), name))
 
 
 def _compact_table(paths: RunPaths, name: str, committed: list[int], parts: dict[int, Path]) -> None:
