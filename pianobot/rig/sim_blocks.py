@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from pianobot.physics.trajectory import Press
-from pianobot.rig.sim import SimArm, _retrigger_m, stroke_times
+from pianobot.rig.sim import SimArm, _retrigger_m, make_world, stroke_times
 from pianobot.rig.station import Rig
 
 # How far past a keystroke's settled truth its observations can reach: the mocap clock offset
@@ -131,6 +131,11 @@ def keystroke_times(world: Any, keystrokes: Sequence[tuple[Press, float]]) -> di
         back, ready = stroke_times(stroke, press, retrigger)
         out[(press, vacuum)] = KeystrokeTimes(back, ready, float(stroke.duration_s))
     return out
+
+
+def world_for(rig_spec: Any, seed: int) -> Any:
+    """The physics World the simulated rig of `rig_spec` would build (for a worker's rig)."""
+    return make_world(rig_spec.world, seed)
 
 
 def _arm(rig: Rig) -> SimArm:

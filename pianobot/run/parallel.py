@@ -127,12 +127,12 @@ def _world(setup: SweepSetup) -> Any:
     """The setup's world, built once per worker process (its kernels load once, too)."""
     if setup.world is not None:
         return setup.world
-    from pianobot.rig.sim import make_world
+    from pianobot.rig import sim_blocks
 
     key = (setup.rig_spec.model_dump_json(), setup.seed)
     if key not in _WORLDS:
         _WORLDS.clear()  # one sweep at a time per process
-        _WORLDS[key] = make_world(setup.rig_spec.world, setup.seed)
+        _WORLDS[key] = sim_blocks.world_for(setup.rig_spec, setup.seed)
     return _WORLDS[key]
 
 
