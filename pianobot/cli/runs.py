@@ -14,7 +14,7 @@ from rich.console import Console
 from rich.table import Table
 
 from pianobot.cli.common import DEFAULT_DATA, DataDir, JsonFlag, emit_json
-from pianobot.plan import format_duration
+from pianobot.durations import format_duration
 from pianobot.store import RunSummary, list_runs, load_run, summarize_run
 from pianobot.store.tables import trial_status_counts
 

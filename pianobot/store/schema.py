@@ -8,10 +8,14 @@ polars, DuckDB) instead of a type that changes with the data.
 
 from __future__ import annotations
 
-import pandas as pd
+from typing import TYPE_CHECKING
+
 import pyarrow as pa
 
 from pianobot.spec.parameters import PARAMETER_NAMES
+
+if TYPE_CHECKING:  # pandas takes a third of a second to import: only where frames are made
+    import pandas as pd
 
 SCHEMA_VERSION = "1"
 METADATA_VERSION_KEY = b"pianobot.schema_version"

@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
@@ -38,6 +37,9 @@ from pianobot.store.schema import (
     with_metadata,
 )
 from pianobot.store.tables import committed_batches, dedupe_trials, drop_orphan_parts
+
+if TYPE_CHECKING:  # pandas takes a third of a second to import: only where frames are made
+    import pandas as pd
 
 
 class RunWriter:
