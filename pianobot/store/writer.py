@@ -269,8 +269,10 @@ def _compact_table(paths: RunPaths, name: str, committed: list[int], parts: dict
     temp = target.with_name(f".{target.name}.{os.getpid()}.compact.tmp")
     try:
         with pq.ParquetWriter(temp, schema, **parquet_options(schema)) as out:
+            # Text columns (ids, sources) read as dictionaries: no million-fold string copies.
+            text = [f.name for f in schema if pa.types.is_string(f.type)]
             for source in sources:
-                parquet = pq.ParquetFile(source)
+                parquet = pq.ParquetFile(source, read_dictionary=text)
                 for group in range(parquet.num_row_groups):
                     out.write_table(parquet.read_row_group(group).cast(schema))
         with open(temp, "rb+") as handle:
