@@ -223,18 +223,32 @@ class World:
         `key` seeds the observation noise (use the trial id); `block` labels the stiffness-drift
         block (default: the vacuum level, i.e. one drift per level and world).
         """
+        return self._observe(self._take(press, vacuum_kpa, block), press, note, t0_s, key)
+
+    def settled_truth(
+        self, press: Press, vacuum_kpa: float, *, block: str | None = None
+    ) -> SettledTruth:
+        """The true trajectory `keystroke` would observe (from motion start until the arm is
+        back and the key at rest), without the observation: no noise, no MIDI."""
+        truth = self._take(press, vacuum_kpa, block)
+        duration = _rest_time(truth.t_s, truth.x1_m, truth.x2_m,
+                              press_duration_s(press, self.model.arm_profile))
+        keep = truth.t_s <= duration + 1e-9
+        return SettledTruth(float(duration), truth.t_s[keep], truth.x0_m[keep], truth.x2_m[keep])
+
+    def _take(self, press: Press, vacuum_kpa: float, block: str | None) -> _Truth:
+        """A keystroke's truth: prefetched (once per time it was prefetched for) or simulated."""
         k = (press, float(vacuum_kpa), self._block_key(vacuum_kpa, block))
         cached = self._truth.get(k)
         if cached is not None:
             self._uses[k] = left = self._uses.get(k, 1) - 1
             if left <= 0:
                 del self._truth[k]
-        else:
-            batch = self.simulate([press], vacuum_kpa, [block])
-            own = output_count(self._horizon_s(press), self.config.out_dt_s)
-            cached = _Truth(batch.t_s[:own], batch.x0_m[0, :own], batch.x1_m[0, :own],
-                            batch.x2_m[0, :own], batch.v2_mps[0, :own])
-        return self._observe(cached, press, note, t0_s, key)
+            return cached
+        batch = self.simulate([press], vacuum_kpa, [block])
+        own = output_count(self._horizon_s(press), self.config.out_dt_s)
+        return _Truth(batch.t_s[:own], batch.x0_m[0, :own], batch.x1_m[0, :own],
+                      batch.x2_m[0, :own], batch.v2_mps[0, :own])
 
     def keystrokes(
         self,
@@ -312,6 +326,16 @@ class World:
             max_key_travel_m=float(np.max(x2)),
             rel_t_s=t,
         )
+
+
+@dataclass(frozen=True)
+class SettledTruth:
+    """A keystroke's true arm and key positions until it is at rest (times from motion start)."""
+
+    duration_s: float
+    rel_t_s: FloatArray
+    truth_x0_m: FloatArray
+    truth_x2_m: FloatArray
 
 
 @dataclass(frozen=True)

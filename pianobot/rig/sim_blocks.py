@@ -127,9 +127,9 @@ def keystroke_times(world: Any, keystrokes: Sequence[tuple[Press, float]]) -> di
     retrigger = _retrigger_m(world)
     out: dict[tuple[Press, float], KeystrokeTimes] = {}
     for press, vacuum in unique:
-        stroke = world.keystroke(press, vacuum, key="timeline")  # times depend on truth only
-        back, ready = stroke_times(stroke, press, retrigger)
-        out[(press, vacuum)] = KeystrokeTimes(back, ready, float(stroke.duration_s))
+        truth = world.settled_truth(press, vacuum)  # the times depend on the truth only
+        back, ready = stroke_times(truth, press, retrigger)
+        out[(press, vacuum)] = KeystrokeTimes(back, ready, truth.duration_s)
     return out
 
 
