@@ -18,7 +18,7 @@ from rich.table import Table
 
 from pianobot.cli.common import DEFAULT_DATA, DataDir, JsonFlag, emit_json, print_error
 from pianobot.plan import format_duration
-from pianobot.run import RunOutcome, dry_run, run_sweep
+from pianobot.run import RunOutcome, RunStarted, dry_run, run_sweep
 from pianobot.store import RunSummary, list_runs, load_run, summarize_run
 from pianobot.store.tables import trial_status_counts
 
@@ -132,6 +132,13 @@ def _print_details(details: dict[str, Any]) -> None:
     console.print(table, highlight=False)
 
 
+def _warn_before_motion(record: Any) -> None:
+    """The rig's warnings (e.g. the UR's speed slider below 100 %), on stderr before any motion."""
+    if isinstance(record, RunStarted):
+        for warning in record.warnings:
+            print(f"warning: {warning}", file=sys.stderr, flush=True)
+
+
 def register(app: typer.Typer) -> None:
     """Add `sweep` and the `runs` group to the app."""
 
@@ -169,6 +176,7 @@ def register(app: typer.Typer) -> None:
         outcome = run_sweep(
             spec, data_dir=data, resume=resume, seed=seed, rig_path=rig,
             progress=not no_progress and not json_out and sys.stderr.isatty(), batch_trials=batch_trials,
+            subscribers=[_warn_before_motion],
         )
         if json_out:
             emit_json(outcome.to_dict())

@@ -22,6 +22,7 @@ class RunStarted:
     done: int  # trials already completed (a resume)
     todo: int  # trials this session will attempt
     resumed: bool
+    warnings: tuple[str, ...] = ()  # what the rig found when it opened, before any motion
 
 
 @dataclass(frozen=True)

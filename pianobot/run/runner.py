@@ -85,7 +85,8 @@ class Runner:
 
     def run(self, run_id: str, trials: Sequence[TrialLike], *, planned: int, done: int = 0) -> SessionResult:
         """Execute `trials` in order; `done` trials of `planned` were completed before."""
-        self.publish(RunStarted(run_id, planned=planned, done=done, todo=len(trials), resumed=done > 0))
+        self.publish(RunStarted(run_id, planned=planned, done=done, todo=len(trials), resumed=done > 0,
+                                warnings=self.rig.warnings))
         counts = {"executed": 0, "silent": 0, "retries": 0, "done": done}
         status, reason = "completed", None
         try:

@@ -243,7 +243,8 @@ def _session(
     todo = [t for t in prepared.trials if t.trial_id not in done_ids]
     if resumed:
         _note_resume(writer, meta, done_ids)
-    writer.update_meta(rig={**meta.get("rig", {}), "description": rig.describe()})
+    writer.update_meta(rig={**meta.get("rig", {}), "description": rig.describe(),
+                            "warnings": list(rig.warnings)})
     sink = StoreSink(writer, batch_trials=batch_trials, batch_s=batch_s)
     retry = prepared.rig.retry
     with ExitStack() as stack:
@@ -274,7 +275,7 @@ def _session(
             raise
     _record_end(writer, result)
     writer.finish(result.status, result.reason, lab_time_s=result.lab_time_s)
-    return _outcome(writer, result, resumed=resumed)
+    return _outcome(writer, result, resumed=resumed, warnings=rig.warnings)
 
 
 def _note_resume(writer: RunWriter, meta: dict[str, Any], done_ids: set[str]) -> None:
@@ -307,7 +308,9 @@ def _flush_quietly(sink: StoreSink) -> None:
         pass
 
 
-def _outcome(writer: RunWriter, result: SessionResult | None, *, resumed: bool) -> RunOutcome:
+def _outcome(
+    writer: RunWriter, result: SessionResult | None, *, resumed: bool, warnings: tuple[str, ...] = ()
+) -> RunOutcome:
     summary = summarize_run(Run(run_id=writer.run_id, path=writer.path))
     counts = trial_status_counts(writer.paths)
     return RunOutcome(
@@ -323,6 +326,7 @@ def _outcome(writer: RunWriter, result: SessionResult | None, *, resumed: bool) 
         executed=0 if result is None else result.executed,
         lab_time_s=summary.lab_time_s,
         resumed=resumed,
+        warnings=list(warnings),
     )
 
 

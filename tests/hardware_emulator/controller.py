@@ -26,7 +26,8 @@ POLYSCOPE = {CB3: "URSoftware 3.15.7.106331 (Feb 02 2022)",
 LOOP_HZ = {CB3: 125.0, ESERIES: 500.0}
 # runtime_state
 STOPPING, STOPPED, PLAYING, PAUSING, PAUSED, RESUMING = range(6)
-RUNTIME_NAMES = {STOPPED: "STOPPED", PLAYING: "PLAYING", PAUSED: "PAUSED"}
+RUNTIME_NAMES = {STOPPING: "STOPPING", STOPPED: "STOPPED", PLAYING: "PLAYING", PAUSING: "PAUSING",
+                 PAUSED: "PAUSED", RESUMING: "RESUMING"}
 # robot_mode
 POWER_OFF, POWER_ON, IDLE, RUNNING = 3, 4, 5, 7
 ROBOT_MODE_NAMES = {POWER_OFF: "POWER_OFF", POWER_ON: "POWER_ON", IDLE: "IDLE", RUNNING: "RUNNING"}
@@ -86,6 +87,7 @@ class Controller:
         self.velocity = (0.0,) * 6
         self.motion: LinearMove | Stop | None = None
         self.time_scale = config.speed_slider * config.limiter_scaling
+        self.hold = 1.0  # 1 while the program plays, ramps to 0 while it pauses
         self.slider = config.speed_slider
         self.limiter = config.limiter_scaling
         self.robot_mode = RUNNING
@@ -136,14 +138,21 @@ class Controller:
         self.truth.append((self.timestamp, self.pose))
 
     def _move(self, dt_s: float) -> None:
-        running = (self.runtime == PLAYING and self.safety_mode == NORMAL
-                   and self.robot_mode == RUNNING)
-        target = self.slider * self.limiter if running else 0.0
-        if self.safety_mode != NORMAL:
-            self.time_scale = 0.0  # a protective stop halts at once
-        else:
-            step = SLIDER_RATE_PER_S * dt_s
-            self.time_scale += max(-step, min(step, target - self.time_scale))
+        # A pause ramps the trajectory's time scaling down (PAUSING, then PAUSED), a resume
+        # ramps it up again (RESUMING, then PLAYING); the controller reports it in
+        # speed_scaling. A protective stop halts at once.
+        step = SLIDER_RATE_PER_S * dt_s
+        if self.runtime in (PAUSING, PAUSED, STOPPED, STOPPING):
+            self.hold = max(self.hold - step, 0.0)
+            if self.runtime == PAUSING and self.hold == 0.0:
+                self.runtime = PAUSED
+        elif self.runtime in (RESUMING, PLAYING):
+            self.hold = min(self.hold + step, 1.0)
+            if self.runtime == RESUMING and self.hold == 1.0:
+                self.runtime = PLAYING
+        if self.safety_mode != NORMAL or self.robot_mode != RUNNING:
+            self.hold = 0.0
+        self.time_scale = self.slider * self.limiter * self.hold
         motion = self.motion
         before = self.pose
         if isinstance(motion, LinearMove) and not motion.done:
@@ -211,16 +220,16 @@ class Controller:
         return True
 
     def pause_program(self) -> bool:
-        if self.runtime != PLAYING:
+        if self.runtime not in (PLAYING, RESUMING):
             return False
-        self.runtime = PAUSED
+        self.runtime = PAUSING
         self.events.append("program paused")
         return True
 
     def play_program(self) -> bool:
-        if self.runtime != PAUSED or self.safety_mode != NORMAL or self.script is None:
+        if self.runtime not in (PAUSED, PAUSING) or self.safety_mode != NORMAL:
             return False
-        self.runtime = PLAYING
+        self.runtime = RESUMING
         self.events.append("program resumed")
         return True
 
@@ -229,7 +238,7 @@ class Controller:
         self.safety_mode = PROTECTIVE
         self.protective_since_s = self.timestamp
         self.events.append(f"protective stop: {why}")
-        if self.runtime == PLAYING:
+        if self.runtime in (PLAYING, PAUSING, RESUMING):
             self.runtime = PAUSED
 
     def emergency_stop(self) -> None:
@@ -349,7 +358,7 @@ _GETTERS: dict[str, Callable[[Controller], Any]] = {
     "safety_mode": lambda c: c.safety_mode,
     "safety_status": lambda c: c.safety_mode,
     "actual_tool_accelerometer": lambda c: (0.0, 0.0, 9.81),
-    "speed_scaling": lambda c: c.limiter,
+    "speed_scaling": lambda c: c.limiter * c.hold,
     "target_speed_fraction": lambda c: c.slider,
     "actual_momentum": lambda c: 0.0,
     "actual_main_voltage": lambda c: 48.0, "actual_robot_voltage": lambda c: 48.0,

@@ -22,7 +22,6 @@ from dataclasses import dataclass
 from typing import Any
 
 from .controller import (
-    ESERIES,
     POLYSCOPE,
     ROBOT_MODE_NAMES,
     RUNNING,
@@ -242,7 +241,8 @@ class DashboardHandler:
         if cmd == "get loaded program":
             return "No program loaded"
         if cmd == "stop":
-            return "Stopped" if c.stop_program() else "Failed to execute: stop"
+            c.stop_program()  # answered "Stopped" also when nothing ran (ur_rtde relies on it)
+            return "Stopped"
         if cmd == "pause":
             return "Pausing program" if c.pause_program() else "Failed to execute: pause"
         if cmd == "play":
@@ -292,10 +292,3 @@ class ScriptHandler:
             with self.c.lock:
                 self.c.load_program(program.decode(errors="replace"))
 
-
-def remote_control_applies(generation: str) -> bool:
-    """Only e-Series controllers have a local/remote control switch."""
-    return generation == ESERIES
-
-
-__all__ = ["DashboardHandler", "RtdeHandler", "ScriptHandler", "RUNNING"]

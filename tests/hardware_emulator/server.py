@@ -20,12 +20,12 @@ from __future__ import annotations
 
 import random
 import selectors
-from multiprocessing.connection import Connection
 import socket
 import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from multiprocessing.connection import Connection
 from typing import Any
 
 from .controller import PAUSED, PLAYING, Controller, ControllerConfig, MoveFault
