@@ -17,6 +17,7 @@ from pianobot.rig.midi import MidiKeyboard, mido_backend
 from pianobot.rig.protocols import Arm, Clock, Keyboard, Mocap, Vacuum
 from pianobot.rig.ur5 import DEFAULT_KEYBOARD_AXIS, UR5Arm
 from pianobot.rig.ur5_link import open_io
+from pianobot.rig.ur5_session import close_link
 from pianobot.rig.vacuum import AnalogVacuum, CommandedVacuum, ManualVacuum, SignalSpan
 from pianobot.spec.rig import RegulatorCommand, RegulatorMonitor, RigSpec
 
@@ -138,9 +139,11 @@ def monitor_span(monitor: RegulatorMonitor, regulator: RegulatorCommand) -> Sign
 
 
 def _close(device: Any) -> None:
-    close = getattr(device, "close", None) or getattr(device, "disconnect", None)
+    close = getattr(device, "close", None)
+    if close is None:  # a ur_rtde object
+        close_link(device)
+        return
     try:
-        if close is not None:
-            close()
+        close()
     except Exception:  # closing after a failure must not hide that failure
         pass

@@ -18,7 +18,9 @@ declared stalled only when its *trajectory* time — wall time × `getSpeedScali
 which is 0 while paused — exceeds the profile's duration by a margin, so a slow slider never
 reads as a stall. A slider below the rig file's threshold is a warning before any motion.
 
-Failures. ur_rtde answers `False` instead of raising; every False, every stall and every stop
+Failures. A command sent to a control interface whose link is down is lost, and ur_rtde then
+waits for its answer for up to 300 s; so no command goes out without `isConnected()` first.
+ur_rtde answers `False` instead of raising; every False, every stall and every stop
 seen while sampling is diagnosed (`ur5_link.failure`): stops and pauses raise SafetyStop (after
 `make_safe`), a dropped link or an ended control script ConnectionLost. Every target is checked
 against the rig's workspace box and `isPoseWithinSafetyLimits` before it is sent
@@ -37,8 +39,8 @@ from pianobot.physics.keyboard import KeyboardGeometry
 from pianobot.physics.trajectory import Press, move_profile
 from pianobot.rig.errors import ConnectionLost, DeviceUnavailable, RigError, SafetyViolation
 from pianobot.rig.protocols import Clock, PressRecord
-from pianobot.rig.ur5_link import ControllerInfo, failure, read_status
-from pianobot.rig.ur5_session import Links, open_links, reconnect
+from pianobot.rig.ur5_link import ControllerInfo, failure, read_status, settled_status
+from pianobot.rig.ur5_session import Links, close_link, open_links, reconnect
 from pianobot.rig.ur5_trace import TcpRecorder
 from pianobot.spec.rig import UR5Config
 
@@ -108,6 +110,8 @@ class UR5Arm:
         self.reference_pose: Pose = [float(v) for v in config.reference_pose]
         self._min_scaling = math.inf
         self._measured_rate_hz: float | None = None
+        # Controller time → run clock offset of the last press's trace (provenance, checks).
+        self.last_trace_offset_s: float | None = None
 
     @property
     def control(self) -> Any:
@@ -170,6 +174,17 @@ class UR5Arm:
         pose[2] += height_m
         return pose
 
+    def _links_up(self) -> bool:
+        """Both RTDE links up. ur_rtde can report its control link up after a failed
+        background reconnect, so a dropped receive link counts as the network being down."""
+        return bool(_quietly(self.control, "isConnected")) and bool(
+            _quietly(self.receive, "isConnected"))
+
+    def _link_up(self, action: str) -> None:
+        """ConnectionLost unless the links are up (a command on a dead link hangs)."""
+        if not self._links_up():
+            raise self._fail(action)
+
     def check_target(self, pose: Sequence[float]) -> None:
         """SafetyViolation unless the pose is inside the workspace box and the robot's limits."""
         low, high = self.config.workspace_min_m, self.config.workspace_max_m
@@ -179,12 +194,13 @@ class UR5Arm:
                     f"target {axis} = {value:.4f} m is outside the workspace [{lo:g}, {hi:g}] m "
                     f"(pose {_fmt(pose)})"
                 )
+        self._link_up("safety-limit check")
         try:
             within = self.control.isPoseWithinSafetyLimits(list(pose))
         except RuntimeError as exc:
             raise ConnectionLost(f"safety-limit check failed: {exc}") from exc
         if not within:
-            status = read_status(self.receive, self.control)
+            status = settled_status(self.receive, self.control, 1.0 / self.rate_hz)
             if status.stopped or status.link_down or status.paused or status.script_stopped:
                 raise failure("safety-limit check", status)  # ur_rtde answered False: not a no
             raise SafetyViolation(
@@ -193,7 +209,7 @@ class UR5Arm:
 
     # -- motion ------------------------------------------------------------------------------
     def _fail(self, action: str) -> RigError:
-        return failure(action, read_status(self.receive, self.control))
+        return failure(action, settled_status(self.receive, self.control, 1.0 / self.rate_hz))
 
     def _operation_id(self) -> int:
         return int(self.control.getAsyncOperationProgressEx().operationId())
@@ -203,6 +219,7 @@ class UR5Arm:
         """One guarded asynchronous moveL; returns when the arm is at the target."""
         self.check_target(target)
         action = f"moveL to {_fmt(target)}"
+        self._link_up(action)
         try:
             start = self.receive.getActualTCPPose()
             expected_s = move_profile(math.dist(start[:3], target[:3]), speed_mps,
@@ -232,7 +249,7 @@ class UR5Arm:
                 break
             status = read_status(self.receive, self.control)
             if status.stopped or status.link_down or status.paused or status.script_stopped:
-                raise failure(action, status)
+                raise self._fail(action)  # re-read until both streams tell the same story
             now = self.clock.now()
             scaling = status.speed_scaling_combined
             if scaling is None:
@@ -241,7 +258,7 @@ class UR5Arm:
             trajectory_s += (now - last_s) * max(scaling, 0.0)
             last_s = now
             if trajectory_s > expected_s + STALL_MARGIN_S:
-                _quietly(self.control, "stopL", STOP_DECELERATION_MPS2)
+                self._stop()
                 raise self._fail(f"{action} (no end after {now - t_sent:.1f} s)")
             self.clock.sleep(0.25 / self.rate_hz)
 
@@ -307,6 +324,7 @@ class UR5Arm:
         t_end_s = self.clock.now()
         if recorder.period_s is not None:
             self._measured_rate_hz = 1.0 / recorder.period_s
+        self.last_trace_offset_s = recorder.offset_s
         return PressRecord(t_start_s, t_end_s, recorder.trace(hover[2]),
                            self._press_warnings(recorder))
 
@@ -324,9 +342,14 @@ class UR5Arm:
                             "cycles (the host was too busy to read them)")
         return tuple(warnings)
 
+    def _stop(self) -> None:
+        """stopL, if the links are up. Never raises."""
+        if self._links_up():
+            _quietly(self.control, "stopL", STOP_DECELERATION_MPS2)
+
     def make_safe(self) -> None:
         """Stop, then retract `safe_lift_m` above the keys if the arm can move. Never raises."""
-        _quietly(self.control, "stopL", STOP_DECELERATION_MPS2)
+        self._stop()
         try:
             status = read_status(self.receive, self.control)
             if status.stopped or status.link_down or status.paused or status.script_stopped:
@@ -348,9 +371,11 @@ class UR5Arm:
 
     def close(self) -> None:
         """Stop the control script and disconnect every link. Never raises."""
-        _quietly(self.control, "stopScript")
-        for link in (self.control, self.receive, self.io, self.dashboard):
-            _quietly(link, "disconnect")
+        if self._links_up() and _quietly(self.control, "isProgramRunning"):
+            _quietly(self.control, "stopScript")
+        for link in (self.control, self.receive, self.io):
+            close_link(link)
+        _quietly(self.dashboard, "disconnect")
 
     def describe(self) -> dict[str, Any]:
         """Host, controller, RTDE rate, calibration, for run metadata."""

@@ -21,6 +21,7 @@ from __future__ import annotations
 import importlib
 import re
 import socket
+import time
 from dataclasses import dataclass
 from typing import Any
 
@@ -271,6 +272,14 @@ class ArmStatus:
         return self.runtime_state in RUNTIME_PAUSE_STATES
 
     @property
+    def consistent(self) -> bool:
+        """The control and receive streams agree on the program state. They are two RTDE
+        connections: for a cycle or two one may already show what the other does not yet."""
+        if self.program_running is None or self.runtime_state is None or self.link_down:
+            return True
+        return self.program_running == (self.runtime_state == RUNTIME_PLAYING)
+
+    @property
     def script_stopped(self) -> bool:
         """The control script is not running and not paused (ended, or stopped on the pendant):
         with the links up, re-uploading it is enough."""
@@ -340,6 +349,17 @@ def read_status(receive: Any, control: Any = None) -> ArmStatus:
         speed_scaling=_number(_ask(receive, "getSpeedScaling"), float),
         speed_scaling_combined=_number(_ask(receive, "getSpeedScalingCombined"), float),
     )
+
+
+def settled_status(receive: Any, control: Any, period_s: float, cycles: int = 25) -> ArmStatus:
+    """read_status, re-read (a cycle apart, up to `cycles` times) until both streams agree."""
+    status = read_status(receive, control)
+    for _ in range(cycles):
+        if status.consistent:
+            break
+        time.sleep(period_s)
+        status = read_status(receive, control)
+    return status
 
 
 def failure(action: str, status: ArmStatus) -> RigError:

@@ -30,10 +30,12 @@ from pianobot.rig.ur5_link import (
     open_receive,
     read_controller,
     read_status,
+    settled_status,
 )
 from pianobot.spec.rig import UR5Config
 
 SCRIPT_START_TIMEOUT_S = 5.0  # ur_rtde's own wait for its script
+IO_RELEASE_S = 0.1
 
 
 @dataclass
@@ -118,21 +120,22 @@ def reconnect(links: Links, io: Any, host: str) -> None:
     Raises ConnectionLost while a link stays down (the runner retries), SafetyStop when an
     operator must act (a stop, a paused program).
     """
-    for name, link in (("receive", links.receive), ("io", io)):
-        if link is None:
-            continue
-        try:
-            if not link.isConnected() and not link.reconnect():
-                raise ConnectionLost(f"arm: RTDE {name} did not reconnect to {host}")
-        except RuntimeError as exc:
-            raise ConnectionLost(f"arm: RTDE {name} reconnect failed: {exc}") from exc
+    dropped = False
+    try:
+        if not links.receive.isConnected():
+            dropped = True
+            if not links.receive.reconnect():
+                raise ConnectionLost(f"arm: RTDE receive did not reconnect to {host}")
+    except RuntimeError as exc:
+        raise ConnectionLost(f"arm: RTDE receive reconnect failed: {exc}") from exc
     control = links.control
     try:
         if not control.isConnected():
+            dropped = True
             if not control.reconnect():  # re-uploads the control script as needed
                 raise ConnectionLost(f"arm: RTDE control did not reconnect to {host}")
         elif not control.isProgramRunning():
-            status = read_status(links.receive, control)
+            status = settled_status(links.receive, control, 1.0 / (links.rate_hz or 125.0))
             if status.stopped or status.paused or status.link_down:
                 raise failure("reconnect", status)
             if not control.reuploadScript():
@@ -140,9 +143,37 @@ def reconnect(links: Links, io: Any, host: str) -> None:
             _wait_for_script(control, host)
     except RuntimeError as exc:
         raise ConnectionLost(f"arm: RTDE control reconnect failed: {exc}") from exc
-    status = read_status(links.receive, control)
+    if io is not None and (dropped or not _quietly(io, "isConnected")):
+        cycle_io(io, host)
+    status = settled_status(links.receive, control, 1.0 / (links.rate_hz or 125.0))
     if status.stopped or status.link_down or status.paused or status.script_stopped:
         raise failure("reconnect", status)
+
+
+def cycle_io(io: Any, host: str) -> None:
+    """Close and re-open the I/O link. It has no receive thread, so it never notices a drop:
+    its next write would go nowhere (or raise). The pause lets the controller release its
+    input registers before the new session claims them."""
+    _quietly(io, "disconnect")
+    time.sleep(IO_RELEASE_S)
+    try:
+        if not io.reconnect():
+            raise ConnectionLost(f"arm: RTDE I/O did not reconnect to {host}")
+    except RuntimeError as exc:
+        raise ConnectionLost(f"arm: RTDE I/O reconnect failed: {exc}") from exc
+
+
+def close_link(link: Any) -> None:
+    """Disconnect a ur_rtde object so that its destructor has nothing left to send: a
+    disconnect that fails on a dead socket leaves it 'connected', and its destructor's own
+    disconnect would then throw past C++ and end the process. Never raises."""
+    if link is None:
+        return
+    try:
+        link.disconnect()
+    except Exception:  # a dead socket: give it a live one, then close that cleanly
+        if _quietly(link, "reconnect"):
+            _quietly(link, "disconnect")
 
 
 def _wait_for_script(control: Any, host: str) -> None:

@@ -72,11 +72,18 @@ class TcpRecorder:
         steps = np.diff(np.asarray(self.ctrl_s))
         return int(np.sum(np.round(steps / period) - 1))
 
-    def trace(self, z_start_m: float) -> Trace | None:
-        """Downward displacement from the hover height, on the run clock."""
+    @property
+    def offset_s(self) -> float | None:
+        """Run-clock time minus controller time (the least-delayed read's)."""
         if not self.ctrl_s:
             return None
+        return float(np.min(np.asarray(self.read_s) - np.asarray(self.ctrl_s)))
+
+    def trace(self, z_start_m: float) -> Trace | None:
+        """Downward displacement from the hover height, on the run clock."""
+        offset_s = self.offset_s
+        if offset_s is None:
+            return None
         ctrl = np.asarray(self.ctrl_s, dtype=np.float64)
-        offset_s = float(np.min(np.asarray(self.read_s) - ctrl))
         x0_m = z_start_m - np.asarray(self.z_m, dtype=np.float64)
         return Trace(t_s=ctrl + offset_s, x0_m=x0_m, source="arm")

@@ -40,6 +40,8 @@ class AnalogOutput(Protocol):
 class AnalogInput(Protocol):
     """The part of `rtde_receive.RTDEReceiveInterface` used for the read-back."""
 
+    def isConnected(self) -> bool: ...  # noqa: N802
+
     def getStandardAnalogInput0(self) -> float: ...  # noqa: N802
 
     def getStandardAnalogInput1(self) -> float: ...  # noqa: N802
@@ -146,6 +148,8 @@ class AnalogVacuum:
         if self.monitor is None or self._receive is None:
             return None
         try:
+            if not self._receive.isConnected():  # ur_rtde would hand back the last reading
+                raise ConnectionLost("vacuum read-back: the RTDE receive link is down")
             if self.input_channel == 0:
                 value = self._receive.getStandardAnalogInput0()
             else:
@@ -162,7 +166,7 @@ class AnalogVacuum:
                 sent = self._io.setAnalogOutputVoltage(self.output_channel, ratio)
             else:
                 sent = self._io.setAnalogOutputCurrent(self.output_channel, ratio)
-        except RuntimeError as exc:  # ur_rtde raises when its reconnect fails
+        except RuntimeError as exc:  # ur_rtde raises when its write or its reconnect fails
             raise ConnectionLost(f"vacuum I/O link: {exc}") from exc
         if not sent:
             raise RigError(

@@ -142,15 +142,17 @@ class Controller:
         # ramps it up again (RESUMING, then PLAYING); the controller reports it in
         # speed_scaling. A protective stop halts at once.
         step = SLIDER_RATE_PER_S * dt_s
-        if self.runtime in (PAUSING, PAUSED, STOPPED, STOPPING):
+        if self.runtime == PAUSING:
             self.hold = max(self.hold - step, 0.0)
-            if self.runtime == PAUSING and self.hold == 0.0:
+            if self.hold == 0.0:
                 self.runtime = PAUSED
-        elif self.runtime in (RESUMING, PLAYING):
+        elif self.runtime == RESUMING:
             self.hold = min(self.hold + step, 1.0)
-            if self.runtime == RESUMING and self.hold == 1.0:
+            if self.hold == 1.0:
                 self.runtime = PLAYING
-        if self.safety_mode != NORMAL or self.robot_mode != RUNNING:
+        elif self.runtime == PLAYING:
+            self.hold = 1.0
+        else:  # no program: nothing moves but a stop already under way
             self.hold = 0.0
         self.time_scale = self.slider * self.limiter * self.hold
         motion = self.motion

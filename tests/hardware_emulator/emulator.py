@@ -83,6 +83,15 @@ class EmulatedUR:
     def alive(self) -> bool:
         return self._process is not None and self._process.is_alive()
 
+    @property
+    def paused(self) -> bool:
+        """The program is paused (or pausing) on the emulated pendant."""
+        return self.get("runtime") in (3, 4)
+
+    @property
+    def program_running(self) -> bool:
+        return self.get("runtime") == 2
+
     # -- calls -------------------------------------------------------------------------------
     def call(self, name: str, *args: Any, **kwargs: Any) -> Any:
         if self._process is None:

@@ -60,7 +60,7 @@ class ControllerServer:
         self._owners: dict[str, RtdeHandler] = {}
         self._clients: list[_Client] = []
         self._listeners: dict[socket.socket, tuple[str, int]] = {}
-        self._refuse_until = 0.0
+        self._relisten_at: float | None = None
         self._stop = threading.Event()
         self._selector = selectors.DefaultSelector()
         self._threads: list[threading.Thread] = []
@@ -120,6 +120,23 @@ class ControllerServer:
             return
         raise RuntimeError("no free loopback address for the UR emulator")
 
+    def _close_listeners(self) -> None:
+        for sock in list(self._listeners):
+            try:
+                self._selector.unregister(sock)
+            except (KeyError, ValueError, OSError):
+                pass
+            sock.close()
+
+    def _open_listeners(self) -> None:
+        """Listen again on the same address (after an outage)."""
+        reopened: dict[socket.socket, tuple[str, int]] = {}
+        for kind, port in self._listeners.values():
+            sock = self._listen(self.host, port)
+            reopened[sock] = (kind, port)
+            self._selector.register(sock, selectors.EVENT_READ, ("listen", sock))
+        self._listeners = reopened
+
     @staticmethod
     def _listen(host: str, port: int) -> socket.socket:
         sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
@@ -136,7 +153,10 @@ class ControllerServer:
     # -- the network thread ------------------------------------------------------------------
     def _net_loop(self) -> None:
         while not self._stop.is_set() and time.monotonic() < self._deadline:
-            for key, _ in self._selector.select(timeout=0.05):
+            if self._relisten_at is not None and time.monotonic() >= self._relisten_at:
+                self._relisten_at = None
+                self._open_listeners()
+            for key, _ in self._selector.select(timeout=0.02):
                 tag, obj = key.data
                 if tag == "listen":
                     self._accept(obj)
@@ -148,9 +168,6 @@ class ControllerServer:
         try:
             sock, _ = listener.accept()
         except OSError:
-            return
-        if time.monotonic() < self._refuse_until:
-            sock.close()  # the link is down: the connection dies at once
             return
         kind, _port = self._listeners[listener]
         sock.setblocking(True)
@@ -274,8 +291,11 @@ class ControllerServer:
             self.controller.slider = fraction
 
     def drop_links(self, outage_s: float = 0.0) -> None:
-        """The network goes down: every connection closes; new ones die for `outage_s`."""
-        self._refuse_until = time.monotonic() + outage_s
+        """The network goes down: every connection closes, new ones are refused for
+        `outage_s` (as when the controller's ports are unreachable)."""
+        if outage_s > 0 and self._relisten_at is None:
+            self._close_listeners()
+            self._relisten_at = time.monotonic() + outage_s
         with self._clients_lock:
             clients = list(self._clients)
         for client in clients:

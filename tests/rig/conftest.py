@@ -15,6 +15,7 @@ import uuid
 from collections.abc import Iterator
 
 import pytest
+from hardware_emulator.fixtures import ur_emulator  # noqa: F401  (the emulated UR controller)
 
 # Small periods keep the JACK MIDI delivery jitter (one period) near 1 ms.
 JACK_RATE_HZ = 48_000

@@ -1,0 +1,233 @@
+"""UR5Arm with the real ur_rtde modules against the emulated controller (tests/hardware_emulator).
+
+Each test here failed before the semantics it names were fixed (see the issue-14 note):
+the RTDE rate asked of a CB3, the slider read as the trajectory limiter (no warning, a slow
+press taken for a stall), a pause and a pendant stop answered with `reconnect()`, the
+deprecated progress call, and trace samples whose pose could come from another cycle.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+import numpy as np
+import pytest
+from emulated_lab import HOVER_POSE, REFERENCE_POSE, ur5_config
+from hardware_emulator import CB3, ESERIES
+from hardware_emulator.fixtures import EmulatorFactory
+
+from pianobot.physics.trajectory import Press, move_profile
+from pianobot.rig.clock import WallClock
+from pianobot.rig.errors import ConnectionLost, DeviceUnavailable, SafetyStop
+from pianobot.rig.ur5 import UR5Arm
+
+NOTE = 59
+PRESS = Press(distance_m=0.005, depth_m=0.015, down_velocity_mps=0.04, up_velocity_mps=0.1,
+              acceleration_mps2=1.0, hold_s=0.05)
+MOVEL = 3
+
+
+def connect(host: str, **config: Any) -> UR5Arm:
+    return UR5Arm.connect_to(ur5_config(host, **config), clock=WallClock())
+
+
+class Recording:
+    """A transparent proxy that records which methods of the real SDK object are called."""
+
+    def __init__(self, target: Any) -> None:
+        self._target = target
+        self.called: list[str] = []
+
+    def __getattr__(self, name: str) -> Any:
+        self.called.append(name)
+        return getattr(self._target, name)
+
+
+def controller_times(arm: UR5Arm, trace_t_s: np.ndarray) -> np.ndarray:
+    assert arm.last_trace_offset_s is not None
+    return np.round(trace_t_s - arm.last_trace_offset_s, 6)
+
+
+@pytest.mark.parametrize(("generation", "rate_hz"), [(CB3, 125.0), (ESERIES, 500.0)])
+def test_press_trace_has_one_cycle_per_sample_and_the_pose_of_that_cycle(
+    ur_emulator: EmulatorFactory, generation: str, rate_hz: float,
+) -> None:
+    ur = ur_emulator(generation=generation, start_pose=HOVER_POSE)
+    arm = connect(ur.host)
+    try:
+        # The rate follows the controller, as ur_rtde's own default does.
+        assert arm.rate_hz == rate_hz and ur.output_frequencies() == [rate_hz, rate_hz]
+        assert arm.describe()["controller"]["generation"] == ("CB3" if generation == CB3
+                                                              else "e-Series")
+        arm.move_to_key(NOTE, PRESS.distance_m)
+        record = arm.press(PRESS, NOTE)
+    finally:
+        arm.close()
+    trace = record.arm
+    assert trace is not None and trace.x0_m is not None
+    ctrl = controller_times(arm, trace.t_s)
+    steps = np.diff(ctrl) * rate_hz
+    assert np.all(steps > 0.5) and np.allclose(steps, np.round(steps), atol=1e-3)  # whole cycles
+    assert len(ctrl) >= 0.5 * (ctrl[-1] - ctrl[0]) * rate_hz  # most cycles, even on a busy host
+    truth = {round(t, 6): pose[2] for t, pose in ur.truth_between(ctrl[0] - 1, ctrl[-1] + 1)}
+    hover_z = REFERENCE_POSE[2] + PRESS.distance_m
+    for t, x0 in zip(ctrl, trace.x0_m, strict=True):  # the pose read is the cycle's own
+        assert hover_z - x0 == truth[t]
+    # And it is UR's trapezoid, checked against pianobot's own profile (written apart).
+    travel = PRESS.distance_m + PRESS.depth_m
+    profile = move_profile(travel, PRESS.down_velocity_mps, PRESS.acceleration_mps2)
+    first_moving = ctrl[np.flatnonzero(trace.x0_m > 1e-9)[0]]
+    t0 = max(t for t, z in truth.items() if t < first_moving and z == hover_z)  # last at rest
+    down = (ctrl - t0 <= profile.duration_s) & (ctrl >= t0)
+    expected, _ = profile.sample(ctrl[down] - t0)
+    assert np.max(np.abs(trace.x0_m[down] - expected)) < 1e-6
+
+
+def test_a_rate_the_rig_file_sets_is_used_unless_the_controller_cannot(
+    ur_emulator: EmulatorFactory,
+) -> None:
+    ur = ur_emulator(generation=CB3, start_pose=HOVER_POSE)
+    arm = connect(ur.host, frequency_hz=500.0)
+    try:
+        assert arm.rate_hz == 125.0 and "125 Hz" in " ".join(arm.warnings)
+    finally:
+        arm.close()
+    eseries = ur_emulator(generation=ESERIES, start_pose=HOVER_POSE)
+    arm = connect(eseries.host, frequency_hz=250.0)
+    arm.close()
+    assert eseries.output_frequencies() == [250.0, 250.0]
+
+
+def test_a_slider_at_30_percent_is_warned_before_motion_and_is_no_stall(
+    ur_emulator: EmulatorFactory,
+) -> None:
+    ur = ur_emulator(speed_slider=0.3, start_pose=HOVER_POSE)
+    arm = connect(ur.host)
+    try:
+        assert MOVEL not in ur.get("commands")  # connected, nothing moved yet ...
+        warning = " ".join(arm.warnings)  # ... and the warning is already there
+        assert "speed slider is at 30 %" in warning and "9 %" in warning
+        arm.move_to_key(NOTE, 0.01)
+        # 30 mm at 0.03 m/s: 1.03 s nominal, 3.4 s at 30 % — past the nominal time + 2 s
+        # that counted as a stall when the limiter's scaling (1.0) was read as the slider.
+        slow = Press(0.01, 0.02, 0.03, 0.1, 1.0, 0.0)
+        t0 = time.monotonic()
+        record = arm.press(slow, NOTE)
+        assert time.monotonic() - t0 > 3.0
+    finally:
+        arm.close()
+    assert record.arm is not None and record.arm.x0_m is not None
+    assert record.arm.x0_m.max() == pytest.approx(0.03, abs=1e-6)
+    assert any("speed scaling fell to 0.30" in w for w in record.warnings)
+
+
+def test_a_program_paused_mid_press_stops_the_run_and_is_not_uploaded_over(
+    ur_emulator: EmulatorFactory,
+) -> None:
+    ur = ur_emulator(start_pose=HOVER_POSE)
+    arm = connect(ur.host)
+    connected = ur.counts()
+    try:
+        arm.move_to_key(NOTE, PRESS.distance_m)
+        ur.fail_on_move(1, "pause", fraction=0.5)
+        with pytest.raises(SafetyStop, match="paused"):
+            arm.press(PRESS, NOTE)
+        with pytest.raises(SafetyStop, match="paused"):
+            arm.connect()  # the runner's retry path: it must not take the arm back
+        assert ur.paused and ur.counts() == connected  # no new script, no reconnect
+    finally:
+        arm.close()
+
+
+def test_a_program_paused_before_the_run_is_refused_before_taking_the_arm(
+    ur_emulator: EmulatorFactory,
+) -> None:
+    import rtde_control
+
+    ur = ur_emulator(start_pose=HOVER_POSE)
+    someone = rtde_control.RTDEControlInterface(ur.host)  # someone's program, then paused
+    ur.pause()
+    assert ur.wait_until(lambda u: u.paused)
+    someone.disconnect()
+    with pytest.raises(DeviceUnavailable, match="paused"):
+        connect(ur.host)
+    assert ur.counts()["programs"] == 1  # ur_rtde's script was not uploaded over it
+    ur.stop_program()
+
+
+def test_a_script_stopped_at_the_pendant_is_reuploaded_not_reconnected(
+    ur_emulator: EmulatorFactory,
+) -> None:
+    ur = ur_emulator(start_pose=HOVER_POSE)
+    arm = connect(ur.host)
+    try:
+        arm.move_to_key(NOTE, PRESS.distance_m)
+        ur.stop_program()  # the links stay up
+        with pytest.raises(ConnectionLost, match="control script not running"):
+            arm.press(PRESS, NOTE)
+        before = ur.counts()
+        arm.connect()  # the runner's retry path
+        after = ur.counts()
+        assert after["programs"] == before["programs"] + 1  # re-uploaded ...
+        assert after["connections"] == before["connections"]  # ... over the same links
+        arm.move_to_key(NOTE, PRESS.distance_m)
+        record = arm.press(PRESS, NOTE)
+    finally:
+        arm.close()
+    assert record.arm is not None and record.arm.x0_m is not None
+    assert record.arm.x0_m.max() == pytest.approx(PRESS.distance_m + PRESS.depth_m, abs=1e-6)
+
+
+def test_a_link_dropped_mid_press_is_recovered_by_reconnecting(
+    ur_emulator: EmulatorFactory,
+) -> None:
+    ur = ur_emulator(start_pose=HOVER_POSE)
+    arm = connect(ur.host)
+    try:
+        arm.move_to_key(NOTE, PRESS.distance_m)
+        ur.fail_on_move(1, "drop_links", fraction=0.5, outage_s=0.3)
+        with pytest.raises(ConnectionLost):
+            arm.press(PRESS, NOTE)
+        time.sleep(0.5)  # the runner's backoff
+        arm.connect()
+        arm.move_to_key(NOTE, PRESS.distance_m)
+        record = arm.press(PRESS, NOTE)
+    finally:
+        arm.close()
+    assert record.arm is not None and record.arm.x0_m is not None
+    assert record.arm.x0_m.max() == pytest.approx(PRESS.distance_m + PRESS.depth_m, abs=1e-6)
+
+
+def test_a_protective_stop_mid_press_stops_everything(ur_emulator: EmulatorFactory) -> None:
+    ur = ur_emulator(start_pose=HOVER_POSE)
+    arm = connect(ur.host)
+    try:
+        arm.move_to_key(NOTE, PRESS.distance_m)
+        moves_before = ur.get("commands").count(MOVEL)
+        ur.fail_on_move(1, "protective_stop", fraction=0.4)
+        with pytest.raises(SafetyStop, match="protective stopped"):
+            arm.press(PRESS, NOTE)
+        with pytest.raises(SafetyStop):
+            arm.connect()
+        assert ur.get("commands").count(MOVEL) == moves_before + 1  # nothing after the stop
+    finally:
+        arm.close()
+
+
+def test_the_end_of_a_move_is_read_with_the_extended_progress_call(
+    ur_emulator: EmulatorFactory,
+) -> None:
+    ur = ur_emulator(start_pose=HOVER_POSE)
+    arm = connect(ur.host)
+    recording = Recording(arm.control)
+    arm.links.control = recording
+    try:
+        arm.move_to_key(NOTE, PRESS.distance_m)
+        arm.press(PRESS, NOTE)
+    finally:
+        arm.close()
+    assert "getAsyncOperationProgressEx" in recording.called
+    assert "getAsyncOperationProgress" not in recording.called  # deprecated in ur_rtde 1.6
+    assert math.isfinite(arm.rate_hz)
