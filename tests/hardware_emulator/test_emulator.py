@@ -60,10 +60,12 @@ def test_real_clients_connect_at_the_controllers_rate(
         assert control.isConnected() and control.isProgramRunning()
         assert ur.output_frequencies() == [rate_hz, rate_hz]  # ur_rtde's -1: auto
         stamps = [receive.getTimestamp()]
-        while len(stamps) < 5:
+        while len(stamps) < 30:
             if (ts := receive.getTimestamp()) != stamps[-1]:
                 stamps.append(ts)
-        assert min(np.diff(stamps)) == pytest.approx(1.0 / rate_hz)
+            time.sleep(0.0002)
+        cycles = np.diff(stamps) * rate_hz  # a busy host may miss one: whole cycles apart
+        assert np.allclose(cycles, np.round(cycles), atol=1e-6) and min(cycles) == pytest.approx(1)
         dashboard = dashboard_client.DashboardClient(ur.host)
         dashboard.connect()
         assert dashboard.polyscopeVersion() == version
