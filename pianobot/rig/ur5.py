@@ -8,7 +8,10 @@ frame z (up); the recorded trace is converted to downward displacement from the 
 everywhere else in pianobot.
 
 Motion. A press is: moveL to hover `distance` above the key, moveL down by distance + depth at
-(v_down, a), hold, moveL back up at (v_up, a). Each moveL is sent asynchronously; its end is
+(v_down, a), hold, moveL back up at (v_up, a). A two-segment press (`Press.approach_m`,
+`retract_m`) sends up to four moveLs, each from rest to rest: a fast approach that stops above
+the key, the spec's move to the bottom, the spec's move up, a fast retract; every target is
+checked before the first move is sent. Each moveL is sent asynchronously; its end is
 the control script's async operation id moving on with the "running" bit clear
 (`getAsyncOperationProgressEx`; the old `getAsyncOperationProgress` is deprecated). Meanwhile
 the receive interface is sampled once per controller cycle (`TcpRecorder`).
@@ -36,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from pianobot.physics.keyboard import KeyboardGeometry
-from pianobot.physics.trajectory import Press, move_profile
+from pianobot.physics.trajectory import Press, check_press, move_profile
 from pianobot.rig.errors import ConnectionLost, DeviceUnavailable, RigError, SafetyViolation
 from pianobot.rig.protocols import Clock, PressRecord
 from pianobot.rig.ur5_link import ControllerInfo, failure, read_status, settled_status
@@ -260,7 +263,7 @@ class UR5Arm:
             if trajectory_s > expected_s + STALL_MARGIN_S:
                 self._stop()
                 raise self._fail(f"{action} (no end after {now - t_sent:.1f} s)")
-            self.clock.sleep(0.25 / self.rate_hz)
+            self.clock.sleep(0.5 / self.rate_hz)
 
     def _await_arrival(self, action: str, target: Pose, recorder: TcpRecorder | None) -> None:
         """The move ended (control stream): wait for the receive stream to show the arrival."""
@@ -274,7 +277,7 @@ class UR5Arm:
                 return
             if self.clock.now() > deadline:
                 raise self._fail(f"{action} (stopped {1000 * short_m:.1f} mm short)")
-            self.clock.sleep(0.25 / self.rate_hz)
+            self.clock.sleep(0.5 / self.rate_hz)
 
     def _travel(self, target: Pose) -> None:
         """Go to `target`, lifting first when the move is sideways (never drag across keys)."""
@@ -297,27 +300,30 @@ class UR5Arm:
         self._travel(self.key_pose(note, distance_m))
 
     def press(self, press: Press, note: int) -> PressRecord:
-        """Down by distance + depth at (v_down, a), hold, up at (v_up, a); the TCP trace."""
+        """Down, hold, up — as one moveL each way, or as a two-segment press (fast approach to
+        `approach_m` below the hover, the spec's move to the bottom, hold, the spec's move up to
+        `retract_m` below the hover, a fast retract) — with the TCP trace of all of it."""
+        try:
+            check_press(press)
+        except ValueError as exc:
+            raise SafetyViolation(str(exc)) from exc
         for name in ("down_velocity_mps", "up_velocity_mps", "acceleration_mps2"):
             if not getattr(press, name) > 0:
                 raise SafetyViolation(f"{name} must be > 0 for a moveL, got {getattr(press, name)}")
-        if press.depth_m < 0 or press.distance_m < 0 or press.hold_s < 0:
-            raise SafetyViolation(f"distance, depth and hold must be >= 0, got {press}")
         hover = self.key_pose(note, press.distance_m)
         bottom = self.key_pose(note, -press.depth_m)
-        self.check_target(hover)
-        self.check_target(bottom)
+        moves = self._press_moves(press, note, bottom)
+        for target, _, _ in moves:  # refuse the whole press before the first move
+            self.check_target(target)
         self._travel(hover)
         recorder = TcpRecorder(self.receive, self.clock)
         self._min_scaling = math.inf
         t_start_s = self.clock.now()
         try:
-            self._move(bottom, press.down_velocity_mps, press.acceleration_mps2, recorder)
-            hold_until_s = self.clock.now() + press.hold_s
-            while self.clock.now() < hold_until_s:
-                recorder.sample()
-                self.clock.sleep(min(0.25 / self.rate_hz, hold_until_s - self.clock.now()))
-            self._move(hover, press.up_velocity_mps, press.acceleration_mps2, recorder)
+            for target, speed, acceleration in moves:
+                self._move(target, speed, acceleration, recorder)
+                if target is bottom:
+                    self._hold(press.hold_s, recorder)
         except RigError:
             self.make_safe()
             raise
@@ -327,6 +333,27 @@ class UR5Arm:
         self.last_trace_offset_s = recorder.offset_s
         return PressRecord(t_start_s, t_end_s, recorder.trace(hover[2]),
                            self._press_warnings(recorder))
+
+    def _press_moves(self, press: Press, note: int,
+                     bottom: Pose) -> list[tuple[Pose, float, float]]:
+        """(target, speed, acceleration) of each moveL of the press, in order."""
+        fast = (press.travel_velocity_mps, press.travel_acceleration_mps2)
+        spec_down = (press.down_velocity_mps, press.acceleration_mps2)
+        spec_up = (press.up_velocity_mps, press.acceleration_mps2)
+        moves: list[tuple[Pose, float, float]] = []
+        if press.approach_m > 0.0:  # stops above the key (check_press)
+            moves.append((self.key_pose(note, press.distance_m - press.approach_m), *fast))
+        moves.append((bottom, *spec_down))
+        moves.append((self.key_pose(note, press.distance_m - press.retract_m), *spec_up))
+        if press.retract_m > 0.0:  # starts at or above the key surface (check_press)
+            moves.append((self.key_pose(note, press.distance_m), *fast))
+        return moves
+
+    def _hold(self, hold_s: float, recorder: TcpRecorder) -> None:
+        hold_until_s = self.clock.now() + hold_s
+        while self.clock.now() < hold_until_s:
+            recorder.sample()
+            self.clock.sleep(min(0.5 / self.rate_hz, hold_until_s - self.clock.now()))
 
     def _press_warnings(self, recorder: TcpRecorder) -> tuple[str, ...]:
         warnings = []

@@ -360,7 +360,8 @@ _GETTERS: dict[str, Callable[[Controller], Any]] = {
     "safety_mode": lambda c: c.safety_mode,
     "safety_status": lambda c: c.safety_mode,
     "actual_tool_accelerometer": lambda c: (0.0, 0.0, 9.81),
-    "speed_scaling": lambda c: c.limiter * c.hold,
+    # The limiter's scaling, which a pause ramps to 0 (and back); without a program: the limiter.
+    "speed_scaling": lambda c: c.limiter * (c.hold if c.script is not None else 1.0),
     "target_speed_fraction": lambda c: c.slider,
     "actual_momentum": lambda c: 0.0,
     "actual_main_voltage": lambda c: 48.0, "actual_robot_voltage": lambda c: 48.0,

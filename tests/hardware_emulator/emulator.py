@@ -52,9 +52,13 @@ class EmulatedUR:
         self._process.start()
         child.close()
         self._conn = parent
-        self.host = str(self._answer(START_TIMEOUT_S))
-        if self.piano is not None:
-            self.call("set_piano", self.piano)
+        try:
+            self.host = str(self._answer(START_TIMEOUT_S))
+            if self.piano is not None:
+                self.call("set_piano", self.piano)
+        except BaseException:
+            self.stop()  # never leave a half-started emulator behind
+            raise
         return self
 
     def stop(self) -> None:

@@ -1,4 +1,5 @@
-"""A private JACK server (dummy driver) for the MIDI tests; skipped when jackd is absent.
+"""Fixtures of the rig tests: a private JACK server (dummy driver) for the MIDI tests, skipped
+when jackd is absent, and `ur_emulator`, the emulated UR controller (tests/hardware_emulator).
 
 Each pytest process (each xdist worker) starts its own server under a unique name and points
 `JACK_DEFAULT_SERVER` at it, so parallel workers never share or kill each other's server.

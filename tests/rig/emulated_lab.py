@@ -64,6 +64,8 @@ def lab_rig(host: str, piano_config: PianoConfig | None = None, **sections: Any)
         "settle_s": {"after_vacuum_change_s": 0.2, "between_presses_s": 0.1},
         "travel": {"velocity_mps": 0.25, "acceleration_mps2": 2.0, "lift_m": 0.01},
         "retry": {"max_attempts": 3, "backoff_s": 0.6, "backoff_factor": 1.0},
+        # Fast approaches keep 0.1 s of the spec's motion before contact (a rigid finger here).
+        "approach": {"velocity_mps": 0.25, "acceleration_mps2": 2.0, "settle_s": 0.1},
     }
     rig.update(sections)
     return rig
@@ -79,18 +81,20 @@ def write_lab(folder: Path, host: str, piano_config: PianoConfig | None = None,
 
 
 def write_spec(folder: Path, rig_path: Path, *, vacuum_kpa: tuple[float, ...] = (0.0, -40.0),
-               down_velocity_mps: tuple[float, ...] = (0.03, 0.05), repeats: int = 1) -> Path:
+               down_velocity_mps: tuple[float, ...] = (0.03, 0.05), repeats: int = 1,
+               distance_m: float = 0.005, approach: str = "as-specified") -> Path:
     """A small soft-finger grid on the reference key (4 trials by default)."""
     spec = {
         "name": "emulated-lab",
         "rig": str(rig_path),
         "finger": "soft",
         "note": 59,
+        "approach": approach,
         "sweep": {
             "mode": "grid",
             "params": {"vacuum_kpa": list(vacuum_kpa),
                        "down_velocity_mps": list(down_velocity_mps)},
-            "fixed": {"acceleration_mps2": 1.0, "depth_m": 0.02, "distance_m": 0.005,
+            "fixed": {"acceleration_mps2": 1.0, "depth_m": 0.02, "distance_m": distance_m,
                       "hold_s": 0.05, "up_velocity_mps": 0.1},
             "repeats": repeats,
             "order": "as-listed",

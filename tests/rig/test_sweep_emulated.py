@@ -22,6 +22,7 @@ from pianobot.run import RunOutcome, RunStarted, TrialStarted, run_sweep
 from pianobot.store import load_run
 
 MOVEL = 3
+pytestmark = pytest.mark.slow  # real-time motion on the emulated arm: ~5-15 s each
 
 
 @pytest.fixture()
@@ -42,9 +43,14 @@ def sweep(spec: Path, data: Path, records: list[Any] | None = None) -> RunOutcom
                      subscribers=[records.append] if records is not None else [])
 
 
-@pytest.mark.parametrize(("generation", "rate_hz"), [(CB3, 125.0), (ESERIES, 500.0)])
-def test_a_full_small_sweep(lab: Any, data_dir: Path, generation: str, rate_hz: float) -> None:
-    ur, spec = lab(generation=generation)
+@pytest.mark.parametrize(("generation", "rate_hz", "approach"), [
+    (CB3, 125.0, "as-specified"), (ESERIES, 500.0, "fast"),
+])
+def test_a_full_small_sweep(
+    lab: Any, data_dir: Path, generation: str, rate_hz: float, approach: str,
+) -> None:
+    distance_m = 0.005 if approach == "as-specified" else 0.03
+    ur, spec = lab(generation=generation, spec={"approach": approach, "distance_m": distance_m})
     outcome = sweep(spec, data_dir)
     assert outcome.status == "completed" and outcome.trials == 4, outcome.reason
     run = load_run(outcome.run_id, data_dir)
@@ -55,7 +61,12 @@ def test_a_full_small_sweep(lab: Any, data_dir: Path, generation: str, rate_hz: 
         slow, fast = level.sort_values("down_velocity_mps")["on_velocity"]
         assert fast > slow
     arm = run.samples[run.samples["source"] == "arm"]
-    assert arm.groupby("trial_id")["x0_m"].max().to_numpy() == pytest.approx(0.025, abs=1e-6)
+    travel_m = distance_m + 0.02
+    assert arm.groupby("trial_id")["x0_m"].max().to_numpy() == pytest.approx(travel_m, abs=1e-6)
+    if approach == "fast":  # a fast approach, the spec's moves, and a fast retract if planned
+        assert (trials["approach_m"] > 0.01).all()
+        per_press = 2 + (trials["approach_m"] > 0) + (trials["retract_m"] > 0)
+        assert ur.get("commands").count(MOVEL) == 1 + per_press.sum()
     described = run.meta["rig"]["description"]["devices"]
     assert described["arm"]["rtde_rate_hz"] == rate_hz
     assert described["arm"]["controller"]["generation"] == ("CB3" if generation == CB3

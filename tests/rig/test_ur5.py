@@ -361,3 +361,28 @@ def test_a_dead_control_script_is_a_connection_loss(robot: FakeController) -> No
     assert robot.program_running
     arm.move_to_key(59, 0.02)
     assert robot.pose == pytest.approx(arm.key_pose(59, 0.02))
+
+
+def test_a_two_segment_press_is_four_moves_each_checked_before_the_first(
+    robot: FakeController,
+) -> None:
+    arm = make_arm(robot)
+    two = Press(0.05, 0.02, 0.03, 0.05, 1.0, 0.1, approach_m=0.03, retract_m=0.04,
+                travel_velocity_mps=0.25, travel_acceleration_mps2=1.5)
+    arm.move_to_key(59, two.distance_m)
+    n = len(moves(robot))
+    record = arm.press(two, 59)
+    sent = robot.calls_to("moveL")[n:]
+    hover_z = REFERENCE_POSE[2] + two.distance_m
+    assert [round(args[0][2] - hover_z, 9) for args in sent] == [-0.03, -0.07, -0.04, 0.0]
+    assert [args[1:3] for args in sent] == [(0.25, 1.5), (0.03, 1.0), (0.05, 1.0), (0.25, 1.5)]
+    assert record.arm is not None and record.arm.x0_m is not None
+    assert record.arm.x0_m.max() == pytest.approx(0.07)
+    # Checked before sending: a fast approach into the key is refused, nothing moves.
+    n = len(moves(robot))
+    with pytest.raises(SafetyViolation, match="stop above the key"):
+        arm.press(Press(0.05, 0.02, 0.03, 0.05, 1.0, approach_m=0.06), 59)
+    robot.reach_m = 0.1  # every target outside the robot's reach: refused before the first
+    with pytest.raises(SafetyViolation, match="safety limits"):
+        arm.press(two, 59)
+    assert len(moves(robot)) == n

@@ -18,7 +18,8 @@ from emulated_lab import HOVER_POSE, REFERENCE_POSE, ur5_config
 from hardware_emulator import CB3, ESERIES
 from hardware_emulator.fixtures import EmulatorFactory
 
-from pianobot.physics.trajectory import Press, move_profile
+from pianobot.physics.approach import ApproachSettings, fast_press
+from pianobot.physics.trajectory import Press, contact_speed_mps, move_profile
 from pianobot.rig.clock import WallClock
 from pianobot.rig.errors import ConnectionLost, DeviceUnavailable, SafetyStop
 from pianobot.rig.ur5 import UR5Arm
@@ -231,3 +232,33 @@ def test_the_end_of_a_move_is_read_with_the_extended_progress_call(
     assert "getAsyncOperationProgressEx" in recording.called
     assert "getAsyncOperationProgress" not in recording.called  # deprecated in ur_rtde 1.6
     assert math.isfinite(arm.rate_hz)
+
+
+def test_a_two_segment_press_meets_the_key_as_the_spec_press_does(
+    ur_emulator: EmulatorFactory,
+) -> None:
+    """Fast approach, the spec's move, the spec's move up, fast retract: four moveLs, and at
+    contact the arm has the speed of the spec's single move."""
+    spec = Press(distance_m=0.03, depth_m=0.01, down_velocity_mps=0.05, up_velocity_mps=0.05,
+                 acceleration_mps2=1.0, hold_s=0.05)
+    fast = fast_press(spec, ApproachSettings(velocity_mps=0.25, acceleration_mps2=2.0,
+                                             clearance_m=0.005, settle_s=0.1))
+    assert fast.approach_m > 0.01 and fast.retract_m > 0.01
+    ur = ur_emulator(start_pose=HOVER_POSE)
+    arm = connect(ur.host)
+    try:
+        arm.move_to_key(NOTE, fast.distance_m)
+        before = ur.get("commands").count(MOVEL)
+        record = arm.press(fast, NOTE)
+    finally:
+        arm.close()
+    assert ur.get("commands").count(MOVEL) - before == 4
+    assert record.arm is not None and record.arm.x0_m is not None
+    ctrl = controller_times(arm, record.arm.t_s)
+    truth = ur.truth_between(ctrl[0] - 1, ctrl[-1] + 1)
+    t = np.array([ts for ts, _ in truth])
+    z = np.array([pose[2] for _, pose in truth])
+    touching = np.flatnonzero(z <= REFERENCE_POSE[2])[0]  # the first cycle at the key surface
+    speed = (z[touching - 1] - z[touching]) / (t[touching] - t[touching - 1])
+    assert speed == pytest.approx(contact_speed_mps(spec), rel=0.05)
+    assert record.arm.x0_m.max() == pytest.approx(spec.distance_m + spec.depth_m, abs=1e-6)
