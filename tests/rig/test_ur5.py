@@ -386,3 +386,42 @@ def test_a_two_segment_press_is_four_moves_each_checked_before_the_first(
     with pytest.raises(SafetyViolation, match="safety limits"):
         arm.press(two, 59)
     assert len(moves(robot)) == n
+
+
+class RacingReceive(FakeReceive):
+    """A receive interface where a new package lands between the timestamp and the pose read
+    of every other sample (ur_rtde's receive thread runs beside the caller)."""
+
+    def __init__(self, controller: FakeController, hostname: str) -> None:
+        super().__init__(controller, hostname)
+        self.truth: dict[float, float] = {}
+        self._reads = 0
+
+    def getTimestamp(self) -> float:  # noqa: N802
+        ts = super().getTimestamp()
+        self.truth[round(ts, 9)] = self.c.pose[2]
+        return ts
+
+    def getActualTCPPose(self) -> list[float]:  # noqa: N802
+        self._reads += 1
+        if self._reads % 2 == 0:
+            self.c.clock.sleep(CONTROLLER_PERIOD_S)  # the next package arrives now
+        pose = super().getActualTCPPose()
+        self.truth[round(self.c.controller_time_s(), 9)] = pose[2]
+        return pose
+
+
+def test_a_package_arriving_mid_sample_never_pairs_a_pose_with_the_wrong_time(
+    robot: FakeController,
+) -> None:
+    receive = RacingReceive(robot, HOST)
+    arm = UR5Arm(make_config(), control=FakeControl(robot, HOST), receive=receive,
+                 clock=robot.clock)
+    arm.move_to_key(59, PRESS.distance_m)
+    record = arm.press(PRESS, 59)
+    assert record.arm is not None and record.arm.x0_m is not None and arm.last_trace_offset_s
+    ctrl = np.round(record.arm.t_s - arm.last_trace_offset_s, 9)
+    hover_z = arm.key_pose(59, PRESS.distance_m)[2]
+    mismatched = [t for t, x0 in zip(ctrl, record.arm.x0_m, strict=True)
+                  if abs(hover_z - x0 - receive.truth[t]) > 1e-12]
+    assert len(ctrl) > 100 and not mismatched

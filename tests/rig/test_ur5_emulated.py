@@ -10,20 +10,37 @@ from __future__ import annotations
 
 import math
 import time
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
-from emulated_lab import HOVER_POSE, REFERENCE_POSE, ur5_config
-from hardware_emulator import CB3, ESERIES
+import yaml
+from emulated_lab import (
+    HOVER_POSE,
+    REFERENCE_POSE,
+    SMC_ITV2090,
+    SMC_MONITOR,
+    lab_rig,
+    ur5_config,
+)
+from fake_midi import FakeMidiBackend
+from hardware_emulator import CB3, ESERIES, VacuumRegulator
 from hardware_emulator.fixtures import EmulatorFactory
 
 from pianobot.physics.approach import ApproachSettings, fast_press
 from pianobot.physics.trajectory import Press, contact_speed_mps, move_profile
+from pianobot.rig.check import check_rig
 from pianobot.rig.clock import WallClock
-from pianobot.rig.errors import ConnectionLost, DeviceUnavailable, SafetyStop
+from pianobot.rig.errors import ConnectionLost, DeviceUnavailable, RigError, SafetyStop
+from pianobot.rig.lab import command_span, monitor_span
 from pianobot.rig.ur5 import UR5Arm
+from pianobot.rig.ur5_link import RECEIVE_VARIABLES
+from pianobot.rig.ur5_session import close_link
+from pianobot.rig.vacuum import AnalogVacuum
+from pianobot.spec.rig import RigSpec
 
+EXPERIMENTS = Path(__file__).resolve().parents[2] / "experiments"
 NOTE = 59
 PRESS = Press(distance_m=0.005, depth_m=0.015, down_velocity_mps=0.04, up_velocity_mps=0.1,
               acceleration_mps2=1.0, hold_s=0.05)
@@ -262,3 +279,83 @@ def test_a_two_segment_press_meets_the_key_as_the_spec_press_does(
     speed = (z[touching - 1] - z[touching]) / (t[touching] - t[touching - 1])
     assert speed == pytest.approx(contact_speed_mps(spec), rel=0.05)
     assert record.arm.x0_m.max() == pytest.approx(spec.distance_m + spec.depth_m, abs=1e-6)
+
+
+def regulated(ur: Any, vacuum: dict[str, Any]) -> AnalogVacuum:
+    """The rig file's vacuum section, built as `open_lab_devices` does, on real ur_rtde links."""
+    import rtde_io
+    import rtde_receive
+
+    spec = RigSpec.model_validate(lab_rig(ur.host, vacuum=vacuum)).vacuum
+    assert spec.regulator is not None
+    receive = rtde_receive.RTDEReceiveInterface(ur.host, -1.0, RECEIVE_VARIABLES)
+    return AnalogVacuum(
+        command_span(spec.regulator), io=rtde_io.RTDEIOInterface(ur.host), clock=WallClock(),
+        output_channel=spec.regulator.output_channel, receive=receive,
+        monitor=None if spec.monitor is None else monitor_span(spec.monitor, spec.regulator),
+        input_channel=None if spec.monitor is None else spec.monitor.input_channel,
+        settle_timeout_s=3.0, tolerance_kpa=1.0,
+    )
+
+
+def test_the_regulators_declared_signal_and_span_put_the_finger_at_the_level(
+    ur_emulator: EmulatorFactory,
+) -> None:
+    # An SMC ITV2090 (0 to -80 kPa over 0-10 V, 1-5 V monitor) as in experiments/rigs/ur5-lab.yaml.
+    ur = ur_emulator()
+    vacuum = regulated(ur, {"mode": "ur-analog", "regulator": SMC_ITV2090, "monitor": SMC_MONITOR})
+    assert vacuum.set_kpa(-40.0) == pytest.approx(-40.0, abs=1.0)
+    assert ur.regulator_kpa() == pytest.approx(-40.0, abs=1.0)  # the regulator's own pressure
+    vacuum.vent()
+    assert ur.wait_until(lambda u: abs(u.regulator_kpa() or 0.0) < 1.0)
+    close_link(vacuum._io)
+
+
+def test_a_current_loop_regulator_is_driven_in_the_current_domain(
+    ur_emulator: EmulatorFactory,
+) -> None:
+    # A 4-20 mA regulator on analog output 1: ur_rtde's setAnalogOutputCurrent.
+    current = VacuumRegulator(output_channel=1, signal="current", signal_span=(4.0, 20.0),
+                              kpa_span=(0.0, -100.0), monitor_channel=0,
+                              monitor_signal="voltage", monitor_span=(0.0, 10.0))
+    ur = ur_emulator(regulator=current)
+    declared = {"output_channel": 1, "signal": "current", "signal_span": [4.0, 20.0],
+                "kpa_span": [0.0, -100.0]}
+    monitor = {"input_channel": 0, "signal": "voltage", "signal_span": [0.0, 10.0]}
+    vacuum = regulated(ur, {"mode": "ur-analog", "regulator": declared, "monitor": monitor})
+    assert vacuum.set_kpa(-60.0) == pytest.approx(-60.0, abs=1.0)
+    assert ur.get("analog_domain")[1] == "current"
+    close_link(vacuum._io)
+    # Declared as voltage, the same regulator gets no valid signal: the read-back says so.
+    wrong = regulated(ur, {"mode": "ur-analog", "monitor": monitor,
+                           "regulator": {**declared, "signal": "voltage",
+                                         "signal_span": [0.0, 10.0]}})
+    with pytest.raises(RigError, match=r"did not settle at -30 .*0-10 V = 0 to -100 kPa"):
+        wrong.set_kpa(-30.0)
+    close_link(wrong._io)
+
+
+@pytest.mark.parametrize(("generation", "expected"), [
+    (CB3, "CB3 (PolyScope 3.15.7.106331), RTDE 125 Hz (CB3 default, streaming at 125 Hz)"),
+    (ESERIES, "e-Series (PolyScope 5.11.1.108318), RTDE 500 Hz (e-Series default, streaming at "
+              "500 Hz)"),
+])
+def test_rig_check_reports_what_the_controller_says(
+    ur_emulator: EmulatorFactory, generation: str, expected: str,
+) -> None:
+    ur = ur_emulator(generation=generation, speed_slider=0.5)
+    example = yaml.safe_load((EXPERIMENTS / "rigs" / "ur5-lab.yaml").read_text())
+    example["ur5"]["host"] = ur.host
+    report = check_rig(RigSpec.model_validate(example),
+                       midi_backend=lambda api: FakeMidiBackend(["Kawai ES8 MIDI 1"]))
+    by_name = {d.device: d for d in report.devices}
+    arm = by_name["arm"]
+    assert arm.ok and expected in arm.summary, arm.summary
+    assert "speed slider 50 %" in arm.summary and "combined scaling 0.50" in arm.summary
+    assert "warning: the teach pendant's speed slider is at 50 %" in arm.summary
+    assert arm.details["program_state"] == "STOPPED" and arm.details["safety_status"] == ["normal"]
+    vacuum = by_name["vacuum"]
+    assert vacuum.ok and "voltage domain" in vacuum.summary
+    assert "0-10 V = 0 to -80 kPa" in vacuum.summary and "reads 1.00 V = 0.0 kPa" in vacuum.summary
+    assert by_name["dashboard"].ok and not by_name["calibration"].ok  # the example is uncalibrated
+    assert MOVEL not in ur.get("commands") and ur.counts()["programs"] == 0  # nothing commanded
