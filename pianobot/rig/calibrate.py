@@ -17,8 +17,8 @@ from pathlib import Path
 from typing import Any
 
 from pianobot.rig.errors import DeviceUnavailable, RigError
-from pianobot.rig.ur5_link import failure, read_status
 from pianobot.rig.ur5_session import open_links
+from pianobot.rig.ur5_status import failure, read_status
 from pianobot.spec.loader import load_rig, write_rig_calibration
 
 NOTE_NAMES = ("C", "C#", "D", "D#", "E", "F", "F#", "G", "G#", "A", "A#", "B")

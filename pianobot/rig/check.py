@@ -30,9 +30,9 @@ from pianobot.rig.ur5_link import (
     open_io,
     open_receive,
     read_controller,
-    read_status,
 )
 from pianobot.rig.ur5_session import slider_warnings
+from pianobot.rig.ur5_status import read_status
 from pianobot.spec.rig import RigSpec
 
 GRACE_S = 3.0  # beyond the connect timeout, a check that has not answered is reported as hung

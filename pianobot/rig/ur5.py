@@ -10,24 +10,15 @@ everywhere else in pianobot.
 Motion. A press is: moveL to hover `distance` above the key, moveL down by distance + depth at
 (v_down, a), hold, moveL back up at (v_up, a). A two-segment press (`Press.approach_m`,
 `retract_m`) sends up to four moveLs, each from rest to rest: a fast approach that stops above
-the key, the spec's move to the bottom, the spec's move up, a fast retract; every target is
-checked before the first move is sent. Each moveL is sent asynchronously; its end is
-the control script's async operation id moving on with the "running" bit clear
-(`getAsyncOperationProgressEx`; the old `getAsyncOperationProgress` is deprecated). Meanwhile
-the receive interface is sampled once per controller cycle (`TcpRecorder`).
+the key, the spec's move to the bottom, the spec's move up, a fast retract. Every target is
+checked against the rig's workspace box and `isPoseWithinSafetyLimits` before the first move
+is sent (SafetyViolation, nothing sent). Each moveL is a `GuardedMotion` (ur5_motion): sent only
+over live links, waited for with the extended progress call, the TCP sampled once per cycle,
+stalls judged on trajectory time so a slow speed slider never reads as one.
 
-Speed. The pendant's slider and the trajectory limiter stretch every move in time; a move is
-declared stalled only when its *trajectory* time — wall time × `getSpeedScalingCombined`,
-which is 0 while paused — exceeds the profile's duration by a margin, so a slow slider never
-reads as a stall. A slider below the rig file's threshold is a warning before any motion.
-
-Failures. A command sent to a control interface whose link is down is lost, and ur_rtde then
-waits for its answer for up to 300 s; so no command goes out without `isConnected()` first.
-ur_rtde answers `False` instead of raising; every False, every stall and every stop
-seen while sampling is diagnosed (`ur5_link.failure`): stops and pauses raise SafetyStop (after
-`make_safe`), a dropped link or an ended control script ConnectionLost. Every target is checked
-against the rig's workspace box and `isPoseWithinSafetyLimits` before it is sent
-(SafetyViolation, nothing sent).
+Failures are diagnosed from what the controller says (`ur5_status.failure`): stops and pauses
+raise SafetyStop (after `make_safe`), a dropped link or an ended control script ConnectionLost.
+Taking the arm and recovering it is `ur5_session`.
 """
 
 from __future__ import annotations
@@ -39,23 +30,20 @@ from typing import Any
 import numpy as np
 
 from pianobot.physics.keyboard import KeyboardGeometry
-from pianobot.physics.trajectory import Press, check_press, move_profile
-from pianobot.rig.errors import ConnectionLost, DeviceUnavailable, RigError, SafetyViolation
+from pianobot.physics.trajectory import Press, check_press
+from pianobot.rig.errors import DeviceUnavailable, RigError, SafetyViolation
 from pianobot.rig.protocols import Clock, PressRecord
-from pianobot.rig.ur5_link import ControllerInfo, failure, read_status, settled_status
+from pianobot.rig.ur5_link import ControllerInfo, quietly
+from pianobot.rig.ur5_motion import GuardedMotion, Pose, fmt_pose
 from pianobot.rig.ur5_session import Links, close_link, open_links, reconnect
+from pianobot.rig.ur5_status import read_status
 from pianobot.rig.ur5_trace import TcpRecorder
 from pianobot.spec.rig import UR5Config
 
-Pose = list[float]
 DEFAULT_KEYBOARD_AXIS = (1.0, 0.0, 0.0)  # treble towards base +x unless the rig says otherwise
 TRAVEL_VELOCITY_MPS = 0.1
 TRAVEL_ACCELERATION_MPS2 = 0.5
-STOP_DECELERATION_MPS2 = 2.0
-AT_TARGET_M = 0.0005  # a move that ends further than this from its target stopped short
 LATERAL_MOVE_M = 0.0005  # closer than this the arm is already over the key
-STALL_MARGIN_S = 2.0  # trajectory time beyond the profile's duration: the move stalled
-SETTLE_CYCLES = 10  # after a move ends, the receive stream may lag the control stream this much
 MISSED_WARNING_FRACTION = 0.1  # warn when the host missed more of the press's cycles than this
 
 
@@ -111,7 +99,7 @@ class UR5Arm:
         self.travel_velocity_mps = travel_velocity_mps
         self.travel_acceleration_mps2 = travel_acceleration_mps2
         self.reference_pose: Pose = [float(v) for v in config.reference_pose]
-        self._min_scaling = math.inf
+        self.motion = GuardedMotion(self.links, clock)
         self._measured_rate_hz: float | None = None
         # Controller time → run clock offset of the last press's trace (provenance, checks).
         self.last_trace_offset_s: float | None = None
@@ -177,17 +165,6 @@ class UR5Arm:
         pose[2] += height_m
         return pose
 
-    def _links_up(self) -> bool:
-        """Both RTDE links up. ur_rtde can report its control link up after a failed
-        background reconnect, so a dropped receive link counts as the network being down."""
-        return bool(_quietly(self.control, "isConnected")) and bool(
-            _quietly(self.receive, "isConnected"))
-
-    def _link_up(self, action: str) -> None:
-        """ConnectionLost unless the links are up (a command on a dead link hangs)."""
-        if not self._links_up():
-            raise self._fail(action)
-
     def check_target(self, pose: Sequence[float]) -> None:
         """SafetyViolation unless the pose is inside the workspace box and the robot's limits."""
         low, high = self.config.workspace_min_m, self.config.workspace_max_m
@@ -195,89 +172,15 @@ class UR5Arm:
             if not lo - 1e-9 <= value <= hi + 1e-9:
                 raise SafetyViolation(
                     f"target {axis} = {value:.4f} m is outside the workspace [{lo:g}, {hi:g}] m "
-                    f"(pose {_fmt(pose)})"
+                    f"(pose {fmt_pose(pose)})"
                 )
-        self._link_up("safety-limit check")
-        try:
-            within = self.control.isPoseWithinSafetyLimits(list(pose))
-        except RuntimeError as exc:
-            raise ConnectionLost(f"safety-limit check failed: {exc}") from exc
-        if not within:
-            status = settled_status(self.receive, self.control, 1.0 / self.rate_hz)
-            if status.stopped or status.link_down or status.paused or status.script_stopped:
-                raise failure("safety-limit check", status)  # ur_rtde answered False: not a no
-            raise SafetyViolation(
-                f"target {_fmt(pose)} is outside the robot's safety limits or reach"
-            )
-
-    # -- motion ------------------------------------------------------------------------------
-    def _fail(self, action: str) -> RigError:
-        return failure(action, settled_status(self.receive, self.control, 1.0 / self.rate_hz))
-
-    def _operation_id(self) -> int:
-        return int(self.control.getAsyncOperationProgressEx().operationId())
+        self.motion.check_reach(pose)
 
     def _move(self, target: Pose, speed_mps: float, acceleration_mps2: float,
               recorder: TcpRecorder | None = None) -> None:
-        """One guarded asynchronous moveL; returns when the arm is at the target."""
+        """Check the target, then one guarded moveL to it."""
         self.check_target(target)
-        action = f"moveL to {_fmt(target)}"
-        self._link_up(action)
-        try:
-            start = self.receive.getActualTCPPose()
-            expected_s = move_profile(math.dist(start[:3], target[:3]), speed_mps,
-                                      acceleration_mps2).duration_s
-            before = self._operation_id()
-            sent = self.control.moveL(list(target), speed_mps, acceleration_mps2, True)
-        except RuntimeError as exc:
-            raise ConnectionLost(f"{action}: {exc}") from exc
-        if not sent:
-            raise self._fail(action)
-        try:
-            self._wait_for_move(action, before, expected_s, recorder)
-            self._await_arrival(action, target, recorder)
-        except RuntimeError as exc:  # a dead link may raise instead of answering
-            raise ConnectionLost(f"{action}: {exc}") from exc
-
-    def _wait_for_move(self, action: str, before: int, expected_s: float,
-                       recorder: TcpRecorder | None) -> None:
-        """Sample until the asynchronous move ends; diagnose stops, drops, pauses and stalls."""
-        trajectory_s = 0.0  # wall time × combined speed scaling: how far the profile got
-        last_s = t_sent = self.clock.now()
-        while True:
-            if recorder is not None:
-                recorder.sample()
-            operation = self.control.getAsyncOperationProgressEx()
-            if operation.operationId() != before and not operation.isAsyncOperationRunning():
-                break
-            status = read_status(self.receive, self.control)
-            if status.stopped or status.link_down or status.paused or status.script_stopped:
-                raise self._fail(action)  # re-read until both streams tell the same story
-            now = self.clock.now()
-            scaling = status.speed_scaling_combined
-            if scaling is None:
-                scaling = (status.speed_slider or 1.0) * (status.speed_scaling or 1.0)
-            self._min_scaling = min(self._min_scaling, scaling)
-            trajectory_s += (now - last_s) * max(scaling, 0.0)
-            last_s = now
-            if trajectory_s > expected_s + STALL_MARGIN_S:
-                self._stop()
-                raise self._fail(f"{action} (no end after {now - t_sent:.1f} s)")
-            self.clock.sleep(0.5 / self.rate_hz)
-
-    def _await_arrival(self, action: str, target: Pose, recorder: TcpRecorder | None) -> None:
-        """The move ended (control stream): wait for the receive stream to show the arrival."""
-        deadline = self.clock.now() + SETTLE_CYCLES / self.rate_hz + 0.05
-        while True:
-            if recorder is not None:
-                recorder.sample()
-            reached = self.receive.getActualTCPPose()
-            short_m = math.dist(reached[:3], target[:3])
-            if short_m <= AT_TARGET_M:
-                return
-            if self.clock.now() > deadline:
-                raise self._fail(f"{action} (stopped {1000 * short_m:.1f} mm short)")
-            self.clock.sleep(0.5 / self.rate_hz)
+        self.motion.move(target, speed_mps, acceleration_mps2, recorder)
 
     def _travel(self, target: Pose) -> None:
         """Go to `target`, lifting first when the move is sideways (never drag across keys)."""
@@ -317,7 +220,7 @@ class UR5Arm:
             self.check_target(target)
         self._travel(hover)
         recorder = TcpRecorder(self.receive, self.clock)
-        self._min_scaling = math.inf
+        self.motion.min_scaling = math.inf
         t_start_s = self.clock.now()
         try:
             for target, speed, acceleration in moves:
@@ -357,9 +260,9 @@ class UR5Arm:
 
     def _press_warnings(self, recorder: TcpRecorder) -> tuple[str, ...]:
         warnings = []
-        if self._min_scaling < 1.0 - 1e-6:
+        if self.motion.min_scaling < 1.0 - 1e-6:
             warnings.append(
-                f"speed scaling fell to {self._min_scaling:.2f} during the press (speed slider "
+                f"speed scaling fell to {self.motion.min_scaling:.2f} during the press (speed slider "
                 "or trajectory limiter): the arm ran slower than commanded"
             )
         samples = len(recorder.ctrl_s)
@@ -369,14 +272,9 @@ class UR5Arm:
                             "cycles (the host was too busy to read them)")
         return tuple(warnings)
 
-    def _stop(self) -> None:
-        """stopL, if the links are up. Never raises."""
-        if self._links_up():
-            _quietly(self.control, "stopL", STOP_DECELERATION_MPS2)
-
     def make_safe(self) -> None:
         """Stop, then retract `safe_lift_m` above the keys if the arm can move. Never raises."""
-        self._stop()
+        self.motion.stop()
         try:
             status = read_status(self.receive, self.control)
             if status.stopped or status.link_down or status.paused or status.script_stopped:
@@ -398,11 +296,11 @@ class UR5Arm:
 
     def close(self) -> None:
         """Stop the control script and disconnect every link. Never raises."""
-        if self._links_up() and _quietly(self.control, "isProgramRunning"):
-            _quietly(self.control, "stopScript")
+        if self.motion.links_up() and quietly(self.control, "isProgramRunning"):
+            quietly(self.control, "stopScript")
         for link in (self.control, self.receive, self.io):
             close_link(link)
-        _quietly(self.dashboard, "disconnect")
+        quietly(self.dashboard, "disconnect")
 
     def describe(self) -> dict[str, Any]:
         """Host, controller, RTDE rate, calibration, for run metadata."""
@@ -425,21 +323,7 @@ class UR5Arm:
         if self.dashboard is not None:
             for key, method in (("robot_model", "getRobotModel"),
                                 ("serial_number", "getSerialNumber")):
-                value = _quietly(self.dashboard, method)
+                value = quietly(self.dashboard, method)
                 if value is not None:
                     info[key] = str(value)
         return info
-
-
-def _quietly(obj: Any, method: str, *args: Any) -> Any:
-    """Call obj.method(*args); None if obj is None or the call fails."""
-    if obj is None:
-        return None
-    try:
-        return getattr(obj, method)(*args)
-    except Exception:  # cleanup and metadata calls must never mask the real error
-        return None
-
-
-def _fmt(pose: Sequence[float]) -> str:
-    return "[" + ", ".join(f"{v:.4f}" for v in pose) + "]"

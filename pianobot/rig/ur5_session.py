@@ -24,14 +24,13 @@ from pianobot.rig.errors import ConnectionLost, DeviceUnavailable, RigError
 from pianobot.rig.ur5_link import (
     ControllerInfo,
     choose_rate,
-    failure,
     open_control,
     open_dashboard,
     open_receive,
+    quietly,
     read_controller,
-    read_status,
-    settled_status,
 )
+from pianobot.rig.ur5_status import failure, read_status, settled_status
 from pianobot.spec.rig import UR5Config
 
 SCRIPT_START_TIMEOUT_S = 5.0  # ur_rtde's own wait for its script
@@ -107,7 +106,7 @@ def open_links(config: UR5Config, *, receive_factory: Any = None, control_factor
         control = open_control(host, rate, timeout, control_factory)
     except (RigError, ValueError, RuntimeError) as exc:
         for link in (receive, dashboard):
-            _quietly(link, "disconnect")
+            quietly(link, "disconnect")
         if isinstance(exc, RigError):
             raise
         raise DeviceUnavailable(f"UR5 at {host}: {exc}") from exc
@@ -143,7 +142,7 @@ def reconnect(links: Links, io: Any, host: str) -> None:
             _wait_for_script(control, host)
     except RuntimeError as exc:
         raise ConnectionLost(f"arm: RTDE control reconnect failed: {exc}") from exc
-    if io is not None and (dropped or not _quietly(io, "isConnected")):
+    if io is not None and (dropped or not quietly(io, "isConnected")):
         cycle_io(io, host)
     status = settled_status(links.receive, control, 1.0 / (links.rate_hz or 125.0))
     if status.stopped or status.link_down or status.paused or status.script_stopped:
@@ -154,7 +153,7 @@ def cycle_io(io: Any, host: str) -> None:
     """Close and re-open the I/O link. It has no receive thread, so it never notices a drop:
     its next write would go nowhere (or raise). The pause lets the controller release its
     input registers before the new session claims them."""
-    _quietly(io, "disconnect")
+    quietly(io, "disconnect")
     time.sleep(IO_RELEASE_S)
     try:
         if not io.reconnect():
@@ -172,8 +171,8 @@ def close_link(link: Any) -> None:
     try:
         link.disconnect()
     except Exception:  # a dead socket: give it a live one, then close that cleanly
-        if _quietly(link, "reconnect"):
-            _quietly(link, "disconnect")
+        if quietly(link, "reconnect"):
+            quietly(link, "disconnect")
 
 
 def _wait_for_script(control: Any, host: str) -> None:
@@ -185,13 +184,3 @@ def _wait_for_script(control: Any, host: str) -> None:
                 f"{SCRIPT_START_TIMEOUT_S:g} s"
             )
         time.sleep(0.01)
-
-
-def _quietly(obj: Any, method: str, *args: Any) -> Any:
-    """Call obj.method(*args); None if obj is None or the call fails."""
-    if obj is None:
-        return None
-    try:
-        return getattr(obj, method)(*args)
-    except Exception:  # cleanup and metadata calls must never mask the real error
-        return None

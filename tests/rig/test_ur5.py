@@ -27,7 +27,7 @@ from pianobot.rig.errors import (
 )
 from pianobot.rig.protocols import Arm
 from pianobot.rig.ur5 import UR5Arm
-from pianobot.rig.ur5_link import ArmStatus, failure
+from pianobot.rig.ur5_status import ArmStatus, failure
 from pianobot.spec.rig import UR5Config
 
 HOST = "192.0.2.10"
