@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import Any
 
 from pianobot.physics.trajectory import move_profile
 from pianobot.rig.errors import ConnectionLost, RigError, SafetyViolation
@@ -45,22 +44,14 @@ class GuardedMotion:
         self.min_scaling = math.inf  # the lowest combined speed scaling seen while moving
 
     @property
-    def control(self) -> Any:
-        return self.links.control
-
-    @property
-    def receive(self) -> Any:
-        return self.links.receive
-
-    @property
     def period_s(self) -> float:
         assert self.links.rate_hz is not None
         return 1.0 / self.links.rate_hz
 
     def links_up(self) -> bool:
         """Both RTDE links up."""
-        return bool(quietly(self.control, "isConnected")) and bool(
-            quietly(self.receive, "isConnected"))
+        return bool(quietly(self.links.control, "isConnected")) and bool(
+            quietly(self.links.receive, "isConnected"))
 
     def require_links(self, action: str) -> None:
         """The diagnosis (ConnectionLost, ...) unless the links are up."""
@@ -69,17 +60,17 @@ class GuardedMotion:
 
     def fail(self, action: str) -> RigError:
         """The error for `action`, from a status both streams agree on."""
-        return failure(action, settled_status(self.receive, self.control, self.period_s))
+        return failure(action, settled_status(self.links.receive, self.links.control, self.period_s))
 
     def check_reach(self, pose: Sequence[float]) -> None:
         """SafetyViolation unless the controller finds the pose within its safety limits."""
         self.require_links("safety-limit check")
         try:
-            within = self.control.isPoseWithinSafetyLimits(list(pose))
+            within = self.links.control.isPoseWithinSafetyLimits(list(pose))
         except RuntimeError as exc:
             raise ConnectionLost(f"safety-limit check failed: {exc}") from exc
         if not within:
-            status = settled_status(self.receive, self.control, self.period_s)
+            status = settled_status(self.links.receive, self.links.control, self.period_s)
             if status.stopped or status.link_down or status.paused or status.script_stopped:
                 raise failure("safety-limit check", status)  # ur_rtde answered False: not a no
             raise SafetyViolation(
@@ -92,11 +83,11 @@ class GuardedMotion:
         action = f"moveL to {fmt_pose(target)}"
         self.require_links(action)
         try:
-            start = self.receive.getActualTCPPose()
+            start = self.links.receive.getActualTCPPose()
             expected_s = move_profile(math.dist(start[:3], target[:3]), speed_mps,
                                       acceleration_mps2).duration_s
-            before = int(self.control.getAsyncOperationProgressEx().operationId())
-            sent = self.control.moveL(list(target), speed_mps, acceleration_mps2, True)
+            before = int(self.links.control.getAsyncOperationProgressEx().operationId())
+            sent = self.links.control.moveL(list(target), speed_mps, acceleration_mps2, True)
         except RuntimeError as exc:
             raise ConnectionLost(f"{action}: {exc}") from exc
         if not sent:
@@ -115,10 +106,10 @@ class GuardedMotion:
         while True:
             if recorder is not None:
                 recorder.sample()
-            operation = self.control.getAsyncOperationProgressEx()
+            operation = self.links.control.getAsyncOperationProgressEx()
             if operation.operationId() != before and not operation.isAsyncOperationRunning():
                 break
-            status = read_status(self.receive, self.control)
+            status = read_status(self.links.receive, self.links.control)
             if status.stopped or status.link_down or status.paused or status.script_stopped:
                 raise self.fail(action)  # re-read until both streams tell the same story
             now = self.clock.now()
@@ -139,7 +130,7 @@ class GuardedMotion:
         while True:
             if recorder is not None:
                 recorder.sample()
-            reached = self.receive.getActualTCPPose()
+            reached = self.links.receive.getActualTCPPose()
             short_m = math.dist(reached[:3], target[:3])
             if short_m <= AT_TARGET_M:
                 return
@@ -150,7 +141,7 @@ class GuardedMotion:
     def stop(self) -> None:
         """stopL, if the links are up. Never raises."""
         if self.links_up():
-            quietly(self.control, "stopL", STOP_DECELERATION_MPS2)
+            quietly(self.links.control, "stopL", STOP_DECELERATION_MPS2)
 
 
 def fmt_pose(pose: Sequence[float]) -> str:

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -49,6 +51,18 @@ MOVEL = 3
 
 def connect(host: str, **config: Any) -> UR5Arm:
     return UR5Arm.connect_to(ur5_config(host, **config), clock=WallClock())
+
+
+@contextmanager
+def hovering(ur_emulator: EmulatorFactory, **controller: Any) -> Iterator[tuple[Any, UR5Arm]]:
+    """An emulated UR and pianobot's arm on it, hovering over the reference key."""
+    ur = ur_emulator(start_pose=HOVER_POSE, **controller)
+    arm = connect(ur.host)
+    try:
+        arm.move_to_key(NOTE, PRESS.distance_m)
+        yield ur, arm
+    finally:
+        arm.close()
 
 
 class Recording:
@@ -144,19 +158,14 @@ def test_a_slider_at_30_percent_is_warned_before_motion_and_is_no_stall(
 def test_a_program_paused_mid_press_stops_the_run_and_is_not_uploaded_over(
     ur_emulator: EmulatorFactory,
 ) -> None:
-    ur = ur_emulator(start_pose=HOVER_POSE)
-    arm = connect(ur.host)
-    connected = ur.counts()
-    try:
-        arm.move_to_key(NOTE, PRESS.distance_m)
+    with hovering(ur_emulator) as (ur, arm):
+        connected = ur.counts()
         ur.fail_on_move(1, "pause", fraction=0.5)
         with pytest.raises(SafetyStop, match="paused"):
             arm.press(PRESS, NOTE)
         with pytest.raises(SafetyStop, match="paused"):
             arm.connect()  # the runner's retry path: it must not take the arm back
         assert ur.paused and ur.counts() == connected  # no new script, no reconnect
-    finally:
-        arm.close()
 
 
 def test_a_program_paused_before_the_run_is_refused_before_taking_the_arm(
@@ -178,10 +187,7 @@ def test_a_program_paused_before_the_run_is_refused_before_taking_the_arm(
 def test_a_script_stopped_at_the_pendant_is_reuploaded_not_reconnected(
     ur_emulator: EmulatorFactory,
 ) -> None:
-    ur = ur_emulator(start_pose=HOVER_POSE)
-    arm = connect(ur.host)
-    try:
-        arm.move_to_key(NOTE, PRESS.distance_m)
+    with hovering(ur_emulator) as (ur, arm):
         ur.stop_program()  # the links stay up
         with pytest.raises(ConnectionLost, match="control script not running"):
             arm.press(PRESS, NOTE)
@@ -192,8 +198,6 @@ def test_a_script_stopped_at_the_pendant_is_reuploaded_not_reconnected(
         assert after["connections"] == before["connections"]  # ... over the same links
         arm.move_to_key(NOTE, PRESS.distance_m)
         record = arm.press(PRESS, NOTE)
-    finally:
-        arm.close()
     assert record.arm is not None and record.arm.x0_m is not None
     assert record.arm.x0_m.max() == pytest.approx(PRESS.distance_m + PRESS.depth_m, abs=1e-6)
 
@@ -201,10 +205,7 @@ def test_a_script_stopped_at_the_pendant_is_reuploaded_not_reconnected(
 def test_a_link_dropped_mid_press_is_recovered_by_reconnecting(
     ur_emulator: EmulatorFactory,
 ) -> None:
-    ur = ur_emulator(start_pose=HOVER_POSE)
-    arm = connect(ur.host)
-    try:
-        arm.move_to_key(NOTE, PRESS.distance_m)
+    with hovering(ur_emulator) as (ur, arm):
         ur.fail_on_move(1, "drop_links", fraction=0.5, outage_s=0.3)
         with pytest.raises(ConnectionLost):
             arm.press(PRESS, NOTE)
@@ -212,17 +213,12 @@ def test_a_link_dropped_mid_press_is_recovered_by_reconnecting(
         arm.connect()
         arm.move_to_key(NOTE, PRESS.distance_m)
         record = arm.press(PRESS, NOTE)
-    finally:
-        arm.close()
     assert record.arm is not None and record.arm.x0_m is not None
     assert record.arm.x0_m.max() == pytest.approx(PRESS.distance_m + PRESS.depth_m, abs=1e-6)
 
 
 def test_a_protective_stop_mid_press_stops_everything(ur_emulator: EmulatorFactory) -> None:
-    ur = ur_emulator(start_pose=HOVER_POSE)
-    arm = connect(ur.host)
-    try:
-        arm.move_to_key(NOTE, PRESS.distance_m)
+    with hovering(ur_emulator) as (ur, arm):
         moves_before = ur.get("commands").count(MOVEL)
         ur.fail_on_move(1, "protective_stop", fraction=0.4)
         with pytest.raises(SafetyStop, match="protective stopped"):
@@ -230,8 +226,6 @@ def test_a_protective_stop_mid_press_stops_everything(ur_emulator: EmulatorFacto
         with pytest.raises(SafetyStop):
             arm.connect()
         assert ur.get("commands").count(MOVEL) == moves_before + 1  # nothing after the stop
-    finally:
-        arm.close()
 
 
 def test_the_end_of_a_move_is_read_with_the_extended_progress_call(
