@@ -282,9 +282,8 @@ class UR5Arm:
             current = self.receive.getActualTCPPose()
             lift_z = max(current[2], self.reference_pose[2] + self.config.safe_lift_m)
             up = [*current[:2], min(lift_z, self.config.workspace_max_m[2]), *current[3:6]]
-            if up[2] - current[2] > 1e-5:
-                self.check_target(up)
-                self.control.moveL(up, self.travel_velocity_mps, self.travel_acceleration_mps2)
+            if up[2] - current[2] > 1e-5:  # guarded: a synchronous moveL could wait 300 s
+                self._move(up, self.travel_velocity_mps, self.travel_acceleration_mps2)
         except Exception:  # make_safe runs on the way out of failures: it must not add one
             pass
 
