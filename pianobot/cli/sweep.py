@@ -9,7 +9,7 @@ from __future__ import annotations
 import shlex
 import sys
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 from rich.console import Console
@@ -17,7 +17,7 @@ from rich.console import Console
 from pianobot.cli.common import DEFAULT_DATA, DataDir, JsonFlag, emit_json, print_error
 from pianobot.executor import ENV_SCHEDULER, ENV_WORKERS, ExecutorSettings
 from pianobot.plan import format_duration
-from pianobot.run import RunOutcome, dry_run, run_sweep
+from pianobot.run import RunOutcome, RunStarted, dry_run, run_sweep
 
 EXIT_CODES = {"completed": 0, "failed": 1, "stopped": 3, "interrupted": 130}
 
@@ -54,6 +54,13 @@ def _print_outcome(outcome: RunOutcome, data: Path, spec: Path | None) -> None:
         console.print(f"reason: {outcome.reason}", highlight=False, markup=False)
     for line in _how_to_look(outcome, data, spec):
         console.print(line, highlight=False, markup=False, soft_wrap=True)
+
+
+def _warn_before_motion(record: Any) -> None:
+    """The rig's warnings (e.g. the UR's speed slider below 100 %), on stderr before any motion."""
+    if isinstance(record, RunStarted):
+        for warning in record.warnings:
+            print(f"warning: {warning}", file=sys.stderr, flush=True)
 
 
 def register(app: typer.Typer) -> None:
@@ -105,6 +112,7 @@ def register(app: typer.Typer) -> None:
             spec, data_dir=data, resume=resume, seed=seed, rig_path=rig,
             progress=not no_progress and not json_out and sys.stderr.isatty(), batch_trials=batch_trials,
             executor=ExecutorSettings.resolve(workers=workers, scheduler=scheduler),
+            subscribers=[_warn_before_motion],
         )
         if json_out:
             emit_json(outcome.to_dict())

@@ -278,6 +278,13 @@ class Rig:
         if self._prepare is not None:
             self._prepare(trials)
 
+    @property
+    def warnings(self) -> tuple[str, ...]:
+        """What the devices found when they were opened (e.g. the UR's speed slider below
+        100 %): to be shown before any motion."""
+        return tuple(w for device in (self.arm, self.vacuum)
+                     for w in getattr(device, "warnings", ()))
+
     def keystroke(
         self, trial: TrialLike, attempt: int = 1, *, start_at_s: float | None = None,
         settle_s: float | None = None,

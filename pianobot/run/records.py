@@ -24,6 +24,7 @@ class RunStarted:
     todo: int  # trials this session will attempt
     resumed: bool
     blocks: bool = False  # trials come in blocks, each closed by a `BlockEnded`
+    warnings: tuple[str, ...] = ()  # what the rig found when it opened, before any motion
 
 
 @dataclass(frozen=True)

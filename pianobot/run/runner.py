@@ -102,7 +102,8 @@ class Runner:
         """
         blocked = self.rig.batches
         self.publish(RunStarted(run_id, planned=planned, done=done, todo=len(trials),
-                                resumed=done > 0, blocks=blocked))
+                                resumed=done > 0, blocks=blocked,
+                                warnings=self.rig.warnings))
         counts = {"executed": 0, "silent": 0, "retries": 0, "done": done}
         status, reason = "completed", None
         try:

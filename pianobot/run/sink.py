@@ -79,6 +79,7 @@ class StoreSink:
             self.writer.journal(
                 "resumed" if record.resumed else "run_started",
                 planned=record.planned, done=record.done, todo=record.todo,
+                **({"warnings": list(record.warnings)} if record.warnings else {}),
             )
         elif isinstance(record, RunEnded):
             self._lab_time_s = record.lab_time_s

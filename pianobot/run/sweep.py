@@ -257,7 +257,8 @@ def _session(
     todo = [t for t in prepared.trials if t.trial_id not in done_ids]
     if resumed:
         _note_resume(writer, meta, done_ids)
-    writer.update_meta(rig={**meta.get("rig", {}), "description": rig.describe()})
+    writer.update_meta(rig={**meta.get("rig", {}), "description": rig.describe(),
+                            "warnings": list(rig.warnings)})
     if batch_trials is None:
         batch_trials = BLOCK_TRIALS if rig.batches else BATCH_TRIALS
     sink = StoreSink(writer, batch_trials=batch_trials, batch_s=batch_s)
@@ -301,7 +302,7 @@ def _session(
             raise
     _record_end(writer, result)
     writer.finish(result.status, result.reason, lab_time_s=result.lab_time_s)
-    return _outcome(writer, result, resumed=resumed)
+    return _outcome(writer, result, resumed=resumed, warnings=rig.warnings)
 
 
 # Measured per simulated trial with every stream stored (one core): what the executor weighs
@@ -347,7 +348,9 @@ def _flush_quietly(sink: StoreSink) -> None:
         pass
 
 
-def _outcome(writer: RunWriter, result: SessionResult | None, *, resumed: bool) -> RunOutcome:
+def _outcome(
+    writer: RunWriter, result: SessionResult | None, *, resumed: bool, warnings: tuple[str, ...] = ()
+) -> RunOutcome:
     summary = summarize_run(Run(run_id=writer.run_id, path=writer.path))
     counts = trial_status_counts(writer.paths)
     return RunOutcome(
@@ -363,6 +366,7 @@ def _outcome(writer: RunWriter, result: SessionResult | None, *, resumed: bool) 
         executed=0 if result is None else result.executed,
         lab_time_s=summary.lab_time_s,
         resumed=resumed,
+        warnings=list(warnings),
     )
 
 
