@@ -16,7 +16,8 @@ then on each line may print the previous keystroke's events (a *backlog*). What 
    best assignment fits the timestamps best. Two presses k' < k are expected
    Σ_{k'≤j<k}(motion_j + constant) apart, give or take their note-on windows; the misfit is
    scored in standard deviations (quadratic; beyond 3 SD a gap that is too *long* grows only
-   linearly, because the robot may have paused, while a gap that is too short stays quadratic).
+   logarithmically, because the robot may have paused for any time, while a gap that is too short
+   stays quadratic: no stroke is faster than its motion).
 4. A press moves off its read line only when that fits better by more than `BACKLOG_COST` per
    line of backlog it opens (so ties keep the log as written), and where lines carry notes
    (sequence logs) a note that differs from the line's costs `NOTE_COST`; a press whose note
@@ -34,10 +35,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
+from pianobot.io import _assign_kernel as kernel
+from pianobot.io._assign_kernel import PAUSE_Z
 from pianobot.io.keystroke_timing import LineTiming
 
 FloatArray = npt.NDArray[np.float64]
@@ -45,16 +49,13 @@ IntArray = npt.NDArray[np.int64]
 BoolArray = npt.NDArray[np.bool_]
 
 MAX_BACKLOG_LINES = 64  # deepest backlog considered (lines between a press's keystroke and its read)
-BACKLOG_COST = 3.0  # prior cost of each line of backlog a press opens (squared SDs)
-NOTE_COST = 40.0  # a press whose note differs from its line's key
-SIGMA_ABS_S = 0.2  # timing spread of any gap: MIDI latency, scheduling, the read and the print
-SIGMA_REL = 0.05  # relative spread of each predicted cycle (moveL blending, controller timing)
-SIGMA_REL_UNKNOWN = 0.3  # relative spread of a line whose motion the log does not give
-PAUSE_Z = 3.0  # beyond this many SDs, a too-long gap is scored as a pause (linear cost)
-PAUSE_SLOPE = 6.0
 UNDECIDED_MARGIN = 2.0  # best alternative within this cost: the evidence cannot decide
-PROFILE_PRESSES = 4000  # presses used to estimate a session's constant (the first ones)
-_INF = np.float64(np.inf)
+PROFILE_PRESSES = 2000  # presses used to estimate a session's constant (the first ones)
+# BACKLOG_COST: prior cost of each line of backlog a press opens (squared SDs); NOTE_COST: a press
+# whose note differs from its line's key; SIGMA_ABS_S: timing spread of any gap (MIDI latency,
+# scheduling, the read and the print); SIGMA_REL: relative spread of each predicted cycle (moveL
+# blending, controller timing); SIGMA_REL_UNKNOWN: the same for a line whose motion the log does not
+# give; PAUSE_Z/PAUSE_TAIL: beyond PAUSE_Z SDs a too-long gap costs PAUSE_TAIL·ln(z/PAUSE_Z) more.
 
 
 @dataclass(frozen=True)
@@ -113,18 +114,18 @@ def assign_session(presses: Presses, lines: Lines) -> SessionAssignment:
         empty.unassigned_reason, empty.at_cap = reasons, np.zeros(m, dtype=bool)
         return empty
     model.overhead_s = _profile_overhead(model)
-    keys, margin, own, alt = model.solve()
+    keys, margin, own, alt, last = model.solve()
     scale = _misfit_scale(model, keys)
     if scale > 1.5:  # the timestamps scatter more than the defaults allow: trust them less
         model.sigma_scale = scale
-        keys, margin, own, alt = model.solve()
+        keys, margin, own, alt, last = model.solve()
     out = empty
     out.line[index], out.margin[index] = keys, margin
     out.own_line_cost[index], out.alternative[index] = own, alt
     out.unassigned_reason = reasons
     out.overhead_s, out.sigma_scale = model.overhead_s, model.sigma_scale
     out.at_cap = np.zeros(m, dtype=bool)
-    out.at_cap[index] = model.capped & (keys == model.lo)
+    out.at_cap[index] = (keys == last) & (last < model.hi)
     return out
 
 
@@ -165,147 +166,58 @@ def _after_drain(lines: Lines) -> IntArray:
 
 
 class _Model:
-    """Costs and the dynamic programme of one session (see the module docstring)."""
+    """The arrays of one session's dynamic programme (costs in `_assign_kernel`)."""
 
     def __init__(self, presses: Presses, lines: Lines) -> None:
         self.p = presses
-        self.lines = lines
         timing = lines.timing
-        motion = timing.motion_s
+        motion = timing.motion_s.astype(np.float64)
         self.c1 = np.concatenate([[0.0], np.cumsum(motion)])
         self.c2 = np.concatenate([[0.0], np.cumsum(motion * motion)])
-        self.unknown = np.concatenate([[0.0], np.cumsum(~timing.known)])
+        self.unknown = np.concatenate([[0.0], np.cumsum(~timing.known)]).astype(np.float64)
         self.early, self.late, self.motion = timing.on_early_s, timing.on_late_s, motion
+        self.line_note = lines.note.astype(np.int64)
         self.overhead_s = 0.0
         self.sigma_scale = 1.0
-        r = presses.read_line
+        r = presses.read_line.astype(np.int64)
+        m = np.arange(len(r))
         lo = _after_drain(lines)[r]
-        packed = np.maximum.accumulate(lo - np.arange(len(r))) + np.arange(len(r))
-        self.capped = packed < r - MAX_BACKLOG_LINES
-        self.lo = np.maximum(packed, r - MAX_BACKLOG_LINES)  # first candidate line of each press
+        self.lo = np.maximum.accumulate(lo - m) + m  # earliest line: after the drain, after earlier presses
+        self.hi = (np.minimum.accumulate((r - m)[::-1])[::-1] + m).astype(np.int64)  # latest: before later presses
         self.r = r
+        drains = np.flatnonzero(lines.reads < lines.read_size)
+        self.last_drain = int(drains.max()) if drains.size else -1
+        silent_share = min(max(1.0 - len(presses) / len(lines), 0.05), 0.95)
+        self.silent_cost = -math.log(silent_share)
 
-    # --- costs -------------------------------------------------------------------------------
-    def window(self, i: int, k: IntArray, o: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """Earliest/latest time of press i after the start of line k."""
-        if self.p.has_on[i]:
-            return self.early[k], self.late[k] + 0.0 * o
-        return self.early[k], self.motion[k] + o  # a lone note-off: any time in the cycle
+    def _presses(self) -> tuple[Any, ...]:
+        p = self.p
+        return (self.lo, self.hi, self.r, p.t_s.astype(np.float64), p.has_on.astype(np.bool_),
+                p.note.astype(np.int64))  # fmt: skip
 
-    def pair(self, i: int, kp: IntArray, k: IntArray, o: FloatArray) -> FloatArray:
-        """Timing cost of press i-1 on line kp and press i on line k (arrays broadcast)."""
-        n = k - kp
-        c1, c2 = self.c1[k] - self.c1[kp], self.c2[k] - self.c2[kp]
-        unknown = self.unknown[k] - self.unknown[kp]
-        span = c1 + n * o
-        early_i, late_i = self.window(i, k, o)
-        early_p, late_p = self.window(i - 1, kp, o)
-        low, high = span + early_i - late_p, span + late_i - early_p
-        var = (SIGMA_ABS_S**2 + SIGMA_REL**2 * (c2 + 2 * o * c1 + n * o * o)
-               + (SIGMA_REL_UNKNOWN**2 - SIGMA_REL**2) * unknown * o * o)  # fmt: skip
-        sd = np.sqrt(np.maximum(var, SIGMA_ABS_S**2)) * self.sigma_scale
-        dt = self.p.t_s[i] - self.p.t_s[i - 1]
-        z = (dt - np.clip(dt, low, high)) / sd
-        cost = np.where(z > PAUSE_Z, PAUSE_Z**2 + PAUSE_SLOPE * (z - PAUSE_Z), z * z)
-        return np.where(n > 0, cost, _INF)
+    def _lines(self) -> tuple[Any, ...]:
+        return (self.c1, self.c2, self.unknown, self.early, self.late, self.motion)
 
-    def node(self, i: int, k: IntArray) -> FloatArray:
-        """Cost of press i on line k that does not depend on its neighbours (note match)."""
-        note, line_note = int(self.p.note[i]), self.lines.note[k]
-        if note < 0:
-            return np.zeros(k.shape)
-        return np.where((line_note >= 0) & (line_note != note), NOTE_COST, 0.0)
+    def total(self, overhead_s: float, bound: float = math.inf) -> float:
+        """Cost of the best assignment of the session's first PROFILE_PRESSES presses (infinite
+        once it exceeds `bound`)."""
+        m = min(len(self.p), PROFILE_PRESSES)
+        whole = m == len(self.p)
+        return float(kernel.best_total(*self._presses(), *self._lines(), self.line_note, overhead_s,
+                                       self.sigma_scale, self.silent_cost if whole else 0.0,
+                                       self.last_drain, m, bound))  # fmt: skip
 
-    def backlog(self, i: int, kp: IntArray, k: IntArray) -> FloatArray:
-        """Prior cost of the backlog lines press i opens beyond press i-1's."""
-        grow = (self.r[i] - k) - (self.r[i - 1] - kp)
-        return BACKLOG_COST * np.maximum(grow, 0)
+    def solve(self) -> tuple[IntArray, FloatArray, FloatArray, IntArray, IntArray]:
+        """Best line per press, its margin, the cost of its own line, the best alternative, and
+        the last line it was allowed (its window may stop short of its structural band)."""
+        return kernel.viterbi(*self._presses(), *self._lines(), self.line_note, self.overhead_s,  # type: ignore[no-any-return]
+                              self.sigma_scale, self.silent_cost, self.last_drain)  # fmt: skip
 
-    def band(self, i: int) -> IntArray:
-        return np.arange(self.lo[i], self.r[i] + 1)
-
-    # --- dynamic programme -------------------------------------------------------------------
-    def forward_total(self, overheads: FloatArray) -> FloatArray:
-        """Cost of the best assignment for each overhead value (vectorised over them)."""
-        o = overheads[:, None, None]
-        n = min(len(self.p), PROFILE_PRESSES)
-        k0 = self.band(0)
-        cost = (BACKLOG_COST * (self.r[0] - k0) + self.node(0, k0))[None, :] + 0.0 * overheads[:, None]
-        for i in range(1, n):
-            kp, k = self.band(i - 1), self.band(i)
-            step = self.pair(i, kp[None, :], k[:, None], o) + self.backlog(i, kp[None, :], k[:, None])
-            cost = (cost[:, None, :] + step).min(axis=2) + self.node(i, k)[None, :]
-        return cost.min(axis=1)
-
-    def solve(self) -> tuple[IntArray, FloatArray, FloatArray, IntArray]:
-        """Best line per press, its margin, the cost of its own line, and the best alternative."""
-        m = len(self.p)
-        keys = self.r.copy()  # a pinned press has one candidate: its read line
-        margin, own = np.full(m, math.inf), np.zeros(m)
-        alt = np.full(m, -1, dtype=np.int64)
-        pinned = self.lo == self.r
-        a = 0
-        while a < m:
-            if pinned[a]:
-                a += 1
-                continue
-            b = a
-            while b < m and not pinned[b]:
-                b += 1
-            stop = min(b + 1, m)  # the pinned press that ends the stretch is scored with it
-            self._solve_stretch(a, stop, keys, margin, own, alt)
-            a = stop
-        return keys, margin, own, alt
-
-    def _solve_stretch(
-        self, a: int, b: int, keys: IntArray, margin: FloatArray, own: FloatArray, alt: IntArray
-    ) -> None:
-        """Forward/backward over presses a..b-1 (press a-1, if any, is already placed)."""
-        o = np.array(self.overhead_s)
-        forward: list[FloatArray] = []
-        back: list[IntArray] = []
-        for i in range(a, b):
-            k = self.band(i)
-            if i == a:
-                if i == 0:
-                    f = BACKLOG_COST * (self.r[0] - k) + self.node(0, k)
-                else:
-                    kp = np.array([keys[i - 1]])
-                    f = (self.pair(i, kp[None, :], k[:, None], o)
-                         + self.backlog(i, kp[None, :], k[:, None]))[:, 0] + self.node(i, k)  # fmt: skip
-                forward.append(f)
-                back.append(np.zeros(k.size, dtype=np.int64))
-                continue
-            kp = self.band(i - 1)
-            total = forward[-1][None, :] + self.pair(i, kp[None, :], k[:, None], o) \
-                + self.backlog(i, kp[None, :], k[:, None])
-            forward.append(total.min(axis=1) + self.node(i, k))
-            back.append(total.argmin(axis=1))
-        # backward costs (cost of the best continuation from each candidate)
-        backward: list[FloatArray] = [np.zeros(forward[-1].size)]
-        for i in range(b - 1, a, -1):
-            k, kp = self.band(i), self.band(i - 1)
-            step = (self.pair(i, kp[None, :], k[:, None], o) + self.backlog(i, kp[None, :], k[:, None])
-                    + (self.node(i, k) + backward[0])[:, None])  # fmt: skip
-            backward.insert(0, step.min(axis=0))
-        x = int(np.argmin(forward[-1]))
-        chosen = [x]
-        for i in range(b - 1, a, -1):
-            x = int(back[i - a][x])
-            chosen.append(x)
-        chosen.reverse()
-        for j, i in enumerate(range(a, b)):
-            total = forward[j] + backward[j]
-            best = int(chosen[j])
-            k = self.band(i)
-            keys[i] = k[best]
-            others = np.delete(total, best)
-            if others.size:
-                margin[i] = float(others.min() - total[best])
-                alt[i] = int(np.delete(k, best)[int(others.argmin())])
-            else:
-                margin[i] = math.inf
-            own[i] = float(total[-1] - total[best])  # the band ends at the read line
+    def pair_costs(self, keys: IntArray) -> FloatArray:
+        """Timing cost of each press with its predecessor under an assignment."""
+        p = self.p
+        return kernel.pair_costs(keys, self.overhead_s, self.sigma_scale, p.t_s.astype(np.float64),  # type: ignore[no-any-return]
+                                 p.has_on.astype(np.bool_), *self._lines())  # fmt: skip
 
 
 def _profile_overhead(model: _Model) -> float:
@@ -317,24 +229,32 @@ def _profile_overhead(model: _Model) -> float:
     per_line = (gaps - motion) / steps
     typical = float(np.median(per_line)) if per_line.size else 1.0
     top = max(3.0, 3.0 * max(typical, 0.0), float(np.median(gaps)) if gaps.size else 0.0)
-    grid = top * np.linspace(0.0, 1.0, 49) ** 1.5
-    costs = model.forward_total(grid)
+    grid = top * np.linspace(0.0, 1.0, 25) ** 1.5
+    costs = _costs(model, grid, start=float(np.clip(typical, 0.0, top)))
     best = int(np.argmin(costs))
-    low, high = grid[max(best - 1, 0)], grid[min(best + 1, grid.size - 1)]
-    fine = np.linspace(low, high, 17)
-    fine_costs = model.forward_total(fine)
+    fine = np.linspace(grid[max(best - 1, 0)], grid[min(best + 1, grid.size - 1)], 9)
+    fine_costs = _costs(model, fine, start=float(grid[best]))
     ties = np.flatnonzero(fine_costs <= fine_costs.min() + 1e-9)
     return float(np.median(fine[ties]))
 
 
+def _costs(model: _Model, overheads: FloatArray, start: float) -> FloatArray:
+    """Best cost per overhead value; values far off are cut short once they exceed the best so
+    far (evaluated from `start` outwards, so the good ones come first)."""
+    costs = np.full(overheads.size, math.inf)
+    best = math.inf
+    for j in np.argsort(np.abs(overheads - start)):
+        costs[j] = model.total(float(overheads[j]), bound=best + 1e-6)
+        best = min(best, costs[j])
+    return costs
+
+
 def _misfit_scale(model: _Model, keys: IntArray) -> float:
     """Robust SD of the timing misfits of neighbouring keystrokes (1 = as the model expects)."""
-    o = np.array(model.overhead_s)
-    z = []
-    for i in range(1, len(model.p)):
-        if keys[i] - keys[i - 1] == 1 and model.p.has_on[i] and model.p.has_on[i - 1]:
-            cost = float(model.pair(i, np.array(keys[i - 1]), np.array(keys[i]), o))
-            z.append(math.sqrt(cost) if cost <= PAUSE_Z**2 else PAUSE_Z)
-    if len(z) < 8:
+    costs = model.pair_costs(keys)[1:]
+    both_on = model.p.has_on[1:] & model.p.has_on[:-1]
+    adjacent = (np.diff(keys) == 1) & both_on
+    z = np.sqrt(np.minimum(costs[adjacent], PAUSE_Z**2))
+    if z.size < 8:
         return 1.0
-    return float(np.sqrt(np.mean(np.square(z))))
+    return float(np.sqrt(np.mean(z * z)))

@@ -194,40 +194,38 @@ def _session(records: LogRecords, a: int, b: int, s: int, read_size: int, timing
     local["record"] = local["record"] - a
     kind = event_kinds(local["status"], local["velocity"])
     press_of = group_presses(local["t_ms"], kind, local["note"])
-    presses, spans = _presses(local, kind, press_of)
+    found = _PressEvents(local, kind, press_of)
+    presses = found.presses
     n_lines = b - a
     line_notes = (records.notes[a:b] if records.notes is not None else np.full(n_lines, -1, dtype=np.int64))
     lines = Lines(np.bincount(local["record"], minlength=n_lines), read_size,
                   timing.take(np.arange(a, b)), line_notes)  # fmt: skip
     result = assign_session(presses, lines)
     file_line = records.line[a:b]
-    moved = undecided = 0
-    for i in range(len(presses)):
-        k = int(result.line[i])
-        if k < 0:
-            continue
-        row = a + k
-        _fill_outcome(table, row, local, kind, spans[i])
-        table.read_line[row] = file_line[presses.read_line[i]]
-        doubt = result.margin[i] < UNDECIDED_MARGIN or bool(result.at_cap[i])
-        if k != presses.read_line[i]:
-            moved += 1
-            table.assignment[row] = "moved"
-            table.moved_from[row] = file_line[presses.read_line[i]]
-            table.evidence[row] = _move_evidence(i, result, presses, lines, file_line, spans, read_size)
-        else:
-            table.assignment[row] = "own line"
-        if doubt:
-            undecided += 1
-            alt = int(result.alternative[i])
-            text = _doubt_text(presses.t_s[i], file_line, presses.read_line[i], k, alt, result.margin[i],
-                               bool(result.at_cap[i]))  # fmt: skip
-            table.status[row], table.error[row], table.assignment[row] = "failed", text, "undecided"
-            table.evidence[row] = text
-            if alt >= 0 and table.status[a + alt] == "silent" and not (result.line == alt).any():
-                table.status[a + alt], table.error[a + alt] = "failed", text
-                table.assignment[a + alt], table.evidence[a + alt] = "undecided", text
+    placed = np.flatnonzero(result.line >= 0)
+    rows = a + result.line[placed]
+    found.fill(table, placed, rows)
+    read = presses.read_line[placed]
+    table.read_line[rows] = file_line[read]
+    moved_mask = result.line[placed] != read
+    table.assignment[rows] = np.where(moved_mask, "moved", "own line")
+    table.moved_from[rows[moved_mask]] = file_line[read[moved_mask]]
+    origin = _backlog_origins(presses.read_line, result.line)
+    for i in placed[moved_mask]:
+        table.evidence[a + result.line[i]] = _move_evidence(int(i), result, presses, lines, file_line,
+                                                            found.n_events, read_size, int(origin[i]))  # fmt: skip
+    undecided = 0
+    assigned = set(result.line[placed].tolist())
+    for i in placed[(result.margin[placed] < UNDECIDED_MARGIN) | result.at_cap[placed]]:
+        k, alt = int(result.line[i]), int(result.alternative[i])
+        text = _doubt_text(presses.t_s[i], file_line, presses.read_line[i], k, alt, result.margin[i],
+                           bool(result.at_cap[i]))  # fmt: skip
+        targets = [a + k] + ([a + alt] if alt >= 0 and alt not in assigned else [])
+        for row in targets:
+            if table.assignment[row] != "undecided":
                 undecided += 1
+            table.status[row], table.error[row] = "failed", text
+            table.assignment[row], table.evidence[row] = "undecided", text
     unread = _mark_unread(table, a, b, result, lines, read_size, file_line)
     _midi_rows(table, local, kind, press_of, result, a, s, file_line)
     unassigned = [
@@ -243,51 +241,76 @@ def _session(records: LogRecords, a: int, b: int, s: int, read_size: int, timing
     return {
         "first_line": int(file_line[0]), "last_line": int(file_line[-1]), "lines": n_lines,
         "presses": len(presses), "overhead_s": round(result.overhead_s, 4),
-        "timing_scale": round(result.sigma_scale, 3), "moved": moved, "unread": unread,
+        "timing_scale": round(result.sigma_scale, 3), "moved": int(moved_mask.sum()), "unread": unread,
         "undecided": undecided, "unassigned": unassigned,
     }  # fmt: skip
 
 
-def _presses(local: dict[str, IntArray], kind: IntArray, press_of: IntArray) -> tuple[Presses, list[IntArray]]:
-    """Per press: time, note-on flag, read line, note; and the event indices of each press."""
-    notes_at = np.flatnonzero(press_of >= 0)
-    ids = press_of[notes_at]
-    starts = np.flatnonzero(np.diff(ids, prepend=-1))  # presses are runs in time order
-    spans = np.split(notes_at, starts[1:]) if notes_at.size else []
-    t, has_on, read, note = [], [], [], []
-    for span in spans:
-        ons = span[kind[span] == KIND_ON]
-        first = ons[0] if ons.size else span[0]
-        t.append(local["t_ms"][first] / 1000.0)
-        has_on.append(bool(ons.size))
-        read.append(int(local["record"][span].min()))
-        note.append(int(local["note"][first]))
-    presses = Presses(np.array(t, dtype=np.float64), np.array(has_on, dtype=bool),
-                      np.array(read, dtype=np.int64), np.array(note, dtype=np.int64))  # fmt: skip
-    return presses, spans
+class _PressEvents:
+    """The presses of a session (runs of events in time order) and their MIDI outcomes."""
+
+    def __init__(self, local: dict[str, IntArray], kind: IntArray, press_of: IntArray) -> None:
+        self.local = local
+        at = np.flatnonzero(press_of >= 0)  # note events, in time order; presses are runs of them
+        self.at = at
+        starts = np.flatnonzero(np.diff(press_of[at], prepend=-1)) if at.size else np.zeros(0, np.int64)
+        self.starts = starts
+        big = np.iinfo(np.int64).max
+        position = np.arange(at.size)
+        is_on = kind[at] == KIND_ON
+        if at.size:
+            first_on = np.minimum.reduceat(np.where(is_on, position, big), starts)
+            self.n_on = np.add.reduceat(is_on.astype(np.int64), starts)
+            self.n_events = np.diff(np.append(starts, at.size))
+            has_on = first_on < big
+            first = np.where(has_on, first_on, starts)
+            t_first_on = np.repeat(np.where(has_on, local["t_ms"][at[np.minimum(first_on, at.size - 1)]], big),
+                                   self.n_events)  # fmt: skip
+            off_after = (kind[at] == KIND_OFF) & (local["t_ms"][at] >= t_first_on)
+            self.last_off = np.maximum.reduceat(np.where(off_after, position, -1), starts)
+            self.any_off = np.maximum.reduceat(np.where(kind[at] == KIND_OFF, position, -1), starts)
+            self.t_max = np.maximum.reduceat(local["t_ms"][at], starts)
+            read = np.minimum.reduceat(local["record"][at], starts)
+        else:
+            first = self.n_on = self.n_events = self.last_off = self.any_off = self.t_max = read = np.zeros(0, np.int64)
+            has_on = np.zeros(0, dtype=bool)
+        self.first = first
+        self.presses = Presses(local["t_ms"][at[first]] / 1000.0, has_on, read.astype(np.int64),
+                               local["note"][at[first]].astype(np.int64))  # fmt: skip
+
+    def fill(self, table: _Table, placed: IntArray, rows: IntArray) -> None:
+        """Write the MIDI outcome of presses `placed` into table rows `rows` (module docstring)."""
+        local, at, out = self.local, self.at, table.outcome
+        on = self.presses.has_on[placed]
+        first = at[self.first[placed]]
+        ok_rows, ok_first = rows[on], first[on]
+        table.status[ok_rows] = "ok"
+        table.note[ok_rows] = local["note"][ok_first]
+        out["on_velocity"][ok_rows] = local["velocity"][ok_first]
+        out["t_on_s"][ok_rows] = local["t_ms"][ok_first] / 1000.0
+        out["n_note_on"][ok_rows] = self.n_on[placed][on]
+        last_off = self.last_off[placed][on]
+        has_off = last_off >= 0
+        off_rows, off_events = ok_rows[has_off], at[last_off[has_off]]
+        out["off_velocity"][off_rows] = local["velocity"][off_events]
+        out["t_off_s"][off_rows] = local["t_ms"][off_events] / 1000.0
+        out["midi_hold_s"][off_rows] = out["t_off_s"][off_rows] - out["t_on_s"][off_rows]
+        # only a note-off was logged: the key sounded but its note-on is lost
+        lone_rows, lone = rows[~on], placed[~on]
+        lone_off = at[np.maximum(self.any_off[lone], 0)]
+        table.note[lone_rows] = np.where(table.note[lone_rows] >= 0, table.note[lone_rows], local["note"][lone_off])
+        out["off_velocity"][lone_rows] = local["velocity"][lone_off]
+        out["t_off_s"][lone_rows] = self.t_max[lone] / 1000.0
 
 
-def _fill_outcome(table: _Table, row: int, local: dict[str, IntArray], kind: IntArray, span: IntArray) -> None:
-    """MIDI outcome of one keystroke: first note-on, last note-off after it, note-on count."""
-    t_s = local["t_ms"][span] / 1000.0
-    ons = span[kind[span] == KIND_ON]
-    offs = span[kind[span] == KIND_OFF]
-    out = table.outcome
-    if ons.size:
-        first = ons[0]
-        t_on = local["t_ms"][first] / 1000.0
-        later = offs[local["t_ms"][offs] >= local["t_ms"][first]]
-        table.status[row] = "ok"
-        table.note[row] = local["note"][first]
-        out["on_velocity"][row], out["t_on_s"][row] = float(local["velocity"][first]), t_on
-        out["n_note_on"][row] = ons.size
-        if later.size:
-            out["off_velocity"][row] = float(local["velocity"][later[-1]])
-            out["t_off_s"][row] = local["t_ms"][later[-1]] / 1000.0
-            out["midi_hold_s"][row] = out["t_off_s"][row] - t_on
-    elif offs.size:  # only a note-off was logged: the key sounded but its note-on is lost
-        table.note[row] = local["note"][offs[0]] if table.note[row] < 0 else table.note[row]
-        out["off_velocity"][row], out["t_off_s"][row] = float(local["velocity"][offs[-1]]), float(t_s.max())
+def _backlog_origins(read_line: IntArray, line: IntArray) -> IntArray:
+    """Per press: the press where its backlog last grew (lag = read line - line)."""
+    lag = read_line - line
+    origin = np.zeros(line.size, dtype=np.int64)
+    for i in range(1, line.size):
+        grew = line[i - 1] < 0 or line[i] < 0 or lag[i - 1] < lag[i]
+        origin[i] = i if grew else origin[i - 1]
+    return origin
 
 
 def _mark_unread(table: _Table, a: int, b: int, result: SessionAssignment, lines: Lines, read_size: int,
@@ -325,8 +348,9 @@ def _midi_rows(table: _Table, local: dict[str, IntArray], kind: IntArray, press_
 
 
 def _move_evidence(i: int, result: SessionAssignment, presses: Presses, lines: Lines, file_line: IntArray,
-                   spans: list[IntArray], read_size: int) -> str:  # fmt: skip
-    """Why press i left its read line, in words: what fits where, and where the backlog began."""
+                   n_events: IntArray, read_size: int, j: int) -> str:  # fmt: skip
+    """Why press i left its read line, in words: what fits where, and where the backlog began
+    (press j, where its backlog last grew)."""
     k, r = int(result.line[i]), int(presses.read_line[i])
     parts = [f"printed on line {file_line[r]}, belongs to line {file_line[k]}"]
     note = int(presses.note[i])
@@ -335,10 +359,8 @@ def _move_evidence(i: int, result: SessionAssignment, presses: Presses, lines: L
     own = float(result.own_line_cost[i])
     if math.isfinite(own):
         parts.append(f"keeping it on line {file_line[r]} fits the timestamps and keys worse by {own:.1f} (squared SDs)")
-    lag = presses.read_line - result.line
-    j = i
-    while j > 0 and result.line[j - 1] >= 0 and lag[j - 1] >= lag[j]:
-        j -= 1
+    else:
+        parts.append(f"line {file_line[r]} cannot hold it (the presses printed after it need the lines up to it)")
     if j > 0 and result.line[j - 1] < 0:
         parts.append(
             f"backlog from line {file_line[presses.read_line[j - 1]]}: it printed a press of a keystroke the "
@@ -346,9 +368,8 @@ def _move_evidence(i: int, result: SessionAssignment, presses: Presses, lines: L
         )
     elif j > 0:
         origin = int(result.line[j - 1])
-        n_events = int(spans[j - 1].size)
         parts.append(
-            f"backlog from line {file_line[origin]}: that keystroke's {n_events} events outlasted "
+            f"backlog from line {file_line[origin]}: that keystroke's {int(n_events[j - 1])} events outlasted "
             f"its read (a read returns at most {read_size}), so later lines printed earlier events"
         )
     return "; ".join(parts)

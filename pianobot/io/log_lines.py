@@ -193,7 +193,8 @@ def is_number(value: Any) -> bool:
 def _control(value: Any) -> list[float]:
     if not isinstance(value, list | tuple) or not value:
         raise ValueError("'control' is not a non-empty list")
-    if not all(is_number(v) for v in value):
+    # exact type checks are the fast path (bool is an int subclass and must not pass)
+    if not all(type(v) is float or type(v) is int for v in value) or not all(map(math.isfinite, value)):
         raise ValueError(f"'control' holds a non-number: {value!r:.80}")
     return [float(v) for v in value]
 
@@ -210,8 +211,7 @@ def _events(value: Any) -> list[tuple[int, int, int, int]]:
             status, note, velocity = message[0], message[1], message[2]
         except (TypeError, ValueError, IndexError, KeyError):
             raise ValueError(f"MIDI event {i} is not [[status, note, velocity, 0], timestamp_ms]") from None
-        numbers = (status, note, velocity, timestamp)
-        if not all(isinstance(v, int) and not isinstance(v, bool) for v in numbers):
+        if not (type(status) is int and type(note) is int and type(velocity) is int and type(timestamp) is int):
             raise ValueError(f"MIDI event {i} holds a non-integer: {item!r:.80}")
         if not (0 <= status <= 255 and 0 <= note <= 127 and 0 <= velocity <= 127 and 0 <= timestamp < 2**53):
             raise ValueError(f"MIDI event {i} is out of range: {item!r:.80}")
