@@ -156,7 +156,8 @@ def named_records(named: dict[str, list[Any]], note_octave: int = DEFAULT_NOTE_O
     keys = set(named)
     return NamedRecords(
         params=params, note=notes, sequence=pd.DataFrame(sequence, index=range(n)),
-        extra=pd.DataFrame(extra, index=range(n)), columns=columns, bad_lines=bad,
+        extra=pd.DataFrame({k: _extra_column(v) for k, v in extra.items()}, index=range(n)),
+        columns=columns, bad_lines=bad,
         is_sequence_script={"group", "order", "press_depth", "up_vel"} <= keys,
     )  # fmt: skip
 
@@ -171,6 +172,16 @@ def _numbers(values: list[Any], key: str, bad: dict[int, str]) -> np.ndarray:
         else:
             bad.setdefault(i, f"{key!r} should be a number, got {value!r:.40}")
     return out
+
+
+def _extra_column(values: list[Any]) -> Any:
+    """A column Parquet can store: numbers as floats, texts as strings, a mix as texts."""
+    present = [v for v in values if v is not None]
+    if all(isinstance(v, bool) for v in present):
+        return pd.array(values, dtype="boolean")
+    if all(isinstance(v, int | float) and not isinstance(v, bool) for v in present):
+        return np.array([np.nan if v is None else float(v) for v in values])
+    return pd.array([None if v is None else str(v) for v in values], dtype="string")
 
 
 def _slug(key: str) -> str:
