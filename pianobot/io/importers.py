@@ -132,11 +132,14 @@ def import_mocap(
         "frame_rate_hz": take.frame_rate_hz,
         "roles": take.roles,
         "coverage_dropped": sorted(n for n, c in take.coverage.items() if c < min_coverage),
+        "stitched": take.stitched,
+        "joins": [j.to_dict() for j in take.joins if take.stitched.get(j.chain)],
+        "stitch_doubts": list(take.stitch_doubts),
         "up_axis": up_axis,
         "vacuum_kpa": vacuum_kpa,
         "skipped_lines": [],
     }
-    extra: dict[str, Any] = {"keystrokes": len(strokes), "roles": take.roles}
+    extra: dict[str, Any] = {"keystrokes": len(strokes), "roles": take.roles, "stitched": take.stitched}
     if run_id is None:
         trials = _stroke_trials(strokes, sha)
         trials["vacuum_kpa"] = math.nan if vacuum_kpa is None else float(vacuum_kpa)
