@@ -91,7 +91,12 @@ class LogRecords:
 
 
 def sessions_of(records: LogRecords) -> IntArray:
-    """Session number of each record: a header line or a timestamp going back starts one."""
+    """Session number of each record: a header line or a timestamp going back starts one.
+
+    Without a header the restart happened somewhere after the last line that printed an event
+    of the old clock; the lines in between (which printed nothing) go to the new session, so that
+    their empty reads are never taken as proof that the old session's last keystrokes were silent.
+    """
     n = len(records)
     record, t = records.events["record"], records.events["t_ms"]
     first = np.full(n, np.iinfo(np.int64).max)
@@ -99,13 +104,19 @@ def sessions_of(records: LogRecords) -> IntArray:
     np.minimum.at(first, record, t)
     np.maximum.at(last, record, t)
     out = np.zeros(n, dtype=np.int64)
-    session, latest = -1, -1
+    session, latest, last_printing = -1, -1, -1
     for i in range(n):
-        if session < 0 or records.after_header[i] or (last[i] >= 0 and first[i] < latest):
+        if session < 0 or records.after_header[i]:
             session += 1
             latest = -1
+        elif last[i] >= 0 and first[i] < latest:
+            session += 1
+            latest = -1
+            out[last_printing + 1 : i] = session
         out[i] = session
         latest = max(latest, int(last[i]))
+        if last[i] >= 0:
+            last_printing = i
     return out
 
 

@@ -198,7 +198,8 @@ def check_assignment(truth: TruthLog, trials: object, midi: object) -> list[str]
 
     An `ok` line must hold exactly the events its stroke printed; a `silent` line must be a silent
     stroke; a stroke whose events were never read must not be called silent or ok (the importer may
-    also flag a silent stroke it cannot prove silent as unread).
+    also flag a silent stroke it cannot prove silent as unread). Lines the importer calls
+    undecided are not counted here (see `undecided`): a doubt said aloud is not a wrong answer.
     """
     import pandas as pd
 
@@ -221,16 +222,26 @@ def check_assignment(truth: TruthLog, trials: object, midi: object) -> list[str]
         elif row.status == "silent":
             if truth_outcome != "silent":
                 problems.append(f"line {row.source_line}: silent, truth {truth_outcome}")
-        elif row.assignment != "unread" or truth_outcome == "ok":
+        elif row.assignment == "unread" and truth_outcome == "ok":
+            problems.append(f"line {row.source_line}: unread, truth ok")
+        elif row.assignment not in ("unread", "undecided"):
             problems.append(f"line {row.source_line}: {row.status}/{row.assignment}, truth {truth_outcome}")
     return problems
+
+
+def undecided(trials: object) -> int:
+    """How many lines the importer left undecided."""
+    import pandas as pd
+
+    assert isinstance(trials, pd.DataFrame)
+    return int((trials["assignment"] == "undecided").sum())
 
 
 def lost_events(truth: TruthLog) -> int:
     return sum(1 for s in truth.strokes for line in s.printed_on if line < 0)
 
 
-__all__ = ["Scenario", "Stroke", "TruthLog", "check_assignment", "lost_events", "make_log"]
+__all__ = ["Scenario", "Stroke", "TruthLog", "check_assignment", "lost_events", "make_log", "tiled_text", "undecided"]
 
 
 def tiled_text(truth: TruthLog, lines: int) -> str:
