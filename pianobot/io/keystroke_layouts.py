@@ -13,9 +13,9 @@ script that wrote it. Known layouts (slot names carry pianobot's units):
   dict (`'acc': ...`) that starts each session.
 
 Any other layout is declared by the user (`declared_layout`: a column list, from `--columns`
-or a YAML layout file, `keystroke_layout_file`). Slot names are pianobot's column names
-(`SLOT_NAMES`); `skip` ignores a value, and a name without a unit suffix keeps the value as an
-extra column. Layouts the logs do not record (depth in the 5/6-value layouts) are NaN, not guessed.
+or a YAML layout file, `layout_file`). Slot names are pianobot's column names (`SLOT_NAMES`) or
+the old scripts' names for them (`COLUMN_ALIASES`: vel, acc, depth, hold_time, ...); `skip`
+ignores a value, and any other name without a unit suffix keeps the value as an extra column. Layouts the logs do not record (depth in the 5/6-value layouts) are NaN, not guessed.
 
 `auto` and the family name `rigid-2022` choose, among the candidates whose length matches, the
 layout under which the largest share of lines has physically plausible values (speeds ≤ 3.2 m/s,
@@ -46,6 +46,30 @@ PARAMETER_SLOTS = (
     "move_velocity_mps", "move_acceleration_mps2",
 )  # fmt: skip
 SLOT_NAMES = (*PARAMETER_SLOTS, "velocity_mps", "note", SKIP)
+# The names old scripts used for the same values (named-key logs, and accepted in --columns).
+COLUMN_ALIASES: dict[str, str] = {
+    "group": "sequence_id",
+    "order": "sequence_order",
+    "note": "note",
+    "down_vel": "down_velocity_mps",
+    "up_vel": "up_velocity_mps",
+    "vel": "velocity_mps",
+    "down_acc": "acceleration_mps2",
+    "acc": "acceleration_mps2",
+    "up_acc": "up_acceleration_mps2",
+    "move_vel": "move_velocity_mps",
+    "move_acc": "move_acceleration_mps2",
+    "distance": "distance_m",
+    "press_depth": "depth_m",
+    "depth": "depth_m",
+    "hold_time": "hold_s",
+    "hold": "hold_s",
+    "angle": "finger_angle_deg",
+    "finger_angle": "finger_angle_deg",
+    "vacuum": "vacuum_kpa",
+    "pressure": "vacuum_kpa",
+}
+
 _UNIT_SUFFIXES = ("_m", "_s", "_mps", "_mps2", "_kpa", "_deg", "_hz", "_n")
 
 
@@ -204,14 +228,14 @@ def declared_layout(
 
     Raises InputError naming the bad column and, for a near miss, the name that was meant.
     """
-    names = [c.strip() for c in columns]
+    names = [COLUMN_ALIASES.get(c.strip(), c.strip()) for c in columns]
     if not names or any(not c for c in names):
         raise InputError("expected a comma-separated list of column names, e.g. "
                          "vacuum_kpa,finger_angle_deg,acceleration_mps2,velocity_mps,depth_m,distance_m,hold_s", where)  # fmt: skip
     for i, column in enumerate(names):
         if column in SLOT_NAMES:
             continue
-        close = difflib.get_close_matches(column, SLOT_NAMES, n=1, cutoff=0.75)
+        close = difflib.get_close_matches(column, [*SLOT_NAMES, *COLUMN_ALIASES], n=1, cutoff=0.75)
         if close or column.endswith(_UNIT_SUFFIXES) or not column.isidentifier():
             hint = f"; did you mean {close[0]!r}?" if close else ""
             raise InputError(

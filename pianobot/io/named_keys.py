@@ -36,31 +36,10 @@ import numpy as np
 import pandas as pd
 
 from pianobot.errors import InputError
-from pianobot.io.keystroke_layouts import RIGID_STIFFNESS_CODE, round_grid
+from pianobot.io.keystroke_layouts import COLUMN_ALIASES, RIGID_STIFFNESS_CODE, round_grid
 
 DEFAULT_NOTE_OCTAVE = 4  # scientific pitch notation: middle C = C4 = MIDI 60
-KEY_COLUMNS: dict[str, str] = {
-    "group": "sequence_id",
-    "order": "sequence_order",
-    "note": "note",
-    "down_vel": "down_velocity_mps",
-    "up_vel": "up_velocity_mps",
-    "vel": "velocity_mps",
-    "down_acc": "acceleration_mps2",
-    "acc": "acceleration_mps2",
-    "up_acc": "up_acceleration_mps2",
-    "move_vel": "move_velocity_mps",
-    "move_acc": "move_acceleration_mps2",
-    "distance": "distance_m",
-    "press_depth": "depth_m",
-    "depth": "depth_m",
-    "hold_time": "hold_s",
-    "hold": "hold_s",
-    "angle": "finger_angle_deg",
-    "finger_angle": "finger_angle_deg",
-    "vacuum": "vacuum_kpa",
-    "pressure": "vacuum_kpa",
-}
+KEY_COLUMNS = COLUMN_ALIASES
 NUMERIC_COLUMNS = (
     "vacuum_kpa", "down_velocity_mps", "up_velocity_mps", "acceleration_mps2",
     "up_acceleration_mps2", "depth_m", "distance_m", "hold_s", "finger_angle_deg",
