@@ -30,14 +30,28 @@ SIGMA_REL = 0.05
 SIGMA_REL_UNKNOWN = 0.3
 PAUSE_Z = 3.0
 PAUSE_TAIL = 1.0
-MAX_SILENT_RUN = 24  # lines of backlog one step may give back (silent keystrokes between two presses)
+MAX_SILENT_RUN = (
+    24  # lines of backlog one step may give back (silent keystrokes between two presses)
+)
 BEAM = 60.0  # candidates costlier than the best by this much are not extended (≈ 7.7 SD)
 
 
 @njit(cache=True)
-def _pair(i: int, kp: int, k: int, o: float, scale: float, t: FloatArray, has_on: npt.NDArray[np.bool_],
-          c1: FloatArray, c2: FloatArray, unk: FloatArray, early: FloatArray, late: FloatArray,
-          motion: FloatArray) -> float:  # fmt: skip
+def _pair(
+    i: int,
+    kp: int,
+    k: int,
+    o: float,
+    scale: float,
+    t: FloatArray,
+    has_on: npt.NDArray[np.bool_],
+    c1: FloatArray,
+    c2: FloatArray,
+    unk: FloatArray,
+    early: FloatArray,
+    late: FloatArray,
+    motion: FloatArray,
+) -> float:
     """Timing cost of press i-1 on line kp and press i on line k."""
     n = k - kp
     if n <= 0:
@@ -48,8 +62,11 @@ def _pair(i: int, kp: int, k: int, o: float, scale: float, t: FloatArray, has_on
     late_p = late[kp] if has_on[i - 1] else motion[kp] + o
     low = span + early[k] - late_p
     high = span + late_i - early[kp]
-    var = (SIGMA_ABS_S**2 + SIGMA_REL**2 * ((c2[k] - c2[kp]) + 2.0 * o * d1 + n * o * o)
-           + (SIGMA_REL_UNKNOWN**2 - SIGMA_REL**2) * (unk[k] - unk[kp]) * o * o)  # fmt: skip
+    var = (
+        SIGMA_ABS_S**2
+        + SIGMA_REL**2 * ((c2[k] - c2[kp]) + 2.0 * o * d1 + n * o * o)
+        + (SIGMA_REL_UNKNOWN**2 - SIGMA_REL**2) * (unk[k] - unk[kp]) * o * o
+    )
     sd = math.sqrt(max(var, SIGMA_ABS_S**2)) * scale
     dt = t[i] - t[i - 1]
     if dt < low:
@@ -59,13 +76,14 @@ def _pair(i: int, kp: int, k: int, o: float, scale: float, t: FloatArray, has_on
     else:
         return 0.0
     if z > PAUSE_Z:
-        return PAUSE_Z * PAUSE_Z + PAUSE_TAIL * math.log(z / PAUSE_Z)
-    return z * z
+        return float(PAUSE_Z * PAUSE_Z + PAUSE_TAIL * math.log(z / PAUSE_Z))
+    return float(z * z)
 
 
 @njit(cache=True)
-def _node(i: int, k: int, m: int, note: IntArray, line_note: IntArray, silent_cost: float,
-          last_drain: int) -> float:  # fmt: skip
+def _node(
+    i: int, k: int, m: int, note: IntArray, line_note: IntArray, silent_cost: float, last_drain: int
+) -> float:
     """Note mismatch, and for the last press the cost of the silent lines its position implies."""
     cost = 0.0
     if note[i] >= 0 and line_note[k] >= 0 and line_note[k] != note[i]:
@@ -82,7 +100,9 @@ def _backlog(i: int, kp: int, k: int, r: IntArray) -> float:
 
 
 @njit(cache=True)
-def _window(i: int, lo: IntArray, hi: IntArray, r: IntArray, prev_first: int, prev_last: int) -> tuple[int, int]:
+def _window(
+    i: int, lo: IntArray, hi: IntArray, r: IntArray, prev_first: int, prev_last: int
+) -> tuple[int, int]:
     """Candidate lines of press i: its structural band, cut to what the previous press's surviving
     candidates allow (after the first of them; at most MAX_SILENT_RUN lines of backlog given back)."""
     a = max(lo[i], prev_first + 1)
@@ -91,10 +111,28 @@ def _window(i: int, lo: IntArray, hi: IntArray, r: IntArray, prev_first: int, pr
 
 
 @njit(cache=True)
-def _forward(lo: IntArray, hi: IntArray, r: IntArray, t: FloatArray, has_on: npt.NDArray[np.bool_], note: IntArray,
-             c1: FloatArray, c2: FloatArray, unk: FloatArray, early: FloatArray, late: FloatArray,
-             motion: FloatArray, line_note: IntArray, o: float, scale: float, silent_cost: float,
-             last_drain: int, m: int, keep: bool, bound: float) -> tuple[FloatArray, npt.NDArray[np.int32], IntArray, IntArray, float]:  # fmt: skip
+def _forward(
+    lo: IntArray,
+    hi: IntArray,
+    r: IntArray,
+    t: FloatArray,
+    has_on: npt.NDArray[np.bool_],
+    note: IntArray,
+    c1: FloatArray,
+    c2: FloatArray,
+    unk: FloatArray,
+    early: FloatArray,
+    late: FloatArray,
+    motion: FloatArray,
+    line_note: IntArray,
+    o: float,
+    scale: float,
+    silent_cost: float,
+    last_drain: int,
+    m: int,
+    keep: bool,
+    bound: float,
+) -> tuple[FloatArray, npt.NDArray[np.int32], IntArray, IntArray, float]:
     """Forward pass over the first m presses (stops with an infinite total once the best prefix
     costs more than `bound`: costs only grow).
 
@@ -137,8 +175,9 @@ def _forward(lo: IntArray, hi: IntArray, r: IntArray, t: FloatArray, has_on: npt
                     c = forward[prev_base + y]
                     if c > prev_best + BEAM:
                         continue
-                    c += _pair(i, kp, k, o, scale, t, has_on, c1, c2, unk, early, late, motion) \
-                        + _backlog(i, kp, k, r)
+                    c += _pair(
+                        i, kp, k, o, scale, t, has_on, c1, c2, unk, early, late, motion
+                    ) + _backlog(i, kp, k, r)
                     if c < best:
                         best, arg = c, y
             value = best + _node(i, k, m, note, line_note, silent_cost, last_drain)
@@ -160,27 +199,99 @@ def _forward(lo: IntArray, hi: IntArray, r: IntArray, t: FloatArray, has_on: npt
 
 
 @njit(cache=True)
-def best_total(lo: IntArray, hi: IntArray, r: IntArray, t: FloatArray, has_on: npt.NDArray[np.bool_], note: IntArray,
-               c1: FloatArray, c2: FloatArray, unk: FloatArray, early: FloatArray, late: FloatArray,
-               motion: FloatArray, line_note: IntArray, o: float, scale: float, silent_cost: float,
-               last_drain: int, m: int, bound: float) -> float:  # fmt: skip
+def best_total(
+    lo: IntArray,
+    hi: IntArray,
+    r: IntArray,
+    t: FloatArray,
+    has_on: npt.NDArray[np.bool_],
+    note: IntArray,
+    c1: FloatArray,
+    c2: FloatArray,
+    unk: FloatArray,
+    early: FloatArray,
+    late: FloatArray,
+    motion: FloatArray,
+    line_note: IntArray,
+    o: float,
+    scale: float,
+    silent_cost: float,
+    last_drain: int,
+    m: int,
+    bound: float,
+) -> float:
     """Cost of the best assignment of the first m presses (for the profile over `o`); infinite
     when it exceeds `bound`."""
-    return _forward(lo, hi, r, t, has_on, note, c1, c2, unk, early, late, motion, line_note, o, scale,
-                    silent_cost, last_drain, m, False, bound)[4]  # fmt: skip
+    total: float = _forward(
+        lo,
+        hi,
+        r,
+        t,
+        has_on,
+        note,
+        c1,
+        c2,
+        unk,
+        early,
+        late,
+        motion,
+        line_note,
+        o,
+        scale,
+        silent_cost,
+        last_drain,
+        m,
+        False,
+        bound,
+    )[4]
+    return total
 
 
 @njit(cache=True)
-def viterbi(lo: IntArray, hi: IntArray, r: IntArray, t: FloatArray, has_on: npt.NDArray[np.bool_], note: IntArray,
-            c1: FloatArray, c2: FloatArray, unk: FloatArray, early: FloatArray, late: FloatArray,
-            motion: FloatArray, line_note: IntArray, o: float, scale: float, silent_cost: float,
-            last_drain: int) -> tuple[IntArray, FloatArray, FloatArray, IntArray, IntArray]:  # fmt: skip
+def viterbi(
+    lo: IntArray,
+    hi: IntArray,
+    r: IntArray,
+    t: FloatArray,
+    has_on: npt.NDArray[np.bool_],
+    note: IntArray,
+    c1: FloatArray,
+    c2: FloatArray,
+    unk: FloatArray,
+    early: FloatArray,
+    late: FloatArray,
+    motion: FloatArray,
+    line_note: IntArray,
+    o: float,
+    scale: float,
+    silent_cost: float,
+    last_drain: int,
+) -> tuple[IntArray, FloatArray, FloatArray, IntArray, IntArray]:
     """Best line per press, its margin, the extra cost of its read line (inf when it was no
     candidate), the best alternative line, and the last candidate line of each press."""
     m = lo.size
-    forward, back, start, off, _ = _forward(lo, hi, r, t, has_on, note, c1, c2, unk, early, late, motion,
-                                            line_note, o, scale, silent_cost, last_drain, m, True,
-                                            math.inf)  # fmt: skip
+    forward, back, start, off, _ = _forward(
+        lo,
+        hi,
+        r,
+        t,
+        has_on,
+        note,
+        c1,
+        c2,
+        unk,
+        early,
+        late,
+        motion,
+        line_note,
+        o,
+        scale,
+        silent_cost,
+        last_drain,
+        m,
+        True,
+        math.inf,
+    )
     backward = np.zeros(off[m])
     for i in range(m - 1, 0, -1):
         best_prev = math.inf
@@ -194,9 +305,12 @@ def viterbi(lo: IntArray, hi: IntArray, r: IntArray, t: FloatArray, has_on: npt.
                     k = start[i] + x
                     if k <= kp:
                         continue
-                    c = _pair(i, kp, k, o, scale, t, has_on, c1, c2, unk, early, late, motion) \
-                        + _backlog(i, kp, k, r) + _node(i, k, m, note, line_note, silent_cost, last_drain) \
+                    c = (
+                        _pair(i, kp, k, o, scale, t, has_on, c1, c2, unk, early, late, motion)
+                        + _backlog(i, kp, k, r)
+                        + _node(i, k, m, note, line_note, silent_cost, last_drain)
                         + backward[off[i] + x]
+                    )
                     if c < best:
                         best = c
             backward[off[i - 1] + y] = best
@@ -228,11 +342,23 @@ def viterbi(lo: IntArray, hi: IntArray, r: IntArray, t: FloatArray, has_on: npt.
 
 
 @njit(cache=True)
-def pair_costs(keys: IntArray, o: float, scale: float, t: FloatArray, has_on: npt.NDArray[np.bool_],
-               c1: FloatArray, c2: FloatArray, unk: FloatArray, early: FloatArray, late: FloatArray,
-               motion: FloatArray) -> FloatArray:  # fmt: skip
+def pair_costs(
+    keys: IntArray,
+    o: float,
+    scale: float,
+    t: FloatArray,
+    has_on: npt.NDArray[np.bool_],
+    c1: FloatArray,
+    c2: FloatArray,
+    unk: FloatArray,
+    early: FloatArray,
+    late: FloatArray,
+    motion: FloatArray,
+) -> FloatArray:
     """Timing cost of each press with its predecessor under an assignment (0 for the first)."""
     out = np.zeros(keys.size)
     for i in range(1, keys.size):
-        out[i] = _pair(i, keys[i - 1], keys[i], o, scale, t, has_on, c1, c2, unk, early, late, motion)
+        out[i] = _pair(
+            i, keys[i - 1], keys[i], o, scale, t, has_on, c1, c2, unk, early, late, motion
+        )
     return out

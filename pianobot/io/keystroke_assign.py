@@ -48,7 +48,9 @@ FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 BoolArray = npt.NDArray[np.bool_]
 
-MAX_BACKLOG_LINES = 64  # deepest backlog considered (lines between a press's keystroke and its read)
+MAX_BACKLOG_LINES = (
+    64  # deepest backlog considered (lines between a press's keystroke and its read)
+)
 UNDECIDED_MARGIN = 2.0  # best alternative within this cost: the evidence cannot decide
 PROFILE_PRESSES = 2000  # presses used to estimate a session's constant (the first ones)
 # BACKLOG_COST: prior cost of each line of backlog a press opens (squared SDs); NOTE_COST: a press
@@ -91,7 +93,9 @@ class SessionAssignment:
     line: IntArray  # per press: its line, -1 when it belongs to no line of the log
     margin: FloatArray  # per press: extra cost of the best assignment that puts it elsewhere
     alternative: IntArray  # per press: the line of that assignment (-1: none)
-    own_line_cost: FloatArray  # per press: extra cost of keeping it on its read line (inf: impossible)
+    own_line_cost: (
+        FloatArray  # per press: extra cost of keeping it on its read line (inf: impossible)
+    )
     unassigned_reason: dict[int, str] = field(default_factory=dict)
     overhead_s: float = 0.0  # the per-line constant on top of the predicted motion
     sigma_scale: float = 1.0  # timing spreads were scaled by this to fit the data
@@ -101,14 +105,20 @@ class SessionAssignment:
 def assign_session(presses: Presses, lines: Lines) -> SessionAssignment:
     """The most plausible line of every press of one session (module docstring)."""
     m = len(presses)
-    empty = SessionAssignment(np.full(m, -1, dtype=np.int64), np.full(m, np.inf),
-                              np.full(m, -1, dtype=np.int64), np.full(m, np.inf))  # fmt: skip
+    empty = SessionAssignment(
+        np.full(m, -1, dtype=np.int64),
+        np.full(m, np.inf),
+        np.full(m, -1, dtype=np.int64),
+        np.full(m, np.inf),
+    )
     if m == 0 or len(lines) == 0:
         empty.at_cap = np.zeros(m, dtype=bool)
         return empty
     keep, reasons = _assignable(presses, lines)
     index = np.flatnonzero(keep)
-    sub = Presses(presses.t_s[index], presses.has_on[index], presses.read_line[index], presses.note[index])
+    sub = Presses(
+        presses.t_s[index], presses.has_on[index], presses.read_line[index], presses.note[index]
+    )
     model = _Model(sub, lines)
     if not len(sub):
         empty.unassigned_reason, empty.at_cap = reasons, np.zeros(m, dtype=bool)
@@ -144,7 +154,9 @@ def _assignable(presses: Presses, lines: Lines) -> tuple[BoolArray, dict[int, st
         first = max(int(lo[i]), taken + 1, r - MAX_BACKLOG_LINES)
         if first > r:
             keep[i] = False
-            reasons[i] = "more presses than keystrokes: every line it could belong to holds an earlier press"
+            reasons[i] = (
+                "more presses than keystrokes: every line it could belong to holds an earlier press"
+            )
             continue
         note = int(presses.note[i])
         candidates = lines.note[first : r + 1]
@@ -165,6 +177,12 @@ def _after_drain(lines: Lines) -> IntArray:
     return (before + 1).astype(np.int64)
 
 
+# The compiled kernels (numba dispatchers take any arguments; their signatures are in the kernel).
+_BEST_TOTAL: Any = kernel.best_total
+_VITERBI: Any = kernel.viterbi
+_PAIR_COSTS: Any = kernel.pair_costs
+
+
 class _Model:
     """The arrays of one session's dynamic programme (costs in `_assign_kernel`)."""
 
@@ -182,8 +200,12 @@ class _Model:
         r = presses.read_line.astype(np.int64)
         m = np.arange(len(r))
         lo = _after_drain(lines)[r]
-        self.lo = np.maximum.accumulate(lo - m) + m  # earliest line: after the drain, after earlier presses
-        self.hi = (np.minimum.accumulate((r - m)[::-1])[::-1] + m).astype(np.int64)  # latest: before later presses
+        self.lo = (
+            np.maximum.accumulate(lo - m) + m
+        )  # earliest line: after the drain, after earlier presses
+        self.hi = (np.minimum.accumulate((r - m)[::-1])[::-1] + m).astype(
+            np.int64
+        )  # latest: before later presses
         self.r = r
         drains = np.flatnonzero(lines.reads < lines.read_size)
         self.last_drain = int(drains.max()) if drains.size else -1
@@ -192,8 +214,14 @@ class _Model:
 
     def _presses(self) -> tuple[Any, ...]:
         p = self.p
-        return (self.lo, self.hi, self.r, p.t_s.astype(np.float64), p.has_on.astype(np.bool_),
-                p.note.astype(np.int64))  # fmt: skip
+        return (
+            self.lo,
+            self.hi,
+            self.r,
+            p.t_s.astype(np.float64),
+            p.has_on.astype(np.bool_),
+            p.note.astype(np.int64),
+        )
 
     def _lines(self) -> tuple[Any, ...]:
         return (self.c1, self.c2, self.unknown, self.early, self.late, self.motion)
@@ -203,21 +231,46 @@ class _Model:
         once it exceeds `bound`)."""
         m = min(len(self.p), PROFILE_PRESSES)
         whole = m == len(self.p)
-        return float(kernel.best_total(*self._presses(), *self._lines(), self.line_note, overhead_s,
-                                       self.sigma_scale, self.silent_cost if whole else 0.0,
-                                       self.last_drain, m, bound))  # fmt: skip
+        return float(
+            _BEST_TOTAL(
+                *self._presses(),
+                *self._lines(),
+                self.line_note,
+                overhead_s,
+                self.sigma_scale,
+                self.silent_cost if whole else 0.0,
+                self.last_drain,
+                m,
+                bound,
+            )
+        )
 
     def solve(self) -> tuple[IntArray, FloatArray, FloatArray, IntArray, IntArray]:
         """Best line per press, its margin, the cost of its own line, the best alternative, and
         the last line it was allowed (its window may stop short of its structural band)."""
-        return kernel.viterbi(*self._presses(), *self._lines(), self.line_note, self.overhead_s,  # type: ignore[no-any-return]
-                              self.sigma_scale, self.silent_cost, self.last_drain)  # fmt: skip
+        found: tuple[IntArray, FloatArray, FloatArray, IntArray, IntArray] = _VITERBI(
+            *self._presses(),
+            *self._lines(),
+            self.line_note,
+            self.overhead_s,
+            self.sigma_scale,
+            self.silent_cost,
+            self.last_drain,
+        )
+        return found
 
     def pair_costs(self, keys: IntArray) -> FloatArray:
         """Timing cost of each press with its predecessor under an assignment."""
         p = self.p
-        return kernel.pair_costs(keys, self.overhead_s, self.sigma_scale, p.t_s.astype(np.float64),  # type: ignore[no-any-return]
-                                 p.has_on.astype(np.bool_), *self._lines())  # fmt: skip
+        costs: FloatArray = _PAIR_COSTS(
+            keys,
+            self.overhead_s,
+            self.sigma_scale,
+            p.t_s.astype(np.float64),
+            p.has_on.astype(np.bool_),
+            *self._lines(),
+        )
+        return costs
 
 
 def _profile_overhead(model: _Model) -> float:

@@ -49,7 +49,11 @@ def group_presses(t_ms: IntArray, kind: IntArray, note: IntArray) -> IntArray:
         gap = t - last_ms
         if k == KIND_ON:
             holding = any(held.values())
-            if current < 0 or gap > regrip_ms or (not holding and not (gap <= bounce_ms and n in held)):
+            if (
+                current < 0
+                or gap > regrip_ms
+                or (not holding and not (gap <= bounce_ms and n in held))
+            ):
                 current += 1
                 held = {}
             held[n] = held.get(n, 0) + 1

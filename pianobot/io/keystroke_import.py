@@ -23,7 +23,14 @@ import pandas as pd
 
 from pianobot.io.keystroke_log import KeystrokeLog, read_keystroke_log
 from pianobot.io.named_keys import DEFAULT_NOTE_OCTAVE
-from pianobot.io.run_output import ImportResult, file_sha256, jsonable, run_dir, trial_ids, write_run
+from pianobot.io.run_output import (
+    ImportResult,
+    file_sha256,
+    jsonable,
+    run_dir,
+    trial_ids,
+    write_run,
+)
 from pianobot.progress import NO_PROGRESS, Progress
 
 
@@ -40,8 +47,15 @@ def import_keystroke_log(
 ) -> ImportResult:
     """Import a dict-per-line keystroke log as a new run (arguments as `read_keystroke_log`)."""
     path, data_dir = Path(path), Path(data_dir)
-    log = read_keystroke_log(path, layout, columns=columns, layout_file=layout_file, finger=finger,
-                             note_octave=note_octave, progress=progress)  # fmt: skip
+    log = read_keystroke_log(
+        path,
+        layout,
+        columns=columns,
+        layout_file=layout_file,
+        finger=finger,
+        note_octave=note_octave,
+        progress=progress,
+    )
     sha = file_sha256(path)
     trials, midi = _tables(log, sha)
     skipped = tuple((s.line, s.reason) for s in log.skipped)
@@ -57,13 +71,22 @@ def import_keystroke_log(
         "skipped_lines": [{"line": n, "reason": r} for n, r in skipped],
         "event_assignment": jsonable(log.assignment),
     }
-    journal = [("events assigned", {k: summary[k] for k in ("moved", "unread", "undecided", "unassigned_presses")})]
+    journal = [
+        (
+            "events assigned",
+            {k: summary[k] for k in ("moved", "unread", "undecided", "unassigned_presses")},
+        )
+    ]
     run_id = write_run(data_dir, f"import-{path.stem}", meta, trials, None, midi, journal, progress)
     return ImportResult(
-        run_id, "keystroke-log", len(trials), summary["silent"], skipped,
+        run_id,
+        "keystroke-log",
+        len(trials),
+        summary["silent"],
+        skipped,
         {"layout": log.layout, "finger": log.finger, **summary, "sessions": log.n_sessions},
         run_dir(data_dir, run_id),
-    )  # fmt: skip
+    )
 
 
 def _tables(log: KeystrokeLog, sha: str) -> tuple[pd.DataFrame, pd.DataFrame]:
@@ -81,7 +104,9 @@ def _tables(log: KeystrokeLog, sha: str) -> tuple[pd.DataFrame, pd.DataFrame]:
     midi = pd.DataFrame(
         {
             # an event of a keystroke the log never wrote keeps no trial (null), but is kept
-            "trial_id": np.where(index >= 0, id_array[np.clip(index, 0, None)] if ids else None, None),
+            "trial_id": np.where(
+                index >= 0, id_array[np.clip(index, 0, None)] if ids else None, None
+            ),
             "t_s": log.midi["t_s"] + log.midi["session"].map(offsets).fillna(0.0),
             "type": log.midi["type"],
             "note": log.midi["note"],

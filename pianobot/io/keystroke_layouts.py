@@ -41,10 +41,18 @@ UP_TRAVELS = ("distance+depth", "depth")
 SKIP = "skip"
 # Columns a layout's slot may fill (the spec's parameter names plus what old scripts also logged).
 PARAMETER_SLOTS = (
-    "vacuum_kpa", "finger_angle_deg", "acceleration_mps2", "up_acceleration_mps2",
-    "down_velocity_mps", "up_velocity_mps", "depth_m", "distance_m", "hold_s",
-    "move_velocity_mps", "move_acceleration_mps2",
-)  # fmt: skip
+    "vacuum_kpa",
+    "finger_angle_deg",
+    "acceleration_mps2",
+    "up_acceleration_mps2",
+    "down_velocity_mps",
+    "up_velocity_mps",
+    "depth_m",
+    "distance_m",
+    "hold_s",
+    "move_velocity_mps",
+    "move_acceleration_mps2",
+)
 SLOT_NAMES = (*PARAMETER_SLOTS, "velocity_mps", "note", SKIP)
 # The names old scripts used for the same values (named-key logs, and accepted in --columns).
 COLUMN_ALIASES: dict[str, str] = {
@@ -113,12 +121,18 @@ class Layout:
             out["up_acceleration_mps2"] = out["acceleration_mps2"]
         if "vacuum_kpa" in raw:  # stored as a positive magnitude; gauge is <= 0
             stiffness = raw["vacuum_kpa"]
-            out["vacuum_kpa"] = np.where(stiffness == RIGID_STIFFNESS_CODE, np.nan, -np.abs(stiffness))
-        frame = pd.DataFrame({k: round_grid_array(np.asarray(v, dtype=np.float64)) for k, v in out.items()})
+            out["vacuum_kpa"] = np.where(
+                stiffness == RIGID_STIFFNESS_CODE, np.nan, -np.abs(stiffness)
+            )
+        frame = pd.DataFrame(
+            {k: round_grid_array(np.asarray(v, dtype=np.float64)) for k, v in out.items()}
+        )
         if "note" in raw:
             notes = raw["note"]
             whole = np.isfinite(notes) & (notes == np.round(notes)) & (notes >= 0) & (notes <= 127)
-            frame["note"] = pd.array([int(v) if w else None for v, w in zip(notes, whole, strict=True)], dtype="Int64")
+            frame["note"] = pd.array(
+                [int(v) if w else None for v, w in zip(notes, whole, strict=True)], dtype="Int64"
+            )
         for name in self.extra_slots:
             frame[name] = raw[name]
         return frame
@@ -153,18 +167,40 @@ class Layout:
         return ok
 
 
-_PAPER = ("vacuum_kpa", "finger_angle_deg", "acceleration_mps2", "velocity_mps", "depth_m", "distance_m", "hold_s")
+_PAPER = (
+    "vacuum_kpa",
+    "finger_angle_deg",
+    "acceleration_mps2",
+    "velocity_mps",
+    "depth_m",
+    "distance_m",
+    "hold_s",
+)
 LAYOUTS: dict[str, Layout] = {
     "soft-2022": Layout("soft-2022", _PAPER, "soft"),
     "rigid-2022": Layout("rigid-2022", _PAPER, "rigid", rigid_code=True),
     "rigid-2022-acc": Layout(
         "rigid-2022-acc",
-        ("finger_angle_deg", "acceleration_mps2", "up_acceleration_mps2", "velocity_mps", "distance_m", "hold_s"),
+        (
+            "finger_angle_deg",
+            "acceleration_mps2",
+            "up_acceleration_mps2",
+            "velocity_mps",
+            "distance_m",
+            "hold_s",
+        ),
         "rigid",
     ),
     "rigid-2022-pretest": Layout(
         "rigid-2022-pretest",
-        ("finger_angle_deg", "down_velocity_mps", "up_velocity_mps", "distance_m", "hold_s", "acceleration_mps2"),
+        (
+            "finger_angle_deg",
+            "down_velocity_mps",
+            "up_velocity_mps",
+            "distance_m",
+            "hold_s",
+            "acceleration_mps2",
+        ),
         "rigid",
     ),
     "sweep-2021": Layout(
@@ -199,9 +235,14 @@ _RANGES: dict[str, tuple[float, float]] = {
     "note": (0.0, 127.0),
 }
 _POSITIVE = {
-    "acceleration_mps2", "up_acceleration_mps2", "move_acceleration_mps2", "velocity_mps",
-    "down_velocity_mps", "up_velocity_mps", "move_velocity_mps",
-}  # fmt: skip
+    "acceleration_mps2",
+    "up_acceleration_mps2",
+    "move_acceleration_mps2",
+    "velocity_mps",
+    "down_velocity_mps",
+    "up_velocity_mps",
+    "move_velocity_mps",
+}
 
 
 def round_grid(value: float) -> float:
@@ -213,25 +254,37 @@ def round_grid(value: float) -> float:
 
 def round_grid_array(values: FloatArray) -> FloatArray:
     """`round_grid` of every value (12 significant digits)."""
-    magnitude = np.floor(np.log10(np.abs(np.where((values == 0) | ~np.isfinite(values), 1.0, values))))
+    magnitude = np.floor(
+        np.log10(np.abs(np.where((values == 0) | ~np.isfinite(values), 1.0, values)))
+    )
     k = 11 - magnitude
     with np.errstate(over="ignore", invalid="ignore"):
-        scaled = np.where(k >= 0, np.round(values * 10.0**k) / 10.0**k, np.round(values / 10.0 ** (-k)) * 10.0 ** (-k))
+        scaled = np.where(
+            k >= 0,
+            np.round(values * 10.0**k) / 10.0**k,
+            np.round(values / 10.0 ** (-k)) * 10.0 ** (-k),
+        )
     return np.where(np.isfinite(values), scaled, values)
 
 
 def declared_layout(
-    columns: Sequence[str], finger: str = "unknown", name: str = "declared",
-    up_travel: str = "distance+depth", where: str = "--columns",
-) -> Layout:  # fmt: skip
+    columns: Sequence[str],
+    finger: str = "unknown",
+    name: str = "declared",
+    up_travel: str = "distance+depth",
+    where: str = "--columns",
+) -> Layout:
     """A user's layout from its column names (validated: known names, no duplicates).
 
     Raises InputError naming the bad column and, for a near miss, the name that was meant.
     """
     names = [COLUMN_ALIASES.get(c.strip(), c.strip()) for c in columns]
     if not names or any(not c for c in names):
-        raise InputError("expected a comma-separated list of column names, e.g. "
-                         "vacuum_kpa,finger_angle_deg,acceleration_mps2,velocity_mps,depth_m,distance_m,hold_s", where)  # fmt: skip
+        raise InputError(
+            "expected a comma-separated list of column names, e.g. "
+            "vacuum_kpa,finger_angle_deg,acceleration_mps2,velocity_mps,depth_m,distance_m,hold_s",
+            where,
+        )
     for i, column in enumerate(names):
         if column in SLOT_NAMES:
             continue
@@ -249,7 +302,9 @@ def declared_layout(
         raise InputError(f"column {duplicate!r} is named twice", where)
     both = {"velocity_mps"} & set(taken) and {"down_velocity_mps", "up_velocity_mps"} & set(taken)
     if both:
-        raise InputError("velocity_mps (both speeds) cannot be combined with down/up_velocity_mps", where)
+        raise InputError(
+            "velocity_mps (both speeds) cannot be combined with down/up_velocity_mps", where
+        )
     if finger not in ("soft", "rigid", "unknown"):
         raise InputError(f"finger should be soft or rigid, got {finger!r}", where)
     if up_travel not in UP_TRAVELS:

@@ -31,7 +31,8 @@ from pianobot.io.keystroke_layouts import (
     declared_layout,
     layouts_tried,
 )
-from pianobot.io.keystroke_sessions import LogRecords, assign_events
+from pianobot.io.keystroke_records import LogRecords
+from pianobot.io.keystroke_sessions import assign_events
 from pianobot.io.layout_file import load_layout_file
 from pianobot.io.log_lines import LogLines, SkippedLine, parse_lines
 from pianobot.io.named_keys import DEFAULT_NOTE_OCTAVE, named_records
@@ -133,25 +134,35 @@ def read_keystroke_log(
     )
 
 
-def _declared(layout: str, columns: list[str] | None, layout_file: Path | str | None,
-              finger: str | None) -> Layout | None:  # fmt: skip
+def _declared(
+    layout: str, columns: list[str] | None, layout_file: Path | str | None, finger: str | None
+) -> Layout | None:
     if columns is not None and layout_file is not None:
         raise InputError("give either --columns or --layout-file, not both", "--columns")
     if (columns is not None or layout_file is not None) and layout != "auto":
-        raise InputError("--layout names a known layout; a declared one (--columns, --layout-file) replaces it",
-                         "--layout")  # fmt: skip
+        raise InputError(
+            "--layout names a known layout; a declared one (--columns, --layout-file) replaces it",
+            "--layout",
+        )
     if columns is not None:
         return declared_layout(columns, finger or "unknown")
     if layout_file is not None:
         return load_layout_file(layout_file)
     if layout not in LAYOUT_CHOICES:
-        raise InputError(f"layout should be one of {sorted(LAYOUT_CHOICES)}, got {layout!r}", "--layout")
+        raise InputError(
+            f"layout should be one of {sorted(LAYOUT_CHOICES)}, got {layout!r}", "--layout"
+        )
     return None
 
 
-def _positional(parsed: LogLines, choice: str, declared: Layout | None, finger: str | None,
-                where: str) -> tuple[LogRecords, str]:  # fmt: skip
-    counts = np.frombuffer(parsed.n_control, dtype=np.int32).astype(np.int64) if len(parsed.n_control) else np.zeros(0, np.int64)
+def _positional(
+    parsed: LogLines, choice: str, declared: Layout | None, finger: str | None, where: str
+) -> tuple[LogRecords, str]:
+    counts = (
+        np.frombuffer(parsed.n_control, dtype=np.int32).astype(np.int64)
+        if len(parsed.n_control)
+        else np.zeros(0, np.int64)
+    )
     is_positional = _kinds(parsed)
     offsets = np.concatenate([[0], np.cumsum(counts)])
     values = np.frombuffer(parsed.control, dtype=np.float64) if len(parsed.control) else np.zeros(0)
@@ -183,8 +194,12 @@ def _positional(parsed: LogLines, choice: str, declared: Layout | None, finger: 
             f"{chosen.name} has {n} columns ({', '.join(chosen.slots)})",
             where,
         )
-    skipped = [SkippedLine(int(lines[i]), f"control has {int(counts[i])} values, layout {chosen.name} expects {n}")
-               for i in np.flatnonzero(~fits)]  # fmt: skip
+    skipped = [
+        SkippedLine(
+            int(lines[i]), f"control has {int(counts[i])} values, layout {chosen.name} expects {n}"
+        )
+        for i in np.flatnonzero(~fits)
+    ]
     skipped += _other_kind(parsed, is_positional, "a named-key line in a log of control lists")
     control = _rows(values, offsets, counts, n)
     header_acc = np.frombuffer(parsed.header_acc, dtype=np.float64)[is_positional][fits]
@@ -196,9 +211,16 @@ def _positional(parsed: LogLines, choice: str, declared: Layout | None, finger: 
     extra = params[list(chosen.extra_slots)]
     params = params.drop(columns=list(chosen.extra_slots))
     records = LogRecords.build(
-        parsed, np.flatnonzero(is_positional)[fits], params, fingers, notes, extra,
-        pd.DataFrame(index=range(len(params))), chosen.up_travel, skipped,
-    )  # fmt: skip
+        parsed,
+        np.flatnonzero(is_positional)[fits],
+        params,
+        fingers,
+        notes,
+        extra,
+        pd.DataFrame(index=range(len(params))),
+        chosen.up_travel,
+        skipped,
+    )
     return records, chosen.name
 
 
@@ -216,12 +238,21 @@ def _named(parsed: LogLines, note_octave: int, finger: str | None) -> tuple[LogR
     fingers = np.full(int(keep.sum()), chosen_finger, dtype=object)
     params = found.params[keep].reset_index(drop=True)
     records = LogRecords.build(
-        parsed, index[keep], params, fingers, found.note[keep],
-        found.extra[keep].reset_index(drop=True), found.sequence[keep].reset_index(drop=True),
-        "depth" if found.is_sequence_script else "distance+depth", skipped, columns=found.columns,
-    )  # fmt: skip
-    octave_text = (f"note letters without an octave are octave {note_octave} "
-                   f"(C{note_octave} = MIDI {12 * (note_octave + 1)}; middle C is C4 = 60)")  # fmt: skip
+        parsed,
+        index[keep],
+        params,
+        fingers,
+        found.note[keep],
+        found.extra[keep].reset_index(drop=True),
+        found.sequence[keep].reset_index(drop=True),
+        "depth" if found.is_sequence_script else "distance+depth",
+        skipped,
+        columns=found.columns,
+    )
+    octave_text = (
+        f"note letters without an octave are octave {note_octave} "
+        f"(C{note_octave} = MIDI {12 * (note_octave + 1)}; middle C is C4 = 60)"
+    )
     return records, "named-keys", f"{octave_text}; {finger_text}"
 
 
@@ -237,9 +268,14 @@ def _named_finger(params: pd.DataFrame, finger: str | None) -> tuple[str, str]:
     median = float(depth.median())
     for name, limits in FINGER_ENVELOPES.items():
         if limits["depth_m"].contains(median):
-            return name, (f"finger {name} (inferred: median press depth {median * 1000:.1f} mm lies in the "
-                          f"{name} finger's depth range; give --finger to override)")  # fmt: skip
-    return "unknown", f"finger unknown (median depth {median * 1000:.1f} mm fits no finger; give --finger)"
+            return name, (
+                f"finger {name} (inferred: median press depth {median * 1000:.1f} mm lies in the "
+                f"{name} finger's depth range; give --finger to override)"
+            )
+    return (
+        "unknown",
+        f"finger unknown (median depth {median * 1000:.1f} mm fits no finger; give --finger)",
+    )
 
 
 def _kinds(parsed: LogLines) -> np.ndarray:
@@ -260,7 +296,8 @@ def _rows(values: np.ndarray, offsets: np.ndarray, counts: np.ndarray, n: int) -
     starts = offsets[:-1][counts == n]
     if not starts.size:
         return np.zeros((0, n))
-    return values[starts[:, None] + np.arange(n)[None, :]]
+    rows: np.ndarray = values[starts[:, None] + np.arange(n)[None, :]]
+    return rows
 
 
 def _other_kind(parsed: LogLines, kept: np.ndarray, reason: str) -> list[SkippedLine]:

@@ -57,16 +57,22 @@ class LineTiming:
         )
 
 
-def move_duration_s(distance_m: FloatArray, velocity_mps: FloatArray, accel_mps2: FloatArray) -> FloatArray:
+def move_duration_s(
+    distance_m: FloatArray, velocity_mps: FloatArray, accel_mps2: FloatArray
+) -> FloatArray:
     """Duration of moveL trapezoids (triangles when d < v²/a); a = inf gives a constant-speed ramp."""
     d, v, a = np.broadcast_arrays(distance_m, velocity_mps, accel_mps2)
     with np.errstate(invalid="ignore", divide="ignore"):
         triangle = d < v * v / a
-        return np.where(triangle, 2.0 * np.sqrt(d / a), d / v + v / a)
+        out: FloatArray = np.where(triangle, 2.0 * np.sqrt(d / a), d / v + v / a)
+    return out
 
 
 def time_at_m(
-    travelled_m: FloatArray, distance_m: FloatArray, velocity_mps: FloatArray, accel_mps2: FloatArray
+    travelled_m: FloatArray,
+    distance_m: FloatArray,
+    velocity_mps: FloatArray,
+    accel_mps2: FloatArray,
 ) -> FloatArray:
     """Time after a move's start at which it has covered `travelled_m` (clipped to [0, d])."""
     s, d, v, a = np.broadcast_arrays(travelled_m, distance_m, velocity_mps, accel_mps2)
@@ -84,7 +90,9 @@ def time_at_m(
 
 
 def line_timing(
-    params: Mapping[str, FloatArray], notes: IntArray | None = None, up_travel: str = "distance+depth"
+    params: Mapping[str, FloatArray],
+    notes: IntArray | None = None,
+    up_travel: str = "distance+depth",
 ) -> LineTiming:
     """Predicted motion time and note-on window of each line.
 
@@ -108,8 +116,13 @@ def line_timing(
     v_down, v_up = column("down_velocity_mps"), column("up_velocity_mps")
     v_up = np.where(np.isfinite(v_up), v_up, v_down)
     a_down = _acceleration(column("acceleration_mps2"))
-    a_up = _acceleration(np.where(np.isfinite(column("up_acceleration_mps2")),
-                                  column("up_acceleration_mps2"), column("acceleration_mps2")))  # fmt: skip
+    a_up = _acceleration(
+        np.where(
+            np.isfinite(column("up_acceleration_mps2")),
+            column("up_acceleration_mps2"),
+            column("acceleration_mps2"),
+        )
+    )
     known = np.isfinite(v_down) & (v_down > 0) & np.isfinite(v_up) & (v_up > 0)
     v_down, v_up = np.where(known, v_down, 1.0), np.where(known, v_up, 1.0)
     travel_down = distance + depth
@@ -123,9 +136,11 @@ def line_timing(
     motion = move_s + down_s + hold + up_s
     zero = np.zeros(n)
     return LineTiming(
-        np.where(known, motion, zero), np.where(known, early, zero),
-        np.where(known, late, zero), known,
-    )  # fmt: skip
+        np.where(known, motion, zero),
+        np.where(known, early, zero),
+        np.where(known, late, zero),
+        known,
+    )
 
 
 def _acceleration(values: FloatArray) -> FloatArray:
@@ -144,7 +159,9 @@ def _sideways_s(
     """Time of the sideways move from the previous line's key to this line's (0 where unknown)."""
     if notes is None or not np.isfinite(velocity).any():
         return np.zeros(n)
-    position = np.where((notes >= 0) & (notes < 128), _KEY_POSITION_M[np.clip(notes, 0, 127)], np.nan)
+    position = np.where(
+        (notes >= 0) & (notes < 128), _KEY_POSITION_M[np.clip(notes, 0, 127)], np.nan
+    )
     step = np.abs(np.diff(position, prepend=np.nan))
     ok = np.isfinite(step) & np.isfinite(velocity) & (velocity > 0)
     duration = move_duration_s(

@@ -29,7 +29,8 @@ class LayoutFile(BaseModel):
 
     name: str = Field("declared", description="A name for the layout, stored with the run.")
     finger: Literal["soft", "rigid", "unknown"] = Field(
-        "unknown", description="The finger the log's script drove (a vacuum column decides per line)."
+        "unknown",
+        description="The finger the log's script drove (a vacuum column decides per line).",
     )
     columns: list[str] = Field(
         min_length=1,
@@ -44,4 +45,6 @@ class LayoutFile(BaseModel):
 def load_layout_file(path: Path | str) -> Layout:
     """The layout a YAML layout file declares; InputError names the file and the YAML path."""
     spec = load_model(path, LayoutFile)
-    return declared_layout(spec.columns, spec.finger, spec.name, spec.up_travel, where=f"{path}: columns")
+    return declared_layout(
+        spec.columns, spec.finger, spec.name, spec.up_travel, where=f"{path}: columns"
+    )

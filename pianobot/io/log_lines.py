@@ -67,7 +67,9 @@ class LogLines:
 
 
 def parse_lines(
-    lines: Iterable[tuple[int, str]], progress: Progress = NO_PROGRESS, total_bytes: int | None = None
+    lines: Iterable[tuple[int, str]],
+    progress: Progress = NO_PROGRESS,
+    total_bytes: int | None = None,
 ) -> LogLines:
     """Parse numbered lines into records, headers and skipped lines.
 
@@ -131,7 +133,9 @@ def _add_record(out: LogLines, number: int, value: dict[Any, Any]) -> None:
             raise ValueError(f"key {bad[0]!r} is not a name")
         for key in keys:
             item = value[key]
-            if not (is_number(item) or isinstance(item, str) or item is None or isinstance(item, bool)):
+            if not (
+                is_number(item) or isinstance(item, str) or item is None or isinstance(item, bool)
+            ):
                 raise ValueError(f"{key!r} is neither a number nor a text: {item!r:.60}")
         record = len(out.line)
         for key in keys:
@@ -194,7 +198,9 @@ def _control(value: Any) -> list[float]:
     if not isinstance(value, list | tuple) or not value:
         raise ValueError("'control' is not a non-empty list")
     # exact type checks are the fast path (bool is an int subclass and must not pass)
-    if not all(type(v) is float or type(v) is int for v in value) or not all(map(math.isfinite, value)):
+    if not all(type(v) is float or type(v) is int for v in value) or not all(
+        map(math.isfinite, value)
+    ):
         raise ValueError(f"'control' holds a non-number: {value!r:.80}")
     return [float(v) for v in value]
 
@@ -210,10 +216,22 @@ def _events(value: Any) -> list[tuple[int, int, int, int]]:
             message, timestamp = item
             status, note, velocity = message[0], message[1], message[2]
         except (TypeError, ValueError, IndexError, KeyError):
-            raise ValueError(f"MIDI event {i} is not [[status, note, velocity, 0], timestamp_ms]") from None
-        if not (type(status) is int and type(note) is int and type(velocity) is int and type(timestamp) is int):
+            raise ValueError(
+                f"MIDI event {i} is not [[status, note, velocity, 0], timestamp_ms]"
+            ) from None
+        if not (
+            type(status) is int
+            and type(note) is int
+            and type(velocity) is int
+            and type(timestamp) is int
+        ):
             raise ValueError(f"MIDI event {i} holds a non-integer: {item!r:.80}")
-        if not (0 <= status <= 255 and 0 <= note <= 127 and 0 <= velocity <= 127 and 0 <= timestamp < 2**53):
+        if not (
+            0 <= status <= 255
+            and 0 <= note <= 127
+            and 0 <= velocity <= 127
+            and 0 <= timestamp < 2**53
+        ):
             raise ValueError(f"MIDI event {i} is out of range: {item!r:.80}")
         events.append((status, note, velocity, timestamp))
     return events

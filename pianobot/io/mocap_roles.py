@@ -36,9 +36,12 @@ NOT_IN_VIEW = "none"
 
 
 def assign_roles(
-    names: list[str], up_m: Callable[[str], FloatArray], given: dict[str, str],
-    resolve: Callable[[str], str | None], where: str,
-) -> dict[str, str]:  # fmt: skip
+    names: list[str],
+    up_m: Callable[[str], FloatArray],
+    given: dict[str, str],
+    resolve: Callable[[str], str | None],
+    where: str,
+) -> dict[str, str]:
     """Roles of the persistent markers `names` (module docstring).
 
     Args:
@@ -59,7 +62,9 @@ def assign_roles(
         chain = resolve(name)
         if chain is None or chain not in names:
             known = ", ".join(names[:8])
-            raise InputError(f"marker {name!r} is not a persistent marker of the take ({known})", "--marker")
+            raise InputError(
+                f"marker {name!r} is not a persistent marker of the take ({known})", "--marker"
+            )
         roles[role] = chain
     free = [n for n in names if n not in roles.values()]
     height = {n: float(np.nanmedian(up_m(n))) for n in free}
@@ -73,7 +78,10 @@ def assign_roles(
     rest = [n for n in moving if n not in roles.values()]
     if "key" not in roles and "key" not in absent and len(rest) >= 2:
         ranked = sorted(rest, key=lambda n: motion[n])
-        clear = motion[ranked[0]] <= KEY_MOTION_RATIO * motion[ranked[1]] and motion[ranked[0]] <= KEY_MAX_TRAVEL_M
+        clear = (
+            motion[ranked[0]] <= KEY_MOTION_RATIO * motion[ranked[1]]
+            and motion[ranked[0]] <= KEY_MAX_TRAVEL_M
+        )
         if not clear:
             _unclear("key", "least moving", ranked[:2], motion, where)
         roles["key"] = ranked[0]
@@ -86,7 +94,9 @@ def assign_roles(
     return {role: roles[role] for role in ROLES if role in roles}
 
 
-def _unclear(role: str, rule: str, candidates: list[str], value: dict[str, float], where: str) -> None:
+def _unclear(
+    role: str, rule: str, candidates: list[str], value: dict[str, float], where: str
+) -> None:
     what = "height" if rule != "least moving" else "travel"
     listed = " or ".join(f"{n} ({what} {value[n] * 1000:.1f} mm)" for n in candidates)
     raise InputError(

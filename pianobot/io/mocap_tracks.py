@@ -48,8 +48,12 @@ class Join:
     mismatch_m: float
 
     def to_dict(self) -> dict[str, object]:
-        return {"chain": self.chain, "piece": self.piece, "gap_s": round(self.gap_s, 4),
-                "mismatch_mm": round(self.mismatch_m * 1000, 3)}  # fmt: skip
+        return {
+            "chain": self.chain,
+            "piece": self.piece,
+            "gap_s": round(self.gap_s, 4),
+            "mismatch_mm": round(self.mismatch_m * 1000, 3),
+        }
 
 
 @dataclass
@@ -59,7 +63,9 @@ class Stitched:
     chains: list[Track]
     pieces: dict[str, list[str]]
     joins: list[Join] = field(default_factory=list)
-    ambiguous: list[tuple[str, str, str]] = field(default_factory=list)  # (piece, chain, other chain)
+    ambiguous: list[tuple[str, str, str]] = field(
+        default_factory=list
+    )  # (piece, chain, other chain)
 
     def chain_of(self, name: str) -> str | None:
         """The chain a marker name (any of its pieces) belongs to."""
@@ -84,19 +90,29 @@ def stitch(tracks: list[Track], t_s: FloatArray) -> Stitched:
             if score is not None:
                 scores.append((score[0], c, score[1], score[2]))
         scores.sort()
-        if scores and (len(scores) == 1 or scores[1][0] > AMBIGUOUS_RATIO * max(scores[0][0], 1e-9)):
+        if scores and (
+            len(scores) == 1 or scores[1][0] > AMBIGUOUS_RATIO * max(scores[0][0], 1e-9)
+        ):
             _, c, gap, mismatch = scores[0]
             joins.append(Join(chains[c][0].name, track.name, gap, mismatch))
             chains[c].append(track)
             continue
         if len(scores) > 1:
-            ambiguous.append((track.name, chains[scores[0][1]][0].name, chains[scores[1][1]][0].name))
+            ambiguous.append(
+                (track.name, chains[scores[0][1]][0].name, chains[scores[1][1]][0].name)
+            )
         chains.append([track])
     merged = [
-        Track(chain[0].name, np.concatenate([p.frames for p in chain]), np.concatenate([p.xyz for p in chain]))
+        Track(
+            chain[0].name,
+            np.concatenate([p.frames for p in chain]),
+            np.concatenate([p.xyz for p in chain]),
+        )
         for chain in chains
     ]
-    return Stitched(merged, {chain[0].name: [p.name for p in chain] for chain in chains}, joins, ambiguous)
+    return Stitched(
+        merged, {chain[0].name: [p.name for p in chain] for chain in chains}, joins, ambiguous
+    )
 
 
 def _continuation(last: Track, piece: Track, t_s: FloatArray) -> tuple[float, float, float] | None:

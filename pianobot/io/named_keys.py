@@ -41,18 +41,39 @@ from pianobot.io.keystroke_layouts import COLUMN_ALIASES, RIGID_STIFFNESS_CODE, 
 DEFAULT_NOTE_OCTAVE = 4  # scientific pitch notation: middle C = C4 = MIDI 60
 KEY_COLUMNS = COLUMN_ALIASES
 NUMERIC_COLUMNS = (
-    "vacuum_kpa", "down_velocity_mps", "up_velocity_mps", "acceleration_mps2",
-    "up_acceleration_mps2", "depth_m", "distance_m", "hold_s", "finger_angle_deg",
-    "move_velocity_mps", "move_acceleration_mps2",
-)  # fmt: skip
+    "vacuum_kpa",
+    "down_velocity_mps",
+    "up_velocity_mps",
+    "acceleration_mps2",
+    "up_acceleration_mps2",
+    "depth_m",
+    "distance_m",
+    "hold_s",
+    "finger_angle_deg",
+    "move_velocity_mps",
+    "move_acceleration_mps2",
+)
 SEQUENCE_COLUMNS = ("sequence_id", "sequence_order")
 _OWN = {*NUMERIC_COLUMNS, *SEQUENCE_COLUMNS, "note", "velocity_mps"}
 _PITCH = {"C": 0, "D": 2, "E": 4, "F": 5, "G": 7, "A": 9, "B": 11}
 _NOTE_NAME = re.compile(r"^\s*([A-Ga-g])\s*([#♯b♭]*)\s*(-?\d+)?\s*$")
 _RESERVED = {
-    "index", "source_line", "session", "status", "finger", "trial_id", "attempt", "run_id",
-    "on_velocity", "off_velocity", "t_on_s", "t_off_s", "midi_hold_s", "n_note_on", "error",
-}  # fmt: skip
+    "index",
+    "source_line",
+    "session",
+    "status",
+    "finger",
+    "trial_id",
+    "attempt",
+    "run_id",
+    "on_velocity",
+    "off_velocity",
+    "t_on_s",
+    "t_off_s",
+    "midi_hold_s",
+    "n_note_on",
+    "error",
+}
 
 
 @dataclass(frozen=True)
@@ -80,7 +101,11 @@ def note_number(value: Any, octave: int = DEFAULT_NOTE_OCTAVE) -> int:
     elif isinstance(value, str) and (match := _NOTE_NAME.match(value)):
         letter, accidentals, given = match.groups()
         shift = sum(1 if a in "#♯" else -1 for a in accidentals)
-        number = 12 * ((int(given) if given is not None else octave) + 1) + _PITCH[letter.upper()] + shift
+        number = (
+            12 * ((int(given) if given is not None else octave) + 1)
+            + _PITCH[letter.upper()]
+            + shift
+        )
     else:
         raise ValueError(f"note {value!r} is neither a MIDI number nor a note name like 'C', 'F#4'")
     if not 0 <= number <= 127:
@@ -88,21 +113,29 @@ def note_number(value: Any, octave: int = DEFAULT_NOTE_OCTAVE) -> int:
     return number
 
 
-def named_records(named: dict[str, list[Any]], note_octave: int = DEFAULT_NOTE_OCTAVE) -> NamedRecords:
+def named_records(
+    named: dict[str, list[Any]], note_octave: int = DEFAULT_NOTE_OCTAVE
+) -> NamedRecords:
     """Turn the named-key columns of a log into pianobot columns (module docstring)."""
     if not -1 <= note_octave <= 9:
-        raise InputError(f"octave should be in -1..9 (middle C is C4), got {note_octave}", "--note-octave")
+        raise InputError(
+            f"octave should be in -1..9 (middle C is C4), got {note_octave}", "--note-octave"
+        )
     n = len(next(iter(named.values()))) if named else 0
     bad: dict[int, str] = {}
     columns: dict[str, str] = {}
     params = pd.DataFrame({name: np.full(n, np.nan) for name in NUMERIC_COLUMNS})
     extra: dict[str, list[Any]] = {}
-    sequence: dict[str, pd.Series] = {}
+    sequence: dict[str, Any] = {}
     notes = np.full(n, -1, dtype=np.int64)
     for key, values in named.items():
         column = KEY_COLUMNS.get(key, key if key in _OWN else None)
         if column is None:
-            name = key if key.isidentifier() and key not in _RESERVED and key not in _OWN else f"log_{_slug(key)}"
+            name = (
+                key
+                if key.isidentifier() and key not in _RESERVED and key not in _OWN
+                else f"log_{_slug(key)}"
+            )
             columns[key] = name
             extra[name] = values
             continue
@@ -112,16 +145,18 @@ def named_records(named: dict[str, list[Any]], note_octave: int = DEFAULT_NOTE_O
                 if value is None:
                     continue
                 try:
-                    notes[i] = note_number(value, note_octave)
+                    notes[i] = np.int64(note_number(value, note_octave))
                 except ValueError as exc:
                     bad.setdefault(i, str(exc))
             continue
         numbers = _numbers(values, key, bad)
         if column in SEQUENCE_COLUMNS:
             whole = np.isfinite(numbers) & (numbers == np.round(numbers))
-            for i in np.flatnonzero(np.isfinite(numbers) & ~whole):
-                bad.setdefault(int(i), f"{key!r} is not a whole number: {values[i]!r}")
-            sequence[column] = pd.array([int(v) if w else None for v, w in zip(numbers, whole, strict=True)], dtype="Int64")
+            for j in np.flatnonzero(np.isfinite(numbers) & ~whole):
+                bad.setdefault(int(j), f"{key!r} is not a whole number: {values[j]!r}")
+            sequence[column] = pd.array(
+                [int(v) if w else None for v, w in zip(numbers, whole, strict=True)], dtype="Int64"
+            )
         elif column == "velocity_mps":
             for target in ("down_velocity_mps", "up_velocity_mps"):
                 params[target] = np.where(np.isfinite(params[target]), params[target], numbers)
@@ -134,11 +169,14 @@ def named_records(named: dict[str, list[Any]], note_octave: int = DEFAULT_NOTE_O
     params = params.apply(lambda c: c.map(round_grid))
     keys = set(named)
     return NamedRecords(
-        params=params, note=notes, sequence=pd.DataFrame(sequence, index=range(n)),
+        params=params,
+        note=notes,
+        sequence=pd.DataFrame(sequence, index=range(n)),
         extra=pd.DataFrame({k: _extra_column(v) for k, v in extra.items()}, index=range(n)),
-        columns=columns, bad_lines=bad,
+        columns=columns,
+        bad_lines=bad,
         is_sequence_script={"group", "order", "press_depth", "up_vel"} <= keys,
-    )  # fmt: skip
+    )
 
 
 def _numbers(values: list[Any], key: str, bad: dict[int, str]) -> np.ndarray:

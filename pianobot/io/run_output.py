@@ -51,10 +51,15 @@ def trial_ids(sha: str, n: int) -> list[str]:
 
 
 def write_run(
-    data_dir: Path, name: str, meta: dict[str, Any], trials: pd.DataFrame,
-    samples: pd.DataFrame | None, midi: pd.DataFrame | None,
-    journal: list[tuple[str, dict[str, Any]]] | None = None, progress: Progress = NO_PROGRESS,
-) -> str:  # fmt: skip
+    data_dir: Path,
+    name: str,
+    meta: dict[str, Any],
+    trials: pd.DataFrame,
+    samples: pd.DataFrame | None,
+    midi: pd.DataFrame | None,
+    journal: list[tuple[str, dict[str, Any]]] | None = None,
+    progress: Progress = NO_PROGRESS,
+) -> str:
     """Create the run, write one batch and finish it; a failure marks the run failed.
 
     `journal`: extra events recorded between "import started" and "import done".

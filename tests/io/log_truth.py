@@ -45,7 +45,9 @@ class Stroke:
 
     line: int  # file line number
     session: int
-    events: list[tuple[str, int, int, int]] = field(default_factory=list)  # (type, note, velocity, t_ms)
+    events: list[tuple[str, int, int, int]] = field(
+        default_factory=list
+    )  # (type, note, velocity, t_ms)
     printed_on: list[int] = field(default_factory=list)  # per event: file line, -1 never read
 
     @property
@@ -62,7 +64,11 @@ class Stroke:
 
     def printed(self) -> set[tuple[str, int, int]]:
         """The events of this stroke that reached the log: (type, t_ms, velocity)."""
-        return {(k, t, v) for (k, _, v, t), line in zip(self.events, self.printed_on, strict=True) if line >= 0}
+        return {
+            (k, t, v)
+            for (k, _, v, t), line in zip(self.events, self.printed_on, strict=True)
+            if line >= 0
+        }
 
 
 @dataclass
@@ -93,21 +99,42 @@ def _move_s(distance: float, speed: float, accel: float) -> np.ndarray:
 
 def _controls(sc: Scenario, k: int, rng: random.Random) -> dict[str, float | str]:
     if sc.layout == "soft":
-        grid = [(a, 0.01 + 0.005 * v, d) for a in (0.1, 0.5, 1.0) for v in range(15) for d in (0.02, 0.03, 0.04)]
+        grid = [
+            (a, 0.01 + 0.005 * v, d)
+            for a in (0.1, 0.5, 1.0)
+            for v in range(15)
+            for d in (0.02, 0.03, 0.04)
+        ]
         acc, vel, depth = grid[k % len(grid)]
         return {"acc": acc, "vel": vel, "depth": depth, "distance": 0.05, "hold": 0.0, "vac": 60}
     if sc.layout == "rigid-acc":
         accs = [4.01 - 0.4 * i for i in range(11)]
-        return {"acc": accs[(k // 11) % 11], "up_acc": accs[k % 11], "vel": 0.774, "distance": 0.035,
-                "hold": 1.0, "depth": 0.01}  # fmt: skip
+        return {
+            "acc": accs[(k // 11) % 11],
+            "up_acc": accs[k % 11],
+            "vel": 0.774,
+            "distance": 0.035,
+            "hold": 1.0,
+            "depth": 0.01,
+        }
     note = rng.choice("CDEFGAB")
-    return {"note": note, "move_vel": rng.uniform(0.05, 1.0), "move_acc": rng.uniform(0.1, 2.0),
-            "down_vel": rng.uniform(0.02, 1.0), "up_vel": rng.uniform(0.02, 1.0),
-            "acc": rng.uniform(0.1, 2.0), "up_acc": rng.uniform(0.1, 2.0), "distance": rng.uniform(0.002, 0.08),
-            "hold": rng.uniform(0.0, 3.0), "depth": rng.uniform(0.008, 0.015)}  # fmt: skip
+    return {
+        "note": note,
+        "move_vel": rng.uniform(0.05, 1.0),
+        "move_acc": rng.uniform(0.1, 2.0),
+        "down_vel": rng.uniform(0.02, 1.0),
+        "up_vel": rng.uniform(0.02, 1.0),
+        "acc": rng.uniform(0.1, 2.0),
+        "up_acc": rng.uniform(0.1, 2.0),
+        "distance": rng.uniform(0.002, 0.08),
+        "hold": rng.uniform(0.0, 3.0),
+        "depth": rng.uniform(0.008, 0.015),
+    }
 
 
-def _line_text(sc: Scenario, c: dict[str, float | str], k: int, printed: list[tuple[int, int, int, int]]) -> str:
+def _line_text(
+    sc: Scenario, c: dict[str, float | str], k: int, printed: list[tuple[int, int, int, int]]
+) -> str:
     midi = [[[status, note, vel, 0], t] for status, note, vel, t in printed]
     if sc.layout == "soft":
         control = [c["vac"], 45, c["acc"], c["vel"], c["depth"], c["distance"], c["hold"]]
@@ -115,10 +142,23 @@ def _line_text(sc: Scenario, c: dict[str, float | str], k: int, printed: list[tu
     if sc.layout == "rigid-acc":
         control = [0, c["acc"], c["up_acc"], c["vel"], c["distance"], c["hold"]]
         return repr({"control": control, "midi": midi})
-    return repr({"group": k // 12, "order": k % 12, "note": c["note"], "move_vel": c["move_vel"],
-                 "down_vel": c["down_vel"], "up_vel": c["up_vel"], "distance": c["distance"],
-                 "hold_time": c["hold"], "move_acc": c["move_acc"], "down_acc": c["acc"],
-                 "up_acc": c["up_acc"], "press_depth": c["depth"], "midi": midi})  # fmt: skip
+    return repr(
+        {
+            "group": k // 12,
+            "order": k % 12,
+            "note": c["note"],
+            "move_vel": c["move_vel"],
+            "down_vel": c["down_vel"],
+            "up_vel": c["up_vel"],
+            "distance": c["distance"],
+            "hold_time": c["hold"],
+            "move_acc": c["move_acc"],
+            "down_acc": c["acc"],
+            "up_acc": c["up_acc"],
+            "press_depth": c["depth"],
+            "midi": midi,
+        }
+    )
 
 
 def make_log(sc: Scenario) -> TruthLog:
@@ -126,7 +166,9 @@ def make_log(sc: Scenario) -> TruthLog:
     rng = random.Random(sc.seed)
     lines: list[str] = []
     strokes: list[Stroke] = []
-    fifo: list[tuple[int, int, int, int, Stroke, int]] = []  # t_ms, status, note, vel, stroke, event
+    fifo: list[
+        tuple[int, int, int, int, Stroke, int]
+    ] = []  # t_ms, status, note, vel, stroke, event
     clock = rng.uniform(1.0, 3.0)
     overhead = rng.uniform(0.2, 2.5)
     session = 0
@@ -138,26 +180,42 @@ def make_log(sc: Scenario) -> TruthLog:
             fifo.clear()
             clock, overhead, session = rng.uniform(1.0, 3.0), rng.uniform(0.2, 2.5), session + 1
             if sc.header_on_restart:
-                lines.append(repr({"start_position_l": [round(rng.uniform(-1, 1), 5) for _ in range(6)]}))
+                lines.append(
+                    repr({"start_position_l": [round(rng.uniform(-1, 1), 5) for _ in range(6)]})
+                )
         if rng.random() < sc.pause:
             clock += rng.uniform(5.0, 40.0)
         c = _controls(sc, k, rng)
         stroke = Stroke(line=len(lines) + 1, session=session)
         start = clock + rng.uniform(0.008, 0.03)  # controller latency before the move begins
-        key = WHITE[str(c["note"])] if sc.layout == "named" else (60 if sc.layout == "rigid-acc" else SOFT_NOTE)
+        key = (
+            WHITE[str(c["note"])]
+            if sc.layout == "named"
+            else (60 if sc.layout == "rigid-acc" else SOFT_NOTE)
+        )
         if sc.layout == "named" and previous_key is not None:
             sideways = abs(key - previous_key) / 12 * 7 * 0.0235
-            start += len(_move_s(sideways, float(c["move_vel"]), float(c["move_acc"]))) * STEP_S if sideways else 0.0
+            start += (
+                len(_move_s(sideways, float(c["move_vel"]), float(c["move_acc"]))) * STEP_S
+                if sideways
+                else 0.0
+            )
         previous_key = key
         travel = float(c["distance"]) + float(c["depth"])
         down = _move_s(travel, float(c["vel"] if "vel" in c else c["down_vel"]), float(c["acc"]))
         up_travel = float(c["depth"]) if sc.layout == "named" else travel
-        up = _move_s(up_travel, float(c["vel"] if "vel" in c else c["up_vel"]), float(c.get("up_acc", c["acc"])))
+        up = _move_s(
+            up_travel,
+            float(c["vel"] if "vel" in c else c["up_vel"]),
+            float(c.get("up_acc", c["acc"])),
+        )
         settle = rng.uniform(0.02, 0.06)
         bottom = start + len(down) * STEP_S + settle
         end = bottom + float(c["hold"]) + len(up) * STEP_S + settle
         if _sounds(sc, k, c, rng):
-            ratio = 1.0 if sc.layout != "soft" else rng.uniform(0.5, 0.9)  # soft finger: key lags the arm
+            ratio = (
+                1.0 if sc.layout != "soft" else rng.uniform(0.5, 0.9)
+            )  # soft finger: key lags the arm
             trigger = float(c["distance"]) + rng.uniform(0.004, 0.009) / ratio
             step = min(int(np.searchsorted(down, min(trigger, travel))), len(down) - 1)
             t_on = start + step * STEP_S + rng.uniform(0.001, 0.004)
@@ -168,9 +226,18 @@ def make_log(sc: Scenario) -> TruthLog:
             velocity = rng.randint(1, 100)
             stroke.events.append(("on", key, velocity, round(t_on * 1000)))
             if rng.random() < sc.double_strike:
-                stroke.events.append(("on", key, max(1, velocity // 2), round((t_on + rng.uniform(0.03, 0.09)) * 1000)))
+                stroke.events.append(
+                    (
+                        "on",
+                        key,
+                        max(1, velocity // 2),
+                        round((t_on + rng.uniform(0.03, 0.09)) * 1000),
+                    )
+                )
                 stroke.events.append(("off", key, 64, round(t_off * 1000)))
-            stroke.events.append(("off", key, rng.randint(1, 110), round(t_off * 1000) + rng.randint(0, 2)))
+            stroke.events.append(
+                ("off", key, rng.randint(1, 110), round(t_off * 1000) + rng.randint(0, 2))
+            )
             stroke.events.sort(key=lambda e: e[3])
             stroke.printed_on = [-1] * len(stroke.events)
             for j, (kind, note, vel, t) in enumerate(stroke.events):
@@ -217,15 +284,19 @@ def check_assignment(truth: TruthLog, trials: object, midi: object) -> list[str]
         truth_outcome = stroke.outcome
         if row.status == "ok":
             if truth_outcome != "ok" or events[row.source_line] != stroke.printed():
-                problems.append(f"line {row.source_line}: ok with {sorted(events[row.source_line])}, truth "
-                                f"{truth_outcome} {sorted(stroke.printed())}")  # fmt: skip
+                problems.append(
+                    f"line {row.source_line}: ok with {sorted(events[row.source_line])}, truth "
+                    f"{truth_outcome} {sorted(stroke.printed())}"
+                )
         elif row.status == "silent":
             if truth_outcome != "silent":
                 problems.append(f"line {row.source_line}: silent, truth {truth_outcome}")
         elif row.assignment == "unread" and truth_outcome == "ok":
             problems.append(f"line {row.source_line}: unread, truth ok")
         elif row.assignment not in ("unread", "undecided"):
-            problems.append(f"line {row.source_line}: {row.status}/{row.assignment}, truth {truth_outcome}")
+            problems.append(
+                f"line {row.source_line}: {row.status}/{row.assignment}, truth {truth_outcome}"
+            )
     return problems
 
 
@@ -241,7 +312,16 @@ def lost_events(truth: TruthLog) -> int:
     return sum(1 for s in truth.strokes for line in s.printed_on if line < 0)
 
 
-__all__ = ["Scenario", "Stroke", "TruthLog", "check_assignment", "lost_events", "make_log", "tiled_text", "undecided"]
+__all__ = [
+    "Scenario",
+    "Stroke",
+    "TruthLog",
+    "check_assignment",
+    "lost_events",
+    "make_log",
+    "tiled_text",
+    "undecided",
+]
 
 
 def tiled_text(truth: TruthLog, lines: int) -> str:

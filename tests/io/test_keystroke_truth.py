@@ -46,7 +46,12 @@ def test_sparse_sounding(seed: int, n: int, p: float) -> None:
 
 
 @SETTINGS
-@given(seed=seeds, n=lengths, p=st.floats(0.85, 1.0), layout=st.sampled_from(["soft", "rigid-acc", "named"]))
+@given(
+    seed=seeds,
+    n=lengths,
+    p=st.floats(0.85, 1.0),
+    layout=st.sampled_from(["soft", "rigid-acc", "named"]),
+)
 def test_dense_sounding(seed: int, n: int, p: float, layout: str) -> None:
     log = assert_exact(Scenario(n=n, layout=layout, sound=p, seed=seed))
     assert log.assignment["moved"] == 0
@@ -60,11 +65,21 @@ def test_only_fast_strokes_late_in_the_file_sound(seed: int, n: int) -> None:
 
 
 @SETTINGS
-@given(seed=seeds, n=lengths, p=st.floats(0.5, 0.95), strikes=st.floats(0.05, 0.4),
-       layout=st.sampled_from(["soft", "rigid-acc", "named"]), late=st.sampled_from([0.0, 0.2]))  # fmt: skip
-def test_backlog_of_one_or_two_events(seed: int, n: int, p: float, strikes: float, layout: str, late: float) -> None:
+@given(
+    seed=seeds,
+    n=lengths,
+    p=st.floats(0.5, 0.95),
+    strikes=st.floats(0.05, 0.4),
+    layout=st.sampled_from(["soft", "rigid-acc", "named"]),
+    late=st.sampled_from([0.0, 0.2]),
+)
+def test_backlog_of_one_or_two_events(
+    seed: int, n: int, p: float, strikes: float, layout: str, late: float
+) -> None:
     """Double strikes (on, on, off, off) and late releases leave 1-2 events for later reads."""
-    assert_exact(Scenario(n=n, layout=layout, sound=p, double_strike=strikes, late_release=late, seed=seed))
+    assert_exact(
+        Scenario(n=n, layout=layout, sound=p, double_strike=strikes, late_release=late, seed=seed)
+    )
 
 
 @SETTINGS
@@ -77,14 +92,30 @@ def test_every_stroke_double_struck_backlog_grows_to_the_end(seed: int, layout: 
 
 
 @SETTINGS
-@given(seed=seeds, n=st.integers(50, 90), cut=st.data(), header=st.booleans(),
-       strikes=st.sampled_from([0.0, 0.3]))  # fmt: skip
-def test_restarted_timestamps(seed: int, n: int, cut: st.DataObject, header: bool, strikes: float) -> None:
+@given(
+    seed=seeds,
+    n=st.integers(50, 90),
+    cut=st.data(),
+    header=st.booleans(),
+    strikes=st.sampled_from([0.0, 0.3]),
+)
+def test_restarted_timestamps(
+    seed: int, n: int, cut: st.DataObject, header: bool, strikes: float
+) -> None:
     """The script restarts (the MIDI clock starts again, unread events are lost)."""
     first = cut.draw(st.integers(10, n // 2))
     second = cut.draw(st.integers(first + 5, n - 5))
-    log = assert_exact(Scenario(n=n, layout="soft", sound=0.8, double_strike=strikes, restarts=(first, second),
-                                header_on_restart=header, seed=seed))  # fmt: skip
+    log = assert_exact(
+        Scenario(
+            n=n,
+            layout="soft",
+            sound=0.8,
+            double_strike=strikes,
+            restarts=(first, second),
+            header_on_restart=header,
+            seed=seed,
+        )
+    )
     assert log.n_sessions == 3
 
 
@@ -107,5 +138,7 @@ def test_pauses_inside_a_backlog_with_notes(seed: int) -> None:
     """In a backlog a pause can last as long as a few strokes; the line's key still decides.
     (Without notes, in a log whose lines repeat with a period, such a pause can make two lines
     fit a press equally: see benchmarks/bench_import.py for how often.)"""
-    assert_exact(Scenario(n=80, layout="named", sound=0.95, double_strike=0.2, pause=0.03, seed=seed),
-                 allow_undecided=0.05)  # fmt: skip
+    assert_exact(
+        Scenario(n=80, layout="named", sound=0.95, double_strike=0.2, pause=0.03, seed=seed),
+        allow_undecided=0.05,
+    )

@@ -21,9 +21,22 @@ def write(tmp_path: Path, lines: list[str], name: str = "log.txt") -> Path:
 def named(group: int, order: int, note: str, t_ms: int | None, **extra: object) -> str:
     key = note_number(note) if note in "CDEFGAB" else 60
     midi = [] if t_ms is None else [[[144, key, 40, 0], t_ms], [[128, key, 60, 0], t_ms + 700]]
-    record = {"group": group, "order": order, "note": note, "move_vel": 0.2, "down_vel": 0.3, "up_vel": 0.4,
-              "distance": 0.02, "hold_time": 0.5, "move_acc": 1.0, "down_acc": 0.8, "up_acc": 1.2,
-              "press_depth": 0.012, **extra, "midi": midi}  # fmt: skip
+    record = {
+        "group": group,
+        "order": order,
+        "note": note,
+        "move_vel": 0.2,
+        "down_vel": 0.3,
+        "up_vel": 0.4,
+        "distance": 0.02,
+        "hold_time": 0.5,
+        "move_acc": 1.0,
+        "down_acc": 0.8,
+        "up_acc": 1.2,
+        "press_depth": 0.012,
+        **extra,
+        "midi": midi,
+    }
     return repr(record)
 
 
@@ -37,23 +50,41 @@ def test_note_names_and_the_octave_convention() -> None:
 
 
 def test_named_keys_become_columns_and_unknown_keys_are_kept(tmp_path: Path) -> None:
-    path = write(tmp_path, [
-        named(0, 0, "F", 1000, operator="yy", take=3),
-        named(0, 1, "C", 4000, operator="yy", take=3),
-        named(1, 0, "G", None, operator="zz", take=4),
-        named(1, 1, "A", 10000, **{"room temp": 21.5}),
-    ])  # fmt: skip
+    path = write(
+        tmp_path,
+        [
+            named(0, 0, "F", 1000, operator="yy", take=3),
+            named(0, 1, "C", 4000, operator="yy", take=3),
+            named(1, 0, "G", None, operator="zz", take=4),
+            named(1, 1, "A", 10000, **{"room temp": 21.5}),
+        ],
+    )
     log = read_keystroke_log(path)
     trials = log.trials
     assert log.layout == "named-keys" and log.finger == "rigid"  # 12 mm presses: the rigid finger
-    assert trials["sequence_id"].tolist() == [0, 0, 1, 1] and trials["sequence_order"].tolist() == [0, 1, 0, 1]
+    assert trials["sequence_id"].tolist() == [0, 0, 1, 1] and trials["sequence_order"].tolist() == [
+        0,
+        1,
+        0,
+        1,
+    ]
     assert trials["note"].tolist() == [65, 60, 67, 69]
     assert trials["status"].tolist() == ["ok", "ok", "silent", "ok"]
     row = trials.iloc[0]
-    assert (row["down_velocity_mps"], row["up_velocity_mps"], row["acceleration_mps2"],
-            row["up_acceleration_mps2"], row["distance_m"], row["depth_m"], row["hold_s"],
-            row["move_velocity_mps"], row["move_acceleration_mps2"]) == (0.3, 0.4, 0.8, 1.2, 0.02, 0.012, 0.5, 0.2, 1.0)  # fmt: skip
-    assert trials["operator"].tolist()[:3] == ["yy", "yy", "zz"] and trials["operator"].isna().iloc[3]
+    assert (
+        row["down_velocity_mps"],
+        row["up_velocity_mps"],
+        row["acceleration_mps2"],
+        row["up_acceleration_mps2"],
+        row["distance_m"],
+        row["depth_m"],
+        row["hold_s"],
+        row["move_velocity_mps"],
+        row["move_acceleration_mps2"],
+    ) == (0.3, 0.4, 0.8, 1.2, 0.02, 0.012, 0.5, 0.2, 1.0)
+    assert (
+        trials["operator"].tolist()[:3] == ["yy", "yy", "zz"] and trials["operator"].isna().iloc[3]
+    )
     assert trials["take"].tolist()[:3] == [3.0, 3.0, 4.0] and np.isnan(trials["take"].iloc[3])
     assert trials["log_room_temp"].iloc[3] == 21.5  # not a plain name: prefixed
     assert log.columns["room temp"] == "log_room_temp" and log.columns["hold_time"] == "hold_s"
@@ -61,7 +92,18 @@ def test_named_keys_become_columns_and_unknown_keys_are_kept(tmp_path: Path) -> 
 
 
 def test_note_octave_is_overridable(tmp_path: Path) -> None:
-    path = write(tmp_path, [repr({"note": "A", "down_vel": 0.3, "midi": [[[144, 57, 40, 0], 1000], [[128, 57, 60, 0], 1500]]})])
+    path = write(
+        tmp_path,
+        [
+            repr(
+                {
+                    "note": "A",
+                    "down_vel": 0.3,
+                    "midi": [[[144, 57, 40, 0], 1000], [[128, 57, 60, 0], 1500]],
+                }
+            )
+        ],
+    )
     log = read_keystroke_log(path, note_octave=3)
     assert log.trials["note"].tolist() == [57] and log.trials["status"].tolist() == ["ok"]
     with pytest.raises(InputError, match="octave"):
@@ -82,8 +124,18 @@ def rigid8(values: list[float], midi: list[tuple[int, int, int, int]]) -> str:
 EIGHT = "finger_angle_deg,acceleration_mps2,up_acceleration_mps2,down_velocity_mps,up_velocity_mps,distance_m,hold_s,depth_m"
 
 
-def test_a_log_with_eight_values_is_refused_naming_the_line_the_count_and_the_layouts(tmp_path: Path) -> None:
-    path = write(tmp_path, [rigid8([0, 1.0, 1.0, 0.2, 0.3, 0.03, 0.5, 0.01], [(144, 60, 50, 900), (128, 60, 70, 1900)])] * 3)
+def test_a_log_with_eight_values_is_refused_naming_the_line_the_count_and_the_layouts(
+    tmp_path: Path,
+) -> None:
+    path = write(
+        tmp_path,
+        [
+            rigid8(
+                [0, 1.0, 1.0, 0.2, 0.3, 0.03, 0.5, 0.01], [(144, 60, 50, 900), (128, 60, 70, 1900)]
+            )
+        ]
+        * 3,
+    )
     with pytest.raises(InputError) as error:
         read_keystroke_log(path)
     message = str(error.value)
@@ -93,21 +145,46 @@ def test_a_log_with_eight_values_is_refused_naming_the_line_the_count_and_the_la
 
 
 def test_declared_columns(tmp_path: Path) -> None:
-    lines = [rigid8([0, 1.0, 0.8, 0.2, 0.3, 0.03, 0.5, 0.01], [(144, 60, 50, 900 + 4000 * i), (128, 60, 70, 1900 + 4000 * i)])
-             for i in range(3)]  # fmt: skip
+    lines = [
+        rigid8(
+            [0, 1.0, 0.8, 0.2, 0.3, 0.03, 0.5, 0.01],
+            [(144, 60, 50, 900 + 4000 * i), (128, 60, 70, 1900 + 4000 * i)],
+        )
+        for i in range(3)
+    ]
     path = write(tmp_path, lines)
     log = read_keystroke_log(path, columns=EIGHT.split(","), finger="rigid")
     row = log.trials.iloc[0]
     assert log.layout == "declared" and log.finger == "rigid"
-    assert (row["acceleration_mps2"], row["up_acceleration_mps2"], row["down_velocity_mps"],
-            row["up_velocity_mps"], row["depth_m"]) == (1.0, 0.8, 0.2, 0.3, 0.01)  # fmt: skip
+    assert (
+        row["acceleration_mps2"],
+        row["up_acceleration_mps2"],
+        row["down_velocity_mps"],
+        row["up_velocity_mps"],
+        row["depth_m"],
+    ) == (1.0, 0.8, 0.2, 0.3, 0.01)
     assert (log.trials["status"] == "ok").all()
-    kept = read_keystroke_log(path, columns=["skip", "acceleration_mps2", "skip", "velocity_mps", "skip",
-                                             "distance_m", "hold_s", "trial_number"])  # fmt: skip
+    kept = read_keystroke_log(
+        path,
+        columns=[
+            "skip",
+            "acceleration_mps2",
+            "skip",
+            "velocity_mps",
+            "skip",
+            "distance_m",
+            "hold_s",
+            "trial_number",
+        ],
+    )
     assert kept.trials["trial_number"].tolist() == [0.01] * 3  # a unit-less name: an extra column
     assert kept.trials["up_velocity_mps"].tolist() == [0.2] * 3
-    aliases = read_keystroke_log(path, columns="angle,acc,up_acc,down_vel,up_vel,distance,hold_time,press_depth".split(","))
-    assert aliases.trials[["hold_s", "depth_m"]].to_numpy().tolist() == [[0.5, 0.01]] * 3  # the old scripts' names
+    aliases = read_keystroke_log(
+        path, columns="angle,acc,up_acc,down_vel,up_vel,distance,hold_time,press_depth".split(",")
+    )
+    assert (
+        aliases.trials[["hold_s", "depth_m"]].to_numpy().tolist() == [[0.5, 0.01]] * 3
+    )  # the old scripts' names
 
 
 @pytest.mark.parametrize(
@@ -128,12 +205,18 @@ def test_declared_columns_are_validated(tmp_path: Path, columns: list[str], mess
 
 
 def test_layout_file(tmp_path: Path) -> None:
-    lines = [rigid8([0, 1.0, 0.8, 0.2, 0.3, 0.03, 0.5, 0.01], [(144, 60, 50, 900), (128, 60, 70, 1900)])]
+    lines = [
+        rigid8([0, 1.0, 0.8, 0.2, 0.3, 0.03, 0.5, 0.01], [(144, 60, 50, 900), (128, 60, 70, 1900)])
+    ]
     path = write(tmp_path, lines)
     layout = tmp_path / "eight.yaml"
     layout.write_text(f"name: rigid-8\nfinger: rigid\ncolumns: [{EIGHT.replace(',', ', ')}]\n")
     log = read_keystroke_log(path, layout_file=layout)
-    assert log.layout == "rigid-8" and log.finger == "rigid" and log.trials["depth_m"].tolist() == [0.01]
+    assert (
+        log.layout == "rigid-8"
+        and log.finger == "rigid"
+        and log.trials["depth_m"].tolist() == [0.01]
+    )
     layout.write_text("name: x\ncolums: [hold_s]\n")
     with pytest.raises(InputError, match="columns") as error:
         read_keystroke_log(path, layout_file=layout)

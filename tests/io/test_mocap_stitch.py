@@ -21,15 +21,27 @@ ROLES = {"arm": "Unlabeled:100", "fingertip": "Unlabeled:102", "key": "Unlabeled
 
 
 def take(tmp_path: Path, **kwargs: object) -> Path:
-    return motive_csv(tmp_path / "take.csv", duration_s=20.0, starts_s=STARTS, speeds_mps=SPEEDS, **kwargs)  # type: ignore[arg-type]
+    return motive_csv(
+        tmp_path / "take.csv", duration_s=20.0, starts_s=STARTS, speeds_mps=SPEEDS, **kwargs
+    )  # type: ignore[arg-type]
 
 
-@pytest.mark.parametrize("split", [
-    {"Unlabeled:103": (0.4, 0.7)},
-    {"Unlabeled:103": (0.4, 0.7), "Unlabeled:102": (0.5,)},
-    {"Unlabeled:100": (0.3, 0.6), "Unlabeled:101": (0.45,), "Unlabeled:102": (0.2, 0.8), "Unlabeled:103": (0.4, 0.7)},
-])  # fmt: skip
-def test_split_tracks_are_joined_and_roles_are_right(tmp_path: Path, split: dict[str, tuple[float, ...]]) -> None:
+@pytest.mark.parametrize(
+    "split",
+    [
+        {"Unlabeled:103": (0.4, 0.7)},
+        {"Unlabeled:103": (0.4, 0.7), "Unlabeled:102": (0.5,)},
+        {
+            "Unlabeled:100": (0.3, 0.6),
+            "Unlabeled:101": (0.45,),
+            "Unlabeled:102": (0.2, 0.8),
+            "Unlabeled:103": (0.4, 0.7),
+        },
+    ],
+)
+def test_split_tracks_are_joined_and_roles_are_right(
+    tmp_path: Path, split: dict[str, tuple[float, ...]]
+) -> None:
     mocap = read_mocap(take(tmp_path, split=split))
     assert mocap.roles == ROLES
     assert set(mocap.stitched) == set(split)
