@@ -15,6 +15,7 @@ restarts of the script (the MIDI clock starts again; unread events are lost), an
 
 from __future__ import annotations
 
+import functools
 import random
 from dataclasses import dataclass, field
 
@@ -80,6 +81,7 @@ class TruthLog:
         return {s.line: s for s in self.strokes}
 
 
+@functools.lru_cache(maxsize=4096)  # the sweeps repeat their grid: the same moves over and over
 def _move_s(distance: float, speed: float, accel: float) -> np.ndarray:
     """Position (m) every STEP_S along a move: accelerate, cruise, brake (stepped, not closed form)."""
     if distance <= 0:
