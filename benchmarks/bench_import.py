@@ -79,13 +79,20 @@ def assignment_times(path: Path) -> dict[str, Any]:
     return {"new_cpu_s": round(new_s, 4), "old_cpu_s": round(old_s, 4), "ratio_old_over_new": round(old_s / new_s, 1)}
 
 
+# Peak memory is the kernel's high-water mark of this process's address space (VmHWM): unlike
+# ru_maxrss it does not carry over the parent's size from before the exec.
 CHILD = """
-import json, resource, sys, time
+import json, sys, time
+def memory_mb(field):
+    for line in open("/proc/self/status"):
+        if line.startswith(field + ":"):
+            return int(line.split()[1]) / 1024
 from pianobot.io.keystroke_log import read_keystroke_log
+before = memory_mb("VmRSS")
 t0, c0 = time.perf_counter(), time.process_time()
 log = read_keystroke_log(sys.argv[1])
 out = {"wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0,
-       "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+       "peak_rss_mb": memory_mb("VmHWM"), "rss_after_imports_mb": before,
        "lines": len(log.trials), "moved": log.assignment["moved"], "undecided": log.assignment["undecided"]}
 print(json.dumps(out))
 """

@@ -96,7 +96,8 @@ def mocap(
     ] = None,
     marker: Annotated[
         list[str] | None,
-        typer.Option("--marker", help="ROLE=NAME (arm, fingertip, key); repeatable."),
+        typer.Option("--marker", help="ROLE=NAME (arm, fingertip, key): NAME may be any piece of a "
+                     "split track, or none (not in view); repeatable."),
     ] = None,
     rig: Annotated[
         Path | None, typer.Option("--rig", help="Rig file whose mocap.markers name the roles.")
@@ -114,7 +115,11 @@ def mocap(
     data: DataDir = DEFAULT_DATA,
     json: JsonFlag = False,
 ) -> None:
-    """Import a Motive CSV take: keystrokes segmented from the arm marker, or aligned to a run."""
+    """Import a Motive CSV take: keystrokes segmented from the arm marker, or aligned to a run.
+
+    Marker tracks Motive split after an occlusion are joined first; roles are inferred only when
+    the evidence is clear, otherwise the candidates are named.
+    """
     markers = _rig_markers(rig) if rig is not None else {}
     markers.update(_marker_options(marker or []))
     result = import_mocap(

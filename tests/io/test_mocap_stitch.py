@@ -6,6 +6,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from motive_synth import motive_csv
 
 from pianobot.errors import InputError
@@ -91,3 +93,17 @@ def test_pieces_that_overlap_or_jump_are_different_markers() -> None:
     assert len(result.chains) == 3 and not result.joins
     result = stitch([first, follows], t)
     assert result.pieces == {"A": ["A", "D"]}
+
+
+@settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@given(st.dictionaries(
+    st.sampled_from(list(ROLES.values()) + ["Unlabeled:101"]),
+    st.lists(st.floats(0.1, 0.9), min_size=1, max_size=3, unique=True).map(lambda c: tuple(sorted(c))),
+    min_size=1, max_size=4,
+))  # fmt: skip
+def test_any_split_of_any_marker(tmp_path_factory: pytest.TempPathFactory, split: dict[str, tuple[float, ...]]) -> None:
+    """Random occlusions split random markers into 2-4 pieces: roles and keystrokes stay right."""
+    cuts = {name: tuple(c for i, c in enumerate(cs) if i == 0 or c - cs[i - 1] > 0.05) for name, cs in split.items()}
+    mocap = read_mocap(take(tmp_path_factory.mktemp("split"), split=cuts))
+    assert mocap.roles == ROLES
+    assert len(segment_take(mocap)) == 6
