@@ -22,18 +22,16 @@ from numba import njit
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 
-# Cost constants (the meaning of each is documented in keystroke_assign).
-BACKLOG_COST = 3.0
-NOTE_COST = 40.0
-SIGMA_ABS_S = 0.2
-SIGMA_REL = 0.05
-SIGMA_REL_UNKNOWN = 0.3
-PAUSE_Z = 3.0
-PAUSE_TAIL = 1.0
-MAX_SILENT_RUN = (
-    24  # lines of backlog one step may give back (silent keystrokes between two presses)
-)
-BEAM = 60.0  # candidates costlier than the best by this much are not extended (≈ 7.7 SD)
+# Costs are in squared standard deviations (a negative log-likelihood, up to constants).
+BACKLOG_COST = 3.0  # prior cost of each line of backlog a press opens: ties keep the log as written
+NOTE_COST = 40.0  # a press whose note differs from its line's key
+SIGMA_ABS_S = 0.2  # timing spread of any gap: MIDI latency, scheduling, the read and the print
+SIGMA_REL = 0.05  # relative spread of each predicted cycle: moveL blending, controller timing
+SIGMA_REL_UNKNOWN = 0.3  # the same for a line whose motion the log does not give
+PAUSE_Z = 3.0  # beyond this many SDs a too-long gap is a pause: it costs only
+PAUSE_TAIL = 1.0  # ... PAUSE_TAIL·ln(z / PAUSE_Z) more, so 20 s and 25 s pauses cost alike
+MAX_SILENT_RUN = 24  # lines of backlog one step may give back (silent keystrokes in a backlog)
+BEAM = 60.0  # candidates costlier than their press's best by this much are not extended
 
 
 @njit(cache=True)

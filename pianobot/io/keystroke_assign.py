@@ -9,7 +9,9 @@ then on each line may print the previous keystroke's events (a *backlog*). What 
    earlier one.
 2. A line that printed fewer than R events emptied the buffer (a *drain*): every press read
    after it belongs to a later keystroke. So a press read on line r can only belong to lines
-   after the last drain before r, and presses keep their order (`_bands`).
+   after the last drain before r, and presses keep their order: each press has a structural
+   band of lines, from the earliest the presses before it leave free to its read line (or the
+   latest the presses after it leave free). Where the band is one line, nothing can move.
 3. Where that still leaves a choice (a run of full reads), the timestamps decide. Each line's
    cycle is predicted from its control values (`keystroke_timing`) plus one per-session constant
    (the read, the print, sleeps), estimated by profile likelihood: the constant under which the
@@ -24,11 +26,14 @@ then on each line may print the previous keystroke's events (a *backlog*). What 
    matches no line it could belong to is left unassigned (a keystroke the log never wrote, e.g.
    one interrupted by a connection drop).
 
-The best assignment is found by dynamic programming over each press's candidate lines (at most
-`MAX_BACKLOG_LINES` + 1 of them), cut at presses the structure pins to one line, so time and
-memory grow as O(n·w) with w the width of the widest ambiguous stretch. Forward and backward
-costs give each press its margin: how much worse the best assignment that puts it elsewhere is.
-A margin below `UNDECIDED_MARGIN` means the evidence cannot decide between two lines.
+The best assignment is found by dynamic programming (`_assign_kernel`, compiled) over each
+press's candidate lines: its band, cut to what the previous press's surviving candidates allow
+(a beam), so time and memory grow as O(n·w) with w the number of candidates kept per press (one
+for a pinned press); a backlog of any depth is followed. Forward and backward costs give each
+press its margin: how much worse the best assignment that puts it elsewhere is. A margin below
+`UNDECIDED_MARGIN` means the evidence cannot decide between two lines. The cost constants
+(`BACKLOG_COST`, `NOTE_COST`, the timing spreads, the pause tail) are defined, with their
+meaning, in `_assign_kernel`.
 """
 
 from __future__ import annotations
@@ -48,16 +53,9 @@ FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 BoolArray = npt.NDArray[np.bool_]
 
-MAX_BACKLOG_LINES = (
-    64  # deepest backlog considered (lines between a press's keystroke and its read)
-)
+NOTE_SEARCH_LINES = 64  # a press whose key no line this far back has belongs to no logged line
 UNDECIDED_MARGIN = 2.0  # best alternative within this cost: the evidence cannot decide
 PROFILE_PRESSES = 2000  # presses used to estimate a session's constant (the first ones)
-# BACKLOG_COST: prior cost of each line of backlog a press opens (squared SDs); NOTE_COST: a press
-# whose note differs from its line's key; SIGMA_ABS_S: timing spread of any gap (MIDI latency,
-# scheduling, the read and the print); SIGMA_REL: relative spread of each predicted cycle (moveL
-# blending, controller timing); SIGMA_REL_UNKNOWN: the same for a line whose motion the log does not
-# give; PAUSE_Z/PAUSE_TAIL: beyond PAUSE_Z SDs a too-long gap costs PAUSE_TAIL·ln(z/PAUSE_Z) more.
 
 
 @dataclass(frozen=True)
@@ -93,9 +91,7 @@ class SessionAssignment:
     line: IntArray  # per press: its line, -1 when it belongs to no line of the log
     margin: FloatArray  # per press: extra cost of the best assignment that puts it elsewhere
     alternative: IntArray  # per press: the line of that assignment (-1: none)
-    own_line_cost: (
-        FloatArray  # per press: extra cost of keeping it on its read line (inf: impossible)
-    )
+    own_line_cost: FloatArray  # per press: extra cost of keeping it on its read line (inf: none)
     unassigned_reason: dict[int, str] = field(default_factory=dict)
     overhead_s: float = 0.0  # the per-line constant on top of the predicted motion
     sigma_scale: float = 1.0  # timing spreads were scaled by this to fit the data
@@ -151,7 +147,7 @@ def _assignable(presses: Presses, lines: Lines) -> tuple[BoolArray, dict[int, st
     taken = -1  # the earliest line the presses kept so far can occupy
     for i in range(len(presses)):
         r = int(presses.read_line[i])
-        first = max(int(lo[i]), taken + 1, r - MAX_BACKLOG_LINES)
+        first = max(int(lo[i]), taken + 1, r - NOTE_SEARCH_LINES)
         if first > r:
             keep[i] = False
             reasons[i] = (
