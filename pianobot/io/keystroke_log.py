@@ -14,6 +14,7 @@ the evidence says it belongs to (`keystroke_sessions`, `keystroke_assign`).
 
 from __future__ import annotations
 
+from array import array
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -202,6 +203,7 @@ def _positional(
     ]
     skipped += _other_kind(parsed, is_positional, "a named-key line in a log of control lists")
     control = _rows(values, offsets, counts, n)
+    parsed.control = array("d")  # the flat values are rows now: free them before the assignment
     header_acc = np.frombuffer(parsed.header_acc, dtype=np.float64)[is_positional][fits]
     params = chosen.table(control, header_acc)
     fingers = chosen.fingers(control)
@@ -227,8 +229,12 @@ def _positional(
 def _named(parsed: LogLines, note_octave: int, finger: str | None) -> tuple[LogRecords, str, str]:
     is_named = ~_kinds(parsed)
     index = np.flatnonzero(is_named)
-    named = {key: [values[i] for i in index] for key, values in parsed.named.items()}
+    if index.size == len(parsed):  # the usual case: no control-list lines mixed in
+        named = parsed.named
+    else:
+        named = {key: [values[i] for i in index] for key, values in parsed.named.items()}
     found = named_records(named, note_octave)
+    parsed.named = {}  # the raw values are columns now: free them before the assignment
     lines = np.frombuffer(parsed.line, dtype=np.int64)[index]
     skipped = [SkippedLine(int(lines[i]), reason) for i, reason in sorted(found.bad_lines.items())]
     skipped += _other_kind(parsed, is_named, "a control-list line in a log of named keys")

@@ -36,7 +36,7 @@ import numpy as np
 import pandas as pd
 
 from pianobot.errors import InputError
-from pianobot.io.keystroke_layouts import COLUMN_ALIASES, RIGID_STIFFNESS_CODE, round_grid
+from pianobot.io.keystroke_layouts import COLUMN_ALIASES, RIGID_STIFFNESS_CODE, round_grid_array
 
 DEFAULT_NOTE_OCTAVE = 4  # scientific pitch notation: middle C = C4 = MIDI 60
 KEY_COLUMNS = COLUMN_ALIASES
@@ -166,7 +166,7 @@ def named_records(
             params[column] = numbers
     if "up_velocity_mps" not in columns.values() and "velocity_mps" not in columns.values():
         params["up_velocity_mps"] = params["down_velocity_mps"]  # the study: same speed down and up
-    params = params.apply(lambda c: c.map(round_grid))
+    params = params.apply(lambda c: round_grid_array(c.to_numpy(dtype=np.float64)))
     keys = set(named)
     return NamedRecords(
         params=params,
