@@ -110,6 +110,32 @@ def raw_simulator(trials: list[Any], rig: Any, seed: int) -> dict[str, float]:
     return {"trials_per_s_wall": len(items) / wall, "trials_per_s_cpu": len(items) / cpu}
 
 
+def storage_floor(run_path: Path, trials: int, block: int = 128) -> dict[str, float]:
+    """What storing the run's sample rows costs alone: encode them as parts (one per `block`
+    trials' worth of rows) and compact them into one file, as the store does, from memory."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from pianobot.store import encode_part
+    from pianobot.store.layout import parquet_options
+
+    table = pq.read_table(run_path / "samples.parquet")
+    per_part = max(1, table.num_rows * block // max(trials, 1))
+
+    def store() -> None:
+        parts = [encode_part(table.slice(i, per_part).drop_columns(["run_id"]), "samples", "bench")
+                 for i in range(0, table.num_rows, per_part)]
+        out = pa.BufferOutputStream()
+        with pq.ParquetWriter(out, table.schema, **parquet_options(table.schema)) as writer:
+            for part in parts:
+                f = pq.ParquetFile(pa.BufferReader(part), read_dictionary=["run_id", "trial_id", "source"])
+                for g in range(f.num_row_groups):
+                    writer.write_table(f.read_row_group(g).cast(table.schema))
+
+    _, wall, cpu = _timed(store)
+    return {"rows": table.num_rows, "trials_per_s_wall": trials / wall, "trials_per_s_cpu": trials / cpu}
+
+
 def _sweep(spec: Path, data: Path, **kwargs: Any) -> tuple[Any, float, float]:
     from pianobot.run import run_sweep
 
@@ -131,6 +157,7 @@ def scenario_grid(quick: bool) -> dict[str, Any]:
         peak_rss_mb = _peak_rss_mb()
         run = load_run(outcome.run_id, Path(tmp) / "data")
         sources = run.table("samples", columns=["source"])["source"].value_counts().to_dict()
+        floor = storage_floor(run.path, outcome.trials)
         # The one-keystroke-at-a-time path (how every simulated sweep ran before), on a fifth.
         old_spec = _grid_spec(Path(tmp) / "old", 3)
         original = Rig.batches
@@ -154,6 +181,9 @@ def scenario_grid(quick: bool) -> dict[str, Any]:
             "old_path_trials_per_s_cpu": round(old.trials / old_cpu, 1),
             "speedup_over_old_path_wall": round((n / wall) / (old.trials / old_wall), 2),
             "speedup_over_old_path_cpu": round((n / cpu) / (old.trials / old_cpu), 2),
+            "storing_samples_only_trials_per_s_cpu": round(floor["trials_per_s_cpu"], 1),
+            "storing_samples_only_vs_raw_simulator_cpu": round(
+                floor["trials_per_s_cpu"] / raw["trials_per_s_cpu"], 3),
             "peak_rss_mb": round(peak_rss_mb, 1),
             "rows": {"trials": int(len(run.trials)), "samples_by_source": sources,
                      "midi": int(len(run.midi))},
@@ -197,6 +227,7 @@ def scenario_random(samples: int, lean: bool = False) -> dict[str, Any]:
             spec, data_dir=folder / "data", progress=False, subscribers=[sample],
             executor=ExecutorSettings(workers=1)))
         peak_rss_mb = _peak_rss_mb()
+        floor = storage_floor(outcome.path, outcome.trials) if samples <= 20_000 else None
         return {
             "trials": samples, "status": outcome.status, "completed": outcome.trials,
             "world": "default, truth at 200 Hz, arm at 125 Hz" if lean else "default",
@@ -206,6 +237,8 @@ def scenario_random(samples: int, lean: bool = False) -> dict[str, Any]:
             "raw_simulator_trials_per_s_cpu": round(raw["trials_per_s_cpu"], 1),
             "ratio_to_raw_simulator_wall": round(samples / wall / raw["trials_per_s_wall"], 3),
             "ratio_to_raw_simulator_cpu": round(samples / cpu / raw["trials_per_s_cpu"], 3),
+            "storing_samples_only_trials_per_s_cpu": (
+                None if floor is None else round(floor["trials_per_s_cpu"], 1)),
             "peak_rss_mb": round(peak_rss_mb, 1),
             "rss_mb_by_trial": rss,
             "rss_growth_mb_after_first_tenth": round(rss[-1][1] - rss[1][1], 1) if len(rss) > 2 else None,

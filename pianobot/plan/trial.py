@@ -19,7 +19,7 @@ if TYPE_CHECKING:  # pandas takes a third of a second to import: only where fram
 FloatArray = npt.NDArray[np.float64]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)  # slots: a million-trial plan is ~4x smaller in memory
 class Trial:
     """One planned keystroke, in run order."""
 
