@@ -13,7 +13,7 @@ import sys
 import typer
 
 from pianobot import __version__
-from pianobot.cli.common import print_error
+from pianobot.cli.common import install_help_conventions, print_error
 from pianobot.errors import InputError
 
 app = typer.Typer(
@@ -38,6 +38,7 @@ COMMAND_MODULES: dict[str, str] = {
     "play": "play",
 }
 _registered: set[str] = set()
+install_help_conventions()  # flags read as flags in every help page
 
 
 def _version(value: bool) -> None:

@@ -6,10 +6,16 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.console import Console
-from rich.table import Table
 
-from pianobot.cli.common import DEFAULT_DATA, DataDir, JsonFlag, emit_json
+from pianobot.cli.common import (
+    DEFAULT_DATA,
+    DataDir,
+    JsonFlag,
+    emit_json,
+    print_fields,
+    say,
+    say_written,
+)
 from pianobot.errors import InputError
 from pianobot.io.force_log import DEFAULT_GAIN_N, DEFAULT_OFFSET_N, DEFAULT_RATE_HZ, Calibration
 from pianobot.io.importers import ImportResult, import_force_log, import_keystroke_log, import_mocap
@@ -36,7 +42,7 @@ def keystroke_log(
     json: JsonFlag = False,
 ) -> None:
     """Import a dict-per-line keystroke log; MIDI events are re-assigned to keystrokes by time."""
-    _show(import_keystroke_log(file, data, layout=layout), json)
+    _show(import_keystroke_log(file, data, layout=layout), json, data)
 
 
 @imports.command("force-log")
@@ -59,7 +65,7 @@ def force_log(
 ) -> None:
     """Import an `Analog reading = N` force capture; one trial per press (burst)."""
     calibration = Calibration(gain_n=gain_n, offset_n=offset_n, rate_hz=rate_hz)
-    _show(import_force_log(file, data, calibration=calibration, align_run=align_run), json)
+    _show(import_force_log(file, data, calibration=calibration, align_run=align_run), json, data)
 
 
 @imports.command("mocap")
@@ -100,7 +106,7 @@ def mocap(
         up_axis=up_axis,
         vacuum_kpa=vacuum_kpa,
     )
-    _show(result, json)
+    _show(result, json, data)
 
 
 def _marker_options(items: list[str]) -> dict[str, str]:
@@ -123,19 +129,14 @@ def _rig_markers(path: Path) -> dict[str, str]:
     return {"arm": names.arm, "fingertip": names.fingertip, "key": names.key}
 
 
-def _show(result: ImportResult, json: bool) -> None:
+def _show(result: ImportResult, json: bool, data: Path) -> None:
     if json:
         emit_json(result.to_dict())
         return
-    table = Table(title=f"imported {result.kind}", show_header=False)
-    table.add_column(no_wrap=True)
-    table.add_column(overflow="fold")  # run ids are copied by hand: never cut them with "…"
-    for key, value in result.to_dict().items():
-        if key == "skipped_lines":
-            continue
-        table.add_row(key, f"{value:.6g}" if isinstance(value, float) else str(value))
-    table.add_row("skipped lines", str(len(result.skipped_lines)))
-    console = Console()
-    console.print(table)
+    fields = [(key, f"{value:.6g}" if isinstance(value, float) else str(value))
+              for key, value in result.to_dict().items() if key != "skipped_lines"]
+    fields.append(("skipped lines", str(len(result.skipped_lines))))
+    print_fields(fields, title=f"imported {result.kind}")
     for line, reason in result.skipped_lines:
-        console.print(f"  line {line}: {reason}", markup=False, highlight=False)
+        say(f"  line {line}: {reason}")
+    say_written("run", data / "runs" / result.run_id)
