@@ -20,6 +20,8 @@ from pianobot.cli.common import (
     Column,
     DataDir,
     JsonFlag,
+    NoProgressFlag,
+    command_progress,
     emit_json,
     output_console,
     print_table,
@@ -109,14 +111,16 @@ def register(app: typer.Typer) -> None:
         model: Annotated[Path | None, typer.Option("--model", help="Model file (identify output).")] = None,
         out: Annotated[Path, typer.Option("--out", help="HTML file to write.")] = Path("report.html"),
         compare: Annotated[bool, typer.Option(help="Also run a quick grouped CV (poly, spline).")] = False,
+        no_progress: NoProgressFlag = False,
     ) -> None:
         """Write one self-contained HTML report (figures embedded, no network)."""
+        progress = command_progress(json_out, no_progress)
         cv = fit_runs(runs, data, kinds=["poly", "spline"], out_dir=None)[0] if compare else None
-        path = build_run_report(runs, data, out, model_file=model, cv_table=cv)
+        path = build_run_report(runs, data, out, model_file=model, cv_table=cv, progress=progress)
         if json_out:
             emit_json({"report": str(path)})
         else:
-            print(f"report written to {path}")
+            say_written("report", path)
 
 
 ESTIMATE_COLUMNS = (

@@ -24,6 +24,8 @@ from rich.console import Console, JustifyMethod
 from rich.table import Table
 from rich.text import Text
 
+from pianobot.progress import Progress, progress_display
+
 DataDir = Annotated[
     Path, typer.Option("--data", help="Dataset folder (runs live in DIR/runs/).", show_default=True)
 ]
@@ -70,9 +72,10 @@ def _clean(value: Any) -> Any:
     return value
 
 
-def show_progress(json_out: bool, no_progress: bool = False) -> bool:
-    """Whether a command draws progress: never under --json or --no-progress (TTY checked later)."""
-    return not (json_out or no_progress)
+def command_progress(json_out: bool, no_progress: bool = False) -> Progress:
+    """The progress a command passes to library code: the shared display on stderr, or nothing
+    under --json, --no-progress, or when stderr is not a terminal."""
+    return progress_display(not (json_out or no_progress))
 
 
 # --- consoles -----------------------------------------------------------------------------------
