@@ -11,6 +11,7 @@ from pianobot.analysis.learn import cross_validate_models, save_predictor, train
 from pianobot.analysis.learn_models import MODEL_KINDS
 from pianobot.analysis.predictors import PhysicsPredictor, load_predictor
 from pianobot.errors import InputError
+from pianobot.progress import NO_PROGRESS, Progress
 from pianobot.store import load_run
 
 
@@ -28,7 +29,7 @@ def load_trials(run_ids: Sequence[str], data_dir: Path) -> pd.DataFrame:
 
 def fit_runs(
     run_ids: Sequence[str], data_dir: Path, *, kinds: Sequence[str], out_dir: Path | None,
-    folds: int = 5, seed: int = 0, physics_model: Path | None = None,
+    folds: int = 5, seed: int = 0, physics_model: Path | None = None, progress: Progress = NO_PROGRESS,
 ) -> tuple[pd.DataFrame, dict[str, Path]]:
     """Cross-validate `kinds` and save one predictor per learned kind under `out_dir`.
 
@@ -41,7 +42,8 @@ def fit_runs(
     physics = None
     if "physics" in kinds:
         physics = load_predictor(physics_model) if physics_model else PhysicsPredictor.published()
-    table, fitted = cross_validate_models(data, kinds, folds=folds, seed=seed, physics=physics)
+    table, fitted = cross_validate_models(data, kinds, folds=folds, seed=seed, physics=physics,
+                                          progress=progress)
     saved: dict[str, Path] = {}
     if out_dir is not None:
         for kind in kinds:

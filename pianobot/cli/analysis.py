@@ -94,10 +94,11 @@ def register(app: typer.Typer) -> None:
         out_dir: Annotated[Path, typer.Option("--out-dir", help="Folder for the saved predictors.")] = Path("models"),
         folds: Annotated[int, typer.Option(min=2, help="Grouped CV folds.")] = 5,
         physics_model: Annotated[Path | None, typer.Option(help="Model file for --model physics.")] = None,
+        no_progress: NoProgressFlag = False,
     ) -> None:
         """Cross-validate learned maps to on-velocity, hold and silence; save each as a predictor."""
         table, saved = fit_runs(runs, data, kinds=model or ["gp"], out_dir=out_dir, folds=folds,
-                                physics_model=physics_model)
+                                physics_model=physics_model, progress=command_progress(json_out, no_progress))
         if json_out:
             emit_json({"cv": table.to_dict(orient="records"), "saved": {k: str(v) for k, v in saved.items()}})
             return

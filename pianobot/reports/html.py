@@ -36,7 +36,8 @@ table.data { border-collapse: collapse; margin: 1em 0; font-size: 0.9em; }
 table.data caption { text-align: left; font-weight: bold; padding-bottom: .3em; }
 table.data th, table.data td { border: 1px solid #ccc; padding: .25em .6em; text-align: right; }
 table.data th { background: #eee; }
-table.data td.text { text-align: left; }
+table.data td.text { text-align: left; overflow-wrap: anywhere; min-width: 6em; }
+div.table { max-width: 100%; overflow-x: auto; }
 figure { margin: 1.5em 0; counter-increment: figure; }
 figure img { max-width: 100%; height: auto; }
 figcaption { font-size: 0.9em; color: #333; max-width: 48em; }
@@ -110,9 +111,10 @@ def table_html(
     ident = f' id="{html.escape(table_id, quote=True)}"' if table_id else ""
     cap = f"<caption>{html.escape(caption)}</caption>" if caption else ""
     head = "<tr>" + "".join(f"<th>{c}</th>" for c in head_cells) + "</tr>"
+    # The wrapper scrolls a table too wide for the page on its own, never the whole page.
     return (
-        f'<table class="data"{ident}>{cap}<thead>{head}</thead>'
-        f"<tbody>{''.join(rows)}</tbody></table>"
+        f'<div class="table"><table class="data"{ident}>{cap}<thead>{head}</thead>'
+        f"<tbody>{''.join(rows)}</tbody></table></div>"
     )
 
 
