@@ -8,8 +8,9 @@ from typing import Annotated
 import pandas as pd
 import typer
 
-from pianobot.analysis.fit_run import fit_runs
+from pianobot.analysis.fit_run import fit_runs, load_trials
 from pianobot.analysis.identify_run import identify_runs
+from pianobot.analysis.predictors import PhysicsPredictor, load_predictor
 from pianobot.analysis.static_stiffness import (
     STUDY_COMPRESSION_M,
     force_log_levels,
@@ -27,10 +28,13 @@ from pianobot.cli.common import (
     print_table,
     say,
     say_written,
+    writable,
 )
 from pianobot.errors import InputError
+from pianobot.reports.command_figures import learned_maps, save_png
 from pianobot.reports.run_report import build_run_report
 
+PlotOption = Annotated[Path | None, typer.Option("--plot", help="Also write a figure here (PNG).")]
 RunIds = Annotated[list[str], typer.Argument(help="Run ids (or unique prefixes).")]
 
 
@@ -94,15 +98,27 @@ def register(app: typer.Typer) -> None:
         out_dir: Annotated[Path, typer.Option("--out-dir", help="Folder for the saved predictors.")] = Path("models"),
         folds: Annotated[int, typer.Option(min=2, help="Grouped CV folds.")] = 5,
         physics_model: Annotated[Path | None, typer.Option(help="Model file for --model physics.")] = None,
+        plot: PlotOption = None,
         no_progress: NoProgressFlag = False,
     ) -> None:
         """Cross-validate learned maps to on-velocity, hold and silence; save each as a predictor."""
-        table, saved = fit_runs(runs, data, kinds=model or ["gp"], out_dir=out_dir, folds=folds,
+        kinds = model or ["gp"]
+        writable(plot, "--plot")
+        table, saved = fit_runs(runs, data, kinds=kinds, out_dir=out_dir, folds=folds,
                                 physics_model=physics_model, progress=command_progress(json_out, no_progress))
+        if plot is not None:
+            predictors = {kind: load_predictor(path) for kind, path in saved.items()}
+            if "physics" in kinds:
+                predictors["physics"] = (load_predictor(physics_model) if physics_model
+                                         else PhysicsPredictor.published())
+            save_png(learned_maps(load_trials(runs, data), predictors), plot)
         if json_out:
-            emit_json({"cv": table.to_dict(orient="records"), "saved": {k: str(v) for k, v in saved.items()}})
+            emit_json({"cv": table.to_dict(orient="records"), "saved": {k: str(v) for k, v in saved.items()},
+                       "plot": None if plot is None else str(plot)})
             return
         print_cv(table, saved)
+        if plot is not None:
+            say_written("figure", plot)
 
     @app.command()
     def report(

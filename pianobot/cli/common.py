@@ -24,6 +24,7 @@ from rich.console import Console, JustifyMethod
 from rich.table import Table
 from rich.text import Text
 
+from pianobot.errors import InputError
 from pianobot.progress import Progress, progress_display
 
 DataDir = Annotated[
@@ -53,6 +54,20 @@ def fail(message: str) -> NoReturn:
 def print_warning(message: str) -> None:
     """One `warning:` line on stderr (stdout stays clean for tables and JSON)."""
     print(f"warning: {' '.join(message.split())}", file=sys.stderr)
+
+
+def writable(path: Path | None, option: str) -> Path | None:
+    """Check before any work that `path`'s folder exists or can be made, so a long command
+    does not fail at its very end (or after storing a run) on a typo in an output path."""
+    if path is None:
+        return None
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"cannot create the folder of {path} ({exc.strerror})", option) from None
+    if path.is_dir():
+        raise InputError(f"{path} is a folder; give a file name", option)
+    return path
 
 
 def emit_json(payload: Any) -> None:

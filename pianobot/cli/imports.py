@@ -15,6 +15,7 @@ from pianobot.cli.common import (
     print_fields,
     say,
     say_written,
+    writable,
 )
 from pianobot.errors import InputError
 from pianobot.io.force_log import DEFAULT_GAIN_N, DEFAULT_OFFSET_N, DEFAULT_RATE_HZ, Calibration
@@ -91,10 +92,14 @@ def mocap(
         float | None,
         typer.Option("--vacuum-kpa", help="Finger vacuum during the take (gauge kPa, <= 0)."),
     ] = None,
+    plot: Annotated[
+        Path | None, typer.Option("--plot", help="Also write a figure of the take (PNG).")
+    ] = None,
     data: DataDir = DEFAULT_DATA,
     json: JsonFlag = False,
 ) -> None:
     """Import a Motive CSV take: keystrokes segmented from the arm marker, or aligned to a run."""
+    writable(plot, "--plot")
     markers = _rig_markers(rig) if rig is not None else {}
     markers.update(_marker_options(marker or []))
     result = import_mocap(
@@ -106,7 +111,13 @@ def mocap(
         up_axis=up_axis,
         vacuum_kpa=vacuum_kpa,
     )
+    if plot is not None:
+        from pianobot.reports.command_figures import plot_mocap_run
+
+        plot_mocap_run(result.run_id, data, plot)
     _show(result, json, data)
+    if plot is not None and not json:
+        say_written("figure", plot)
 
 
 def _marker_options(items: list[str]) -> dict[str, str]:
