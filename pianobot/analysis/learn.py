@@ -266,7 +266,7 @@ def _latency(model: Any, frame: pd.DataFrame, repeats: int = 5) -> float:
 
 
 def save_predictor(model: LearnedPredictor, path: Path, *, cv: pd.DataFrame | None = None,
-                   runs: Sequence[str] = ()) -> Path:
+                   runs: Sequence[str] = (), warnings: Sequence[dict[str, str]] = ()) -> Path:
     """Write `<path>.json` (sidecar, the file to load) and `<path stem>.joblib`; returns the JSON path."""
     path = Path(path)
     json_path = path if path.suffix == ".json" else path.with_suffix(".json")
@@ -285,6 +285,7 @@ def save_predictor(model: LearnedPredictor, path: Path, *, cv: pd.DataFrame | No
         "estimator_sha256": hashlib.sha256(blob.read_bytes()).hexdigest(),
         "runs": list(runs),
         "cv": [] if cv is None else json.loads(cv.to_json(orient="records")),
+        "warnings": list(warnings),  # plausibility findings of the fit (pianobot.analysis.plausibility)
         "pianobot_version": getattr(pianobot, "__version__", "unknown"),
     }
     json_path.write_text(json.dumps(sidecar, indent=2), encoding="utf-8")

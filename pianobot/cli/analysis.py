@@ -10,6 +10,7 @@ import typer
 
 from pianobot.analysis.fit_run import fit_runs, load_trials
 from pianobot.analysis.identify_run import identify_runs
+from pianobot.analysis.plausibility import as_dicts
 from pianobot.analysis.predictors import PhysicsPredictor, load_predictor
 from pianobot.analysis.static_stiffness import (
     STUDY_COMPRESSION_M,
@@ -26,6 +27,7 @@ from pianobot.cli.common import (
     emit_json,
     output_console,
     print_table,
+    print_warning,
     say,
     say_written,
     writable,
@@ -104,8 +106,11 @@ def register(app: typer.Typer) -> None:
         """Cross-validate learned maps to on-velocity, hold and silence; save each as a predictor."""
         kinds = model or ["gp"]
         writable(plot, "--plot")
-        table, saved = fit_runs(runs, data, kinds=kinds, out_dir=out_dir, folds=folds,
-                                physics_model=physics_model, progress=command_progress(json_out, no_progress))
+        result = fit_runs(runs, data, kinds=kinds, out_dir=out_dir, folds=folds,
+                          physics_model=physics_model, progress=command_progress(json_out, no_progress))
+        table, saved = result.cv, result.saved
+        for finding in result.findings:
+            print_warning(finding.text())
         if plot is not None:
             predictors = {kind: load_predictor(path) for kind, path in saved.items()}
             if "physics" in kinds:
@@ -114,7 +119,7 @@ def register(app: typer.Typer) -> None:
             save_png(learned_maps(load_trials(runs, data), predictors), plot)
         if json_out:
             emit_json({"cv": table.to_dict(orient="records"), "saved": {k: str(v) for k, v in saved.items()},
-                       "plot": None if plot is None else str(plot)})
+                       "warnings": as_dicts(result.findings), "plot": None if plot is None else str(plot)})
             return
         print_cv(table, saved)
         if plot is not None:
@@ -132,7 +137,7 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Write one self-contained HTML report (figures embedded, no network)."""
         progress = command_progress(json_out, no_progress)
-        cv = fit_runs(runs, data, kinds=["poly", "spline"], out_dir=None)[0] if compare else None
+        cv = fit_runs(runs, data, kinds=["poly", "spline"], out_dir=None).cv if compare else None
         path = build_run_report(runs, data, out, model_file=model, cv_table=cv, progress=progress)
         if json_out:
             emit_json({"report": str(path)})
