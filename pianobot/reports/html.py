@@ -11,6 +11,7 @@ from __future__ import annotations
 import base64
 import html
 import io
+import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -148,7 +149,8 @@ class Section:
 
 
 def _slug(title: str) -> str:
-    return "".join(ch if ch.isalnum() else "-" for ch in title.lower()).strip("-") or "section"
+    """`Keystroke stages: measured and model` → `keystroke-stages-measured-and-model`."""
+    return re.sub(r"[^0-9a-z]+", "-", title.lower()).strip("-") or "section"
 
 
 def page_html(title: str, sections: Sequence[Section], *, subtitle: str = "") -> str:
