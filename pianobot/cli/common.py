@@ -113,7 +113,9 @@ def say(text: str) -> None:
         print(text)
         return
     width = output_console().width
-    print(textwrap.fill(text, width, break_long_words=False, break_on_hyphens=False))
+    indent = " " * (len(text) - len(text.lstrip(" ")) + 2)  # continuation lines hang under the text
+    print(textwrap.fill(text, width, subsequent_indent=indent, break_long_words=False,
+                        break_on_hyphens=False))
 
 
 def say_written(what: str, path: Path | str) -> None:

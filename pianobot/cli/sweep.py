@@ -24,6 +24,7 @@ from pianobot.cli.common import (
     print_error,
     print_fields,
     print_table,
+    say,
 )
 from pianobot.plan import format_duration
 from pianobot.run import RunOutcome, dry_run, run_sweep
@@ -162,7 +163,8 @@ def register(app: typer.Typer) -> None:
             if json_out:
                 emit_json(summary.to_dict())
             else:
-                print(summary.to_text())
+                for line in summary.to_text().splitlines():
+                    say(line)  # wrapped to the terminal; the spec's own units (as in the YAML)
             errors = [v for v in summary.violations if v.severity == "error"]
             if errors:
                 first = errors[0]
