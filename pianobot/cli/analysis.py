@@ -137,7 +137,7 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Write one self-contained HTML report (figures embedded, no network)."""
         progress = command_progress(json_out, no_progress)
-        cv = fit_runs(runs, data, kinds=["poly", "spline"], out_dir=None).cv if compare else None
+        cv = fit_runs(runs, data, kinds=["poly", "spline"], out_dir=None, progress=progress).cv if compare else None
         path = build_run_report(runs, data, out, model_file=model, cv_table=cv, progress=progress)
         if json_out:
             emit_json({"report": str(path)})
