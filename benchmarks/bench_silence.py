@@ -6,8 +6,9 @@ harness timestamps every chunk of output and reports, per command, the wall time
 stretch with nothing written (start → first output, between outputs, last output → exit). A
 progress display that redraws its elapsed clock counts as output: the screen is visibly alive.
 
-`--pianobot EXE` measures another installation (e.g. main's, as the baseline) with the same
-scenarios in the same run; `--only NAME` limits the scenarios. Writes JSON to
+`--pianobot EXE` (repeatable) measures other installations (e.g. main's, as the baseline) with
+the same scenarios in the same run, interleaved command by command; `--only NAME` limits the
+scenarios. Writes JSON to
 benchmarks/results/silence.json (and a table on stdout).
 
     .venv/bin/python benchmarks/bench_silence.py [--pianobot EXE ...] [--only identify ...]
@@ -71,6 +72,7 @@ def scenarios() -> list[Scenario]:
         Scenario("report", ("report", "{sweep}", "--out", "{tmp}/report.html")),
         Scenario("discover", ("discover", "{mocap}", "--out", "{tmp}/discover.html"),
                  needs_fixtures=True),
+        Scenario("discover (sim sweep)", ("discover", "{quick}", "--out", "{tmp}/discover-sim.html")),
         Scenario("play --dry-run", ("play", "experiments/songs/twinkle.mid", "--dry-run")),
         Scenario("play", ("play", "experiments/songs/twinkle.mid"), makes_run="play"),
         Scenario("model bode", ("model", "bode", "--plot", "{tmp}/bode.png")),
@@ -126,30 +128,37 @@ def run_on_terminal(argv: list[str], cwd: Path) -> dict[str, Any]:
     }
 
 
-def measure(exe: str, only: set[str] | None) -> list[dict[str, Any]]:
-    rows = []
+def measure(exes: list[str], only: set[str] | None) -> dict[str, list[dict[str, Any]]]:
+    """Every scenario on every installation, interleaved (scenario by scenario), so that the
+    machine's changing load hits all installations alike; each has its own data folder."""
+    rows: dict[str, list[dict[str, Any]]] = {exe: [] for exe in exes}
     with tempfile.TemporaryDirectory() as tmp:
-        data = Path(tmp) / "data"
-        made: dict[str, str] = {"tmp": tmp}
+        made: dict[str, dict[str, str]] = {}
+        for n, exe in enumerate(exes):
+            (Path(tmp) / str(n)).mkdir()
+            made[exe] = {"tmp": str(Path(tmp) / str(n))}
         for sc in scenarios():
             if sc.needs_fixtures and not FIXTURES.is_dir():
                 continue
             wanted = only is None or sc.name in only
             if not wanted and sc.makes_run is None:
                 continue
-            try:
-                args = [a.format(**made) for a in sc.args]
-            except KeyError:
-                continue  # a run this command needs was not made
-            before = _run_ids(data)
-            result = run_on_terminal([exe, *args, "--data", str(data)], ROOT)
-            new = sorted(_run_ids(data) - before)
-            if sc.makes_run and new:
-                made[sc.makes_run] = new[-1]
-            if wanted:
-                rows.append({"command": sc.name, "argv": args, **result})
-                print(f"{sc.name:24s} exit {result['exit_code']:3d}  wall {result['wall_s']:7.1f} s  "
-                      f"longest silence {result['longest_silence_s']:6.1f} s", flush=True)
+            for exe in exes:
+                try:
+                    args = [a.format(**made[exe]) for a in sc.args]
+                except KeyError:
+                    continue  # a run this command needs was not made
+                data = Path(made[exe]["tmp"]) / "data"
+                before = _run_ids(data)
+                result = run_on_terminal([exe, *args, "--data", str(data)], ROOT)
+                new = sorted(_run_ids(data) - before)
+                if sc.makes_run and new:
+                    made[exe][sc.makes_run] = new[-1]
+                if wanted:
+                    rows[exe].append({"command": sc.name, "argv": args, **result})
+                    print(f"{sc.name:24s} {Path(exe).parent.parent.parent.name:>6s}  exit {result['exit_code']:3d}  "
+                          f"wall {result['wall_s']:7.1f} s  longest silence {result['longest_silence_s']:6.1f} s",
+                          flush=True)
     return rows
 
 
@@ -162,10 +171,7 @@ def main() -> None:
     ns = parser.parse_args()
     exes = ns.pianobot or [str(ROOT / ".venv" / "bin" / "pianobot")]
     only = set(ns.only) if ns.only else None
-    report: dict[str, Any] = {"columns": COLUMNS, "installations": {}}
-    for exe in exes:
-        print(f"== {exe}", flush=True)
-        report["installations"][exe] = measure(exe, only)
+    report: dict[str, Any] = {"columns": COLUMNS, "installations": measure(exes, only)}
     ns.out.parent.mkdir(parents=True, exist_ok=True)
     ns.out.write_text(json.dumps(report, indent=2))
     print(f"wrote {ns.out}", file=sys.stderr)
