@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from pianobot.physics.msd import MSDParams
+from pianobot.physics.msd import LinearParams, MSDParams, frequency_response, peak_response
 
 #: The study's law k1 = a + b·|p|: its slope b (N/m per kPa of vacuum).
 STUDY_K1_SLOPE_NPM_PER_KPA = MSDParams().k1_b_npm_per_kpa
@@ -65,30 +65,57 @@ def _kpa(levels: Iterable[float]) -> str:
     return ", ".join(f"{v:g}" for v in sorted(levels)) + " kPa"
 
 
-def no_resonance(peak_hz: Mapping[float, float], *, damping_ratios: Mapping[str, float] | None = None,
-                 ) -> list[Finding]:
-    """A key response without a resonance peak (peak at 0 Hz), per vacuum level.
+def local_resonance_hz(lp: LinearParams) -> float:
+    """The strongest interior maximum of |X2/X0| (Hz), even when the static gain is higher; NaN
+    when the response has none (`physics.peak_response` reports 0 Hz in both cases)."""
+    f = np.geomspace(0.1, 1000.0, 3000)
+    gain, _ = frequency_response(lp, f)
+    inner = np.flatnonzero((gain[1:-1] > gain[:-2]) & (gain[1:-1] > gain[2:])) + 1
+    return float(f[inner[np.argmax(gain[inner])]]) if inner.size else math.nan
+
+
+def no_resonance(params: MSDParams, levels_kpa: Iterable[float], *,
+                 damping_ratios: Mapping[str, float] | None = None) -> list[Finding]:
+    """A key response whose largest value is at 0 Hz (no resonance peak), per vacuum level.
 
     Args:
-        peak_hz: the identified |X2/X0| peak per vacuum level (0 or NaN: none).
+        params: the identified model.
+        levels_kpa: the vacuum levels of the data.
         damping_ratios: identified / study value of each damping parameter; a large one names
             the cause (a stop or friction absorbed into viscous damping).
     """
-    flat = [level for level, hz in peak_hz.items() if not (math.isfinite(hz) and hz > 0.0)]
+    flat = {level: local_resonance_hz(params.at(level)) for level in sorted(set(levels_kpa))
+            if not peak_response(params.at(level))[0] > 0.0}
     if not flat:
         return []
+    hidden = {level: hz for level, hz in flat.items() if math.isfinite(hz)}
+    if hidden:
+        shown = ", ".join(f"{hz:.1f} Hz at {level:g} kPa" for level, hz in hidden.items())
+        what = (f"the identified key response to the arm is largest at 0 Hz at {_kpa(flat)}: its resonance "
+                f"({shown}) is weaker than the static response, so the key is heavily damped")
+    else:
+        what = f"no resonance at all in the identified key response at {_kpa(flat)}"
     worst = max((damping_ratios or {}).items(), key=lambda kv: kv[1], default=None)
     if worst is not None and worst[1] >= 10.0:
-        cause = (f"{worst[0]} came out {worst[1]:.0f}× the study's value, so the model is overdamped: "
-                 "it absorbs something it lacks (the key's end stop or friction) into viscous damping; "
-                 "run `pianobot discover` on these runs to name the missing effect")
+        cause = (f"{worst[0]} came out {worst[1]:.0f}× the study's value: the model absorbs something it "
+                 "lacks (the key's end stop or friction) into viscous damping; run `pianobot discover` on "
+                 "these runs to name the missing effect")
     else:
-        cause = ("the keystrokes do not excite the resonance (slow presses, no free ringing of the key "
-                 "after release) or the key marker does not follow the key; check the take with "
+        cause = ("the keystrokes do not excite the resonance (slow presses, no free ringing of the key after "
+                 "release) or the key marker does not follow the key; check the take with "
                  "`pianobot import mocap --plot`")
-    return [Finding("no_resonance",
-                    f"no resonance in the identified key response at {_kpa(flat)} (peak at 0 Hz; the "
-                    "study's model rings at 7–11 Hz)", cause, _kpa(flat))]
+    return [Finding("no_resonance", f"{what} (the study's model and the real key ring at 7–11 Hz)", cause,
+                    _kpa(flat))]
+
+
+def damping_ratios(params: MSDParams) -> dict[str, float]:
+    """Identified / study value of each damping parameter, named as a person reads them."""
+    study = MSDParams()
+    ratios = {f"key damping c2 = {params.c2_nspm:.3g} N·s/m": params.c2_nspm / study.c2_nspm,
+              f"finger damping c1 = {params.c1_nspm:.3g} N·s/m": params.c1_nspm / study.c1_nspm}
+    if params.c0_nspm is not None:
+        ratios[f"arm–fingertip damping c0 = {params.c0_nspm:.3g} N·s/m"] = params.c0_nspm / study.c1_nspm
+    return ratios
 
 
 def at_bounds(estimates: Sequence[Interval], *, finger_separates: bool | None = None) -> list[Finding]:

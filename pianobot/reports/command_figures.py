@@ -1,10 +1,12 @@
-"""Figures written by `--plot` on `fit` and `import mocap`: one PNG that checks the result by eye.
+"""Figures written by `--plot` on `identify`, `fit` and `import mocap`: one PNG that checks the
+result by eye.
 
 Each figure is titled with what it shows and labelled with units (mm, mm/s), like the reports.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Protocol
@@ -17,7 +19,15 @@ from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
 
 from pianobot.errors import InputError
-from pianobot.reports.style import FULL_WIDTH_IN, label_axes, new_figure, quantity, style_axes
+from pianobot.physics.msd import MSDParams, frequency_response
+from pianobot.reports.style import (
+    FULL_WIDTH_IN,
+    label_axes,
+    new_figure,
+    quantity,
+    resonance_label,
+    style_axes,
+)
 
 #: More vacuum levels than this are too many panels: the most populated ones are shown.
 MAX_LEVEL_PANELS = 6
@@ -134,3 +144,44 @@ def plot_mocap_run(run_id: str, data_dir: Path, path: Path) -> Path:
     if "source" in samples:
         samples = samples[samples["source"] == "mocap"]
     return save_png(mocap_take(samples, run.trials), path)
+
+
+def identified_model(params: MSDParams, k1_by_level: Mapping[float, tuple[float, float, float]],
+                     *, title: str = "Identified model") -> Figure:
+    """`identify --plot`: the finger's stiffness per vacuum level against the study's law, and
+    the key's response to the arm at each level with its resonance peak.
+
+    Args:
+        params: the identified model.
+        k1_by_level: per vacuum level (kPa), the identified k1 and its 95 % interval (N/m).
+    """
+    study = MSDParams()
+    fig = new_figure(FULL_WIDTH_IN, 3.6)
+    stiff, gain = fig.subplots(1, 2)
+    style_axes(stiff)
+    style_axes(gain)
+    levels = sorted(k1_by_level) or [0.0]
+    p = np.linspace(0.0, max(80.0, max(abs(v) for v in levels)), 50)
+    stiff.plot(p, study.k1_a_npm + study.k1_b_npm_per_kpa * p, color="0.5", ls="--",
+               label=f"study: {study.k1_a_npm:g} + {study.k1_b_npm_per_kpa:g}·|p|")
+    stiff.plot(p, params.k1_a_npm + params.k1_b_npm_per_kpa * p, color="C0",
+               label=f"identified: {params.k1_a_npm:.4g} + {params.k1_b_npm_per_kpa:.3g}·|p|")
+    if k1_by_level:
+        values = np.array([k1_by_level[v] for v in levels], dtype=float)
+        stiff.errorbar(np.abs(levels), values[:, 0], yerr=[values[:, 0] - values[:, 1], values[:, 2] - values[:, 0]],
+                       fmt="o", color="C0", capsize=3, label="per level (95 %)")
+    stiff.legend(fontsize=7)
+    label_axes(stiff, "vacuum |p| (kPa)", "finger stiffness k1 (N/m)")
+    f = np.geomspace(0.5, 200.0, 400)
+    for i, level in enumerate(levels):
+        lp = params.at(level)
+        g, _ = frequency_response(lp, f)
+        label, peak_hz, peak_gain = resonance_label(lp, f"{level:g} kPa")
+        gain.loglog(f, g, color=f"C{i % 10}", label=label)
+        if math.isfinite(peak_hz):
+            gain.plot([peak_hz], [peak_gain], "o", ms=4, color=f"C{i % 10}")
+    gain.axvspan(7.0, 11.0, color="0.85", alpha=0.5, lw=0, label="real key rings (7–11 Hz)")
+    gain.legend(fontsize=7)
+    label_axes(gain, "frequency (Hz)", "key/arm amplitude |X2/X0| (mm/mm)")
+    fig.suptitle(title, fontsize=10)
+    return fig

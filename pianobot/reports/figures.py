@@ -14,9 +14,16 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 
 from pianobot.analysis.segment import STAGE_NAMES
-from pianobot.physics.msd import MSDParams, frequency_response, peak_response
+from pianobot.physics.msd import MSDParams, frequency_response
 from pianobot.reports.stage_residuals import StageResiduals, stage_edges
-from pianobot.reports.style import FULL_WIDTH_IN, label_axes, new_figure, quantity, style_axes
+from pianobot.reports.style import (
+    FULL_WIDTH_IN,
+    label_axes,
+    new_figure,
+    quantity,
+    resonance_label,
+    style_axes,
+)
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -199,10 +206,9 @@ def bode(params: MSDParams, levels_kpa: list[float]) -> Figure:
     for i, p in enumerate(levels_kpa):
         lp = params.at(p)
         gain, phase = frequency_response(lp, f)
-        peak_hz, peak_gain = peak_response(lp)
-        label = f"{p:g} kPa" + (f": peak {peak_hz:.1f} Hz" if peak_hz > 0 else ": no resonance")
+        label, peak_hz, peak_gain = resonance_label(lp, f"{p:g} kPa")
         mag.loglog(f, gain, color=f"C{i % 10}", label=label)
-        if peak_hz > 0:
+        if math.isfinite(peak_hz):
             mag.plot([peak_hz], [peak_gain], "o", ms=4, color=f"C{i % 10}")
         ph.semilogx(f, np.degrees(phase), color=f"C{i % 10}")
     mag.set_ylabel("key/arm amplitude |X2/X0| (mm/mm)")

@@ -9,6 +9,7 @@ same size, fonts and grid.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -17,6 +18,9 @@ import numpy.typing as npt
 import pandas as pd
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
+
+from pianobot.analysis.plausibility import local_resonance_hz
+from pianobot.physics.msd import LinearParams, frequency_response, peak_response
 
 #: Width of a report figure that spans the page, inches (pages are about 1,000 px at 100 dpi).
 FULL_WIDTH_IN = 8.0
@@ -159,3 +163,19 @@ def percentile_band(values: npt.NDArray[np.float64], lo_pct: float = 10.0,
             col[ok] = np.nanpercentile(values[:, ok], q, axis=0)
         out.append(col)
     return out[0], out[1], out[2], count
+
+
+def resonance_label(lp: LinearParams, name: str) -> tuple[str, float, float]:
+    """Legend text and marker (Hz, gain; NaN: none) of a key response's resonance.
+
+    A resonance weaker than the static response is still shown, and said to be so: the global
+    peak alone would call it "0 Hz".
+    """
+    peak_hz, peak_gain = peak_response(lp)
+    if peak_hz > 0:
+        return f"{name}: peak {peak_hz:.1f} Hz", peak_hz, peak_gain
+    hidden_hz = local_resonance_hz(lp)
+    if math.isfinite(hidden_hz):
+        gain, _ = frequency_response(lp, np.array([hidden_hz]))
+        return f"{name}: {hidden_hz:.1f} Hz, below the static gain", hidden_hz, float(gain[0])
+    return f"{name}: no resonance", math.nan, math.nan

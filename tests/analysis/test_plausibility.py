@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import json
+import math
+import re
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -13,22 +16,33 @@ from cli_runner import invoke_cli
 from pianobot.analysis.plausibility import (
     Interval,
     at_bounds,
+    damping_ratios,
     few_keystrokes,
     fit_findings,
+    local_resonance_hz,
     no_resonance,
     stiffness_slope,
     wide_intervals,
 )
+from pianobot.physics.msd import MSDParams
 from pianobot.store import RunWriter
 
 
 def test_no_resonance_names_the_overdamping_parameter() -> None:
-    assert no_resonance({-40.0: 9.1, -80.0: 10.2}) == []
-    (finding,) = no_resonance({-40.0: 0.0, -80.0: float("nan"), 0.0: 7.0}, damping_ratios={"c2": 113.0, "c1": 1.6})
-    assert finding.check == "no_resonance" and "-80, -40 kPa" in finding.message and "0 Hz" in finding.message
-    assert "c2 came out 113× the study's value" in finding.cause and "discover" in finding.cause
-    (generic,) = no_resonance({-40.0: 0.0})
-    assert "excite the resonance" in generic.cause
+    study = MSDParams()
+    assert no_resonance(study, [0.0, -40.0, -80.0]) == []  # rings at 7–11 Hz
+    damped = replace(study, c2_nspm=34.0)  # the key's stop absorbed into viscous damping
+    (finding,) = no_resonance(damped, [-40.0, -80.0], damping_ratios=damping_ratios(damped))
+    assert finding.check == "no_resonance" and "-80, -40 kPa" in finding.message
+    assert "largest at 0 Hz" in finding.message and "weaker than the static response" in finding.message
+    local = [float(x) for x in re.findall(r"([\d.]+) Hz at -\d+ kPa", finding.message)]
+    assert len(local) == 2 and all(5.0 < hz < 20.0 for hz in local)
+    assert "key damping c2 = 34 N·s/m came out 113× the study's value" in finding.cause
+    assert "discover" in finding.cause
+    dead = replace(study, c1_nspm=20.0, c2_nspm=200.0)
+    (finding,) = no_resonance(dead, [-40.0])
+    assert "no resonance at all" in finding.message and math.isnan(local_resonance_hz(dead.at(-40.0)))
+    assert "excite the resonance" in finding.cause  # no damping ratio given: the generic cause
 
 
 def test_parameters_at_a_bound_and_the_coupling_cause() -> None:

@@ -80,3 +80,19 @@ def test_import_mocap_plot(zhang2022: Path, data_dir: Path, tmp_path: Path, caps
                                "--data", str(data_dir), "--plot", "/proc/no/such/dir/take.png"], capsys, monkeypatch)
     assert code == 2 and err.startswith("error: --plot:") and err.count("\n") == 1
     assert len(list((data_dir / "runs").iterdir())) == 1  # refused before a second import
+
+
+def test_identified_model_figure_shows_the_law_and_a_hidden_resonance() -> None:
+    from dataclasses import replace
+
+    from pianobot.physics.msd import MSDParams
+    from pianobot.reports.command_figures import identified_model
+
+    damped = replace(MSDParams(), c2_nspm=34.0, k1_a_npm=219.0, k1_b_npm_per_kpa=-0.66)
+    fig = identified_model(damped, {-40.0: (192.6, 170.2, 232.2), -80.0: (166.1, 145.5, 200.0)})
+    stiff, gain = fig.axes[:2]
+    assert unlabelled_axes(fig) == []
+    labels = [t.get_text() for t in stiff.get_legend().get_texts()]
+    assert labels[0].startswith("study: 75.41 + 1.19") and "-0.66" in labels[1]
+    resonance = [t.get_text() for t in gain.get_legend().get_texts()]
+    assert any("below the static gain" in text for text in resonance), resonance
