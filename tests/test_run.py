@@ -330,7 +330,7 @@ def test_progress_bar_shows_done_total_lab_eta_retries_and_parameters(tmp_path: 
     from rich.console import Console
 
     from pianobot.progress import RichProgress
-    from pianobot.run.progress import ProgressBar, format_duration
+    from pianobot.run.progress import ProgressBar
 
     stream = io.StringIO()
     display = RichProgress(Console(file=stream, width=200, force_terminal=False))
@@ -350,4 +350,3 @@ def test_progress_bar_shows_done_total_lab_eta_retries_and_parameters(tmp_path: 
     assert "lab ? left" not in frame and "left" in frame
     text = stream.getvalue()
     assert "16/16" in text and "ETA" in text
-    assert format_duration(3725) == "1h02m" and format_duration(75) == "1m15s" and format_duration(9) == "9s"

@@ -1,4 +1,4 @@
-"""Commands `sweep` (run or resume a spec on its rig) and `runs` (list and show runs).
+"""Command `sweep`: run or resume a spec on its rig (or dry-run it).
 
 Exit codes of `sweep`: 0 completed, 1 failed, 2 bad input, 3 stopped by a safety stop,
 130 interrupted (Ctrl-C / SIGTERM). A stopped or interrupted run resumes with `--resume`.
@@ -6,30 +6,25 @@ Exit codes of `sweep`: 0 completed, 1 failed, 2 bad input, 3 stopped by a safety
 
 from __future__ import annotations
 
-import math
 import shlex
 import sys
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated
 
 import typer
 
 from pianobot.cli.common import (
     DEFAULT_DATA,
-    Column,
     DataDir,
     JsonFlag,
     emit_json,
     output_console,
     print_error,
-    print_fields,
-    print_table,
     say,
 )
-from pianobot.plan import format_duration
+from pianobot.durations import format_duration
+from pianobot.executor import ENV_SCHEDULER, ENV_WORKERS, ExecutorSettings
 from pianobot.run import RunOutcome, dry_run, run_sweep
-from pianobot.store import RunSummary, list_runs, load_run, summarize_run
-from pianobot.store.tables import trial_status_counts
 
 EXIT_CODES = {"completed": 0, "failed": 1, "stopped": 3, "interrupted": 130}
 
@@ -62,81 +57,6 @@ def _print_outcome(outcome: RunOutcome, data: Path, spec: Path | None) -> None:
         console.print(line, highlight=False, markup=False, soft_wrap=True)
 
 
-RUN_COLUMNS = (
-    Column("run id"),  # what people copy into the next command: never cut
-    Column("name", 2, wrap=True),
-    Column("kind", 3),
-    Column("status"),
-    Column("trials", justify="right"),
-    Column("silent", 1, "right"),
-    Column("lab time", 1, "right"),
-)
-
-
-def _print_summaries(summaries: list[RunSummary]) -> None:
-    rows = []
-    for s in summaries:
-        planned = "?" if s.trials_planned is None else str(s.trials_planned)
-        silent = "-" if math.isnan(s.silent_pct) else f"{s.silent_pct:.0f}%"
-        rows.append([s.run_id, s.name, s.kind, s.status, f"{s.trials_done}/{planned}", silent,
-                     format_duration(s.lab_time_s)])
-    print_table(RUN_COLUMNS, rows)
-
-
-def _run_details(run_id: str, data: Path) -> dict[str, Any]:
-    run = load_run(run_id, data)
-    meta = run.meta
-    summary = summarize_run(run)
-    spec = meta.get("spec", {}) if isinstance(meta.get("spec"), dict) else {}
-    return {
-        **summary.to_dict(),
-        "path": str(run.path),
-        "counts": trial_status_counts(run.paths),
-        "spec_path": spec.get("path"),
-        "spec_sha256": meta.get("spec_sha256"),
-        "seed": meta.get("seed"),
-        "rig_kind": _rig_kind(meta.get("rig")),
-        "pianobot_version": meta.get("pianobot_version"),
-        "git_commit": meta.get("git_commit"),
-        "end_utc": meta.get("end_utc"),
-        "sessions": meta.get("sessions"),
-        "interruptions": meta.get("interruptions", []),
-        "journal_events": len(run.journal),
-        "meta": meta,
-    }
-
-
-def _rig_kind(rig: Any) -> str | None:
-    """The rig kind recorded by a sweep (`rig.spec.kind`); importers may record other shapes."""
-    if isinstance(rig, dict):
-        spec = rig.get("spec")
-        if isinstance(spec, dict) and spec.get("kind"):
-            return str(spec["kind"])
-        if rig.get("kind"):
-            return str(rig["kind"])
-    return None if rig is None else str(rig)
-
-
-def _print_details(details: dict[str, Any]) -> None:
-    counts = details["counts"]
-    rows: list[tuple[str, Any]] = [
-        ("run id", details["run_id"]),
-        ("name / kind", f"{details['name']} / {details['kind']}"),
-        ("status", details["status"] + (f" — {details['reason']}" if details["reason"] else "")),
-        ("trials", f"{details['trials_done']}/{details['trials_planned']} done: {counts['ok']} ok, "
-                   f"{counts['silent']} silent, {counts['failed']} failed"),
-        ("lab time", format_duration(details["lab_time_s"])),
-        ("started / ended", f"{details['start_utc']} / {details['end_utc'] or '-'}"),
-        ("spec", f"{details['spec_path']} (sha256 {str(details['spec_sha256'])[:12]})"),
-        ("rig / seed", f"{details['rig_kind']} / {details['seed']}"),
-        ("pianobot / git", f"{details['pianobot_version']} / {details['git_commit'] or '-'}"),
-        ("folder", details["path"]),
-    ]
-    for item in details["interruptions"]:
-        rows.append(("interruption", f"{item.get('t_utc')}: {item.get('kind')} — {item.get('reason')}"))
-    print_fields(rows)
-
-
 def register(app: typer.Typer) -> None:
     """Add `sweep` and the `runs` group to the app."""
 
@@ -150,10 +70,21 @@ def register(app: typer.Typer) -> None:
         seed: Annotated[int | None, typer.Option("--seed", help="Seed of the simulated world (overrides the rig file).")] = None,
         rig: Annotated[Path | None, typer.Option("--rig", help="Rig file to use instead of the spec's.")] = None,
         no_progress: Annotated[bool, typer.Option("--no-progress", help="No progress bar.")] = False,
-        batch_trials: Annotated[int, typer.Option(
+        batch_trials: Annotated[int | None, typer.Option(
             "--batch-trials", min=1,
-            help="Trials per Parquet part (also flushed every 2 s); a crash loses at most one batch.",
-        )] = 50,
+            help="Trials per Parquet part (also flushed every 2 s); a crash loses at most one batch. "
+            "Default 50; on the simulated rig 128, simulated together as one block.",
+        )] = None,
+        workers: Annotated[int | None, typer.Option(
+            "--workers", min=1,
+            help="Processes for a simulated sweep (default: the machine's cores for big sweeps, "
+            f"this process for small ones; env {ENV_WORKERS}, config file [executor] workers).",
+        )] = None,
+        scheduler: Annotated[str | None, typer.Option(
+            "--scheduler", metavar="tcp://HOST:PORT",
+            help=f"Run a simulated sweep's blocks on this Dask cluster (env {ENV_SCHEDULER}, "
+            "config file [executor] scheduler). This process keeps the run and writes it.",
+        )] = None,
     ) -> None:
         """Run an experiment spec on its rig into data/runs/<run_id>/ (or --dry-run it)."""
         if dry_run_flag:
@@ -175,39 +106,10 @@ def register(app: typer.Typer) -> None:
         outcome = run_sweep(
             spec, data_dir=data, resume=resume, seed=seed, rig_path=rig,
             progress=not no_progress and not json_out and sys.stderr.isatty(), batch_trials=batch_trials,
+            executor=ExecutorSettings.resolve(workers=workers, scheduler=scheduler),
         )
         if json_out:
             emit_json(outcome.to_dict())
         else:
             _print_outcome(outcome, data, spec)
         raise typer.Exit(code=EXIT_CODES.get(outcome.status, 1))
-
-    runs_app = typer.Typer(help="List runs, or show one run.", no_args_is_help=False)
-
-    @runs_app.callback(invoke_without_command=True)
-    def runs(ctx: typer.Context, data: DataDir = DEFAULT_DATA, json_out: JsonFlag = False) -> None:
-        """List the runs in DATA/runs: id, name, status, trials done/planned, silent %, lab time."""
-        if ctx.invoked_subcommand is not None:
-            return
-        summaries = list_runs(data)
-        if json_out:
-            emit_json([s.to_dict() for s in summaries])
-        elif not summaries:
-            print(f"no runs in {data}/runs yet; start one with `pianobot sweep SPEC --data {data}`")
-        else:
-            _print_summaries(summaries)
-
-    @runs_app.command("show")
-    def show(
-        run_id: Annotated[str, typer.Argument(help="Run id or a unique prefix.")],
-        data: DataDir = DEFAULT_DATA,
-        json_out: JsonFlag = False,
-    ) -> None:
-        """Show one run: status and reason, trial counts, spec, seed, versions, interruptions."""
-        details = _run_details(run_id, data)
-        if json_out:
-            emit_json(details)
-        else:
-            _print_details(details)
-
-    app.add_typer(runs_app, name="runs")

@@ -16,8 +16,8 @@ import numpy as np
 import pandas as pd
 
 from pianobot.analysis.predictors import INPUT_COLUMNS
+from pianobot.durations import format_duration
 from pianobot.physics.msd import MSDParams
-from pianobot.plan import format_duration
 from pianobot.reports.style import quantity
 
 #: Model parameters as a person reads them: name, symbol, unit (stiffness stays N/m, as published).

@@ -12,6 +12,7 @@ from __future__ import annotations
 from contextlib import ExitStack
 from typing import Any
 
+from pianobot.durations import format_duration
 from pianobot.progress import Progress, Task, progress_display
 from pianobot.run.records import Record, RunEnded, RunStarted, TrialDone, TrialRetried, TrialStarted
 
@@ -22,20 +23,6 @@ _SHORT = {
     "acceleration_mps2": ("m/s²", 1.0, "{:.3g}"),
     "depth_m": ("mm", 1e3, "{:.3g}"),
 }
-
-
-def format_duration(seconds: float) -> str:
-    """`3h05m`, `4m12s`, `9s`."""
-    if not seconds == seconds or seconds < 0:
-        return "?"
-    total = int(round(seconds))
-    hours, rest = divmod(total, 3600)
-    minutes, secs = divmod(rest, 60)
-    if hours:
-        return f"{hours}h{minutes:02d}m"
-    if minutes:
-        return f"{minutes}m{secs:02d}s"
-    return f"{secs}s"
 
 
 def describe_parameters(parameters: dict[str, Any]) -> str:
@@ -99,7 +86,7 @@ class ProgressBar:
             task.update(completed=self._done)
             self._show()
         elif isinstance(record, RunEnded):
-            self._lab_eta, self._current = "0s", record.status
+            self._lab_eta, self._current = "0 s", record.status
             self._show()
 
     def _show(self) -> None:
