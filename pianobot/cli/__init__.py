@@ -13,7 +13,7 @@ import sys
 import typer
 
 from pianobot import __version__
-from pianobot.cli.common import print_error
+from pianobot.cli.common import install_help_conventions, print_error
 from pianobot.errors import InputError
 
 app = typer.Typer(
@@ -42,6 +42,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
 }
 COMMAND_MODULES: dict[str, str] = {name: module for name, (module, _) in COMMANDS.items()}
 _registered: set[str] = set()
+install_help_conventions()  # flags read as flags in every help page
 
 
 def _version(value: bool) -> None:

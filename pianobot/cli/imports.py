@@ -6,10 +6,17 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.console import Console
-from rich.table import Table
 
-from pianobot.cli.common import DEFAULT_DATA, DataDir, JsonFlag, emit_json
+from pianobot.cli.common import (
+    DEFAULT_DATA,
+    DataDir,
+    JsonFlag,
+    emit_json,
+    print_fields,
+    say,
+    say_written,
+    writable,
+)
 from pianobot.errors import InputError
 from pianobot.io.force_log import DEFAULT_GAIN_N, DEFAULT_OFFSET_N, DEFAULT_RATE_HZ, Calibration
 from pianobot.io.importers import ImportResult, import_force_log, import_keystroke_log, import_mocap
@@ -62,7 +69,7 @@ def keystroke_log(
     result = import_keystroke_log(file, data, layout=layout, columns=declared, layout_file=layout_file,
                                   finger=finger, note_octave=note_octave,
                                   progress=progress_display(not json))  # fmt: skip
-    _show(result, json)
+    _show(result, json, data)
 
 
 @imports.command("force-log")
@@ -85,7 +92,7 @@ def force_log(
 ) -> None:
     """Import an `Analog reading = N` force capture; one trial per press (burst)."""
     calibration = Calibration(gain_n=gain_n, offset_n=offset_n, rate_hz=rate_hz)
-    _show(import_force_log(file, data, calibration=calibration, align_run=align_run), json)
+    _show(import_force_log(file, data, calibration=calibration, align_run=align_run), json, data)
 
 
 @imports.command("mocap")
@@ -112,6 +119,9 @@ def mocap(
         float | None,
         typer.Option("--vacuum-kpa", help="Finger vacuum during the take (gauge kPa, <= 0)."),
     ] = None,
+    plot: Annotated[
+        Path | None, typer.Option("--plot", help="Also write a figure of the take (PNG).")
+    ] = None,
     data: DataDir = DEFAULT_DATA,
     json: JsonFlag = False,
 ) -> None:
@@ -120,6 +130,7 @@ def mocap(
     Marker tracks Motive split after an occlusion are joined first; roles are inferred only when
     the evidence is clear, otherwise the candidates are named.
     """
+    writable(plot, "--plot")
     markers = _rig_markers(rig) if rig is not None else {}
     markers.update(_marker_options(marker or []))
     result = import_mocap(
@@ -131,7 +142,13 @@ def mocap(
         up_axis=up_axis,
         vacuum_kpa=vacuum_kpa,
     )
-    _show(result, json)
+    if plot is not None:
+        from pianobot.reports.command_figures import plot_mocap_run
+
+        plot_mocap_run(result.run_id, data, plot)
+    _show(result, json, data)
+    if plot is not None and not json:
+        say_written("figure", plot)
 
 
 def _marker_options(items: list[str]) -> dict[str, str]:
@@ -154,23 +171,16 @@ def _rig_markers(path: Path) -> dict[str, str]:
     return {"arm": names.arm, "fingertip": names.fingertip, "key": names.key}
 
 
-def _show(result: ImportResult, json: bool) -> None:
+def _show(result: ImportResult, json: bool, data: Path) -> None:
     if json:
         emit_json(result.to_dict())
         return
-    table = Table(title=f"imported {result.kind}", show_header=False)
-    table.add_column(no_wrap=True)
-    table.add_column(overflow="fold")  # run ids are copied by hand: never cut them with "…"
-    for key, value in result.to_dict().items():
-        if key in ("skipped_lines", "run_dir"):
-            continue
-        table.add_row(key, f"{value:.6g}" if isinstance(value, float) else str(value))
-    table.add_row("skipped lines", str(len(result.skipped_lines)))
-    console = Console()
-    console.print(table)
+    fields = [(key, f"{value:.6g}" if isinstance(value, float) else str(value))
+              for key, value in result.to_dict().items() if key not in ("skipped_lines", "run_dir")]
+    fields.append(("skipped lines", str(len(result.skipped_lines))))
+    print_fields(fields, title=f"imported {result.kind}")
     for line, reason in result.skipped_lines[:SHOWN_SKIPPED]:
-        console.print(f"  line {line}: {reason}", markup=False, highlight=False)
+        say(f"  line {line}: {reason}")
     if len(result.skipped_lines) > SHOWN_SKIPPED:
-        console.print(f"  ... {len(result.skipped_lines) - SHOWN_SKIPPED} more in the run's meta (skipped_lines)",
-                      markup=False, highlight=False)  # fmt: skip
-    console.print(f"written to {result.run_dir}", markup=False, highlight=False, soft_wrap=True)
+        say(f"  ... {len(result.skipped_lines) - SHOWN_SKIPPED} more in the run's meta (skipped_lines)")
+    say_written("run", data / "runs" / result.run_id)

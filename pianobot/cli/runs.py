@@ -10,32 +10,39 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import typer
-from rich.console import Console
-from rich.table import Table
 
-from pianobot.cli.common import DEFAULT_DATA, DataDir, JsonFlag, emit_json
+from pianobot.cli.common import (
+    DEFAULT_DATA,
+    Column,
+    DataDir,
+    JsonFlag,
+    emit_json,
+    print_fields,
+    print_table,
+)
 from pianobot.durations import format_duration
 from pianobot.store import RunSummary, list_runs, load_run, summarize_run
 from pianobot.store.tables import trial_status_counts
 
-
-def _console() -> Console:
-    """A console; piped output gets wide lines instead of rich's 80-column default."""
-    console = Console()
-    return console if console.is_terminal else Console(width=200)
+RUN_COLUMNS = (
+    Column("run id"),  # what people copy into the next command: never cut
+    Column("name", 2, wrap=True),
+    Column("kind", 3),
+    Column("status"),
+    Column("trials", justify="right"),
+    Column("silent", 1, "right"),
+    Column("lab time", 1, "right"),
+)
 
 
 def _print_summaries(summaries: list[RunSummary]) -> None:
-    table = Table(title=None)
-    # The run id is what people copy into the next command: never truncate it.
-    table.add_column("run id", no_wrap=True, min_width=max(len(s.run_id) for s in summaries))
-    for column in ("name", "kind", "status", "trials", "silent", "lab time"):
-        table.add_column(column, justify="right" if column in ("trials", "silent", "lab time") else "left")
+    rows = []
     for s in summaries:
         planned = "?" if s.trials_planned is None else str(s.trials_planned)
         silent = "-" if math.isnan(s.silent_pct) else f"{s.silent_pct:.0f}%"
-        table.add_row(s.run_id, s.name, s.kind, s.status, f"{s.trials_done}/{planned}", silent, format_duration(s.lab_time_s))
-    _console().print(table)
+        rows.append([s.run_id, s.name, s.kind, s.status, f"{s.trials_done}/{planned}", silent,
+                     format_duration(s.lab_time_s)])
+    print_table(RUN_COLUMNS, rows)
 
 
 def _run_details(run_id: str, data: Path) -> dict[str, Any]:
@@ -73,12 +80,8 @@ def _rig_kind(rig: Any) -> str | None:
 
 
 def _print_details(details: dict[str, Any]) -> None:
-    console = _console()
-    table = Table(show_header=False, box=None)
-    table.add_column(style="bold")
-    table.add_column()
     counts = details["counts"]
-    rows = [
+    rows: list[tuple[str, Any]] = [
         ("run id", details["run_id"]),
         ("name / kind", f"{details['name']} / {details['kind']}"),
         ("status", details["status"] + (f" — {details['reason']}" if details["reason"] else "")),
@@ -93,9 +96,7 @@ def _print_details(details: dict[str, Any]) -> None:
     ]
     for item in details["interruptions"]:
         rows.append(("interruption", f"{item.get('t_utc')}: {item.get('kind')} — {item.get('reason')}"))
-    for key, value in rows:
-        table.add_row(key, str(value))
-    console.print(table, highlight=False)
+    print_fields(rows)
 
 
 def register(app: typer.Typer) -> None:

@@ -12,20 +12,21 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import typer
-from rich.console import Console
 
-from pianobot.cli.common import DEFAULT_DATA, DataDir, JsonFlag, emit_json, print_error
+from pianobot.cli.common import (
+    DEFAULT_DATA,
+    DataDir,
+    JsonFlag,
+    emit_json,
+    output_console,
+    print_error,
+    say,
+)
+from pianobot.durations import format_duration
 from pianobot.executor import ENV_SCHEDULER, ENV_WORKERS, ExecutorSettings
-from pianobot.plan import format_duration
 from pianobot.run import RunOutcome, RunStarted, dry_run, run_sweep
 
 EXIT_CODES = {"completed": 0, "failed": 1, "stopped": 3, "interrupted": 130}
-
-
-def _console() -> Console:
-    """A console; piped output gets wide lines instead of rich's 80-column default."""
-    console = Console()
-    return console if console.is_terminal else Console(width=200)
 
 
 def _how_to_look(outcome: RunOutcome, data: Path, spec: Path | None) -> list[str]:
@@ -42,7 +43,7 @@ def _how_to_look(outcome: RunOutcome, data: Path, spec: Path | None) -> list[str
 
 
 def _print_outcome(outcome: RunOutcome, data: Path, spec: Path | None) -> None:
-    console = _console()
+    console = output_console()
     style = {"completed": "green", "stopped": "yellow", "interrupted": "yellow"}.get(outcome.status, "red")
     console.print(
         f"run [bold]{outcome.run_id}[/]: [{style}]{outcome.status}[/] — "
@@ -100,7 +101,8 @@ def register(app: typer.Typer) -> None:
             if json_out:
                 emit_json(summary.to_dict())
             else:
-                print(summary.to_text())
+                for line in summary.to_text().splitlines():
+                    say(line)  # wrapped to the terminal; the spec's own units (as in the YAML)
             errors = [v for v in summary.violations if v.severity == "error"]
             if errors:
                 first = errors[0]
