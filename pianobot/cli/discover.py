@@ -7,13 +7,24 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.console import Console
-from rich.table import Table
 
 from pianobot.analysis.discover.result import DiscoveryResult
 from pianobot.analysis.discover.run import discover_runs
-from pianobot.cli.common import DEFAULT_DATA, DataDir, JsonFlag, emit_json
-from pianobot.progress import progress_display
+from pianobot.cli.common import (
+    DEFAULT_DATA,
+    Column,
+    DataDir,
+    JsonFlag,
+    NoProgressFlag,
+    command_progress,
+    emit_json,
+    output_console,
+    print_table,
+    print_warning,
+    say,
+    say_written,
+    writable,
+)
 from pianobot.reports.discover_report import build_discover_report, gap_cell
 
 RunIds = Annotated[
@@ -22,32 +33,36 @@ RunIds = Annotated[
 
 
 def _print(result: DiscoveryResult, report: Path | None, model_out: Path | None) -> None:
-    console = Console()
+    console = output_console()
     for line in result.decision_line.splitlines():
         console.print(f"[bold]{line}[/bold]")
     console.print(f"Verdict: {result.verdict}")
     for finding in result.findings:
         console.print(f"Measured: {finding.text}")
     if result.base_on_bounds:
-        console.print(f"[yellow]Base parameters on a bound (not pinned by the data): "
-                      f"{', '.join(result.base_on_bounds)}[/yellow]")
+        print_warning(f"base parameters on a bound (not pinned by the data): {', '.join(result.base_on_bounds)}")
     for note in result.notes:
         console.print(f"[dim]Data: {note}[/dim]")
     for it in result.iterations:
-        table = Table(title=f"Iteration {it.index + 1}: held-out gap of the current model {it.gap_before.text()}")
-        for column in ("candidate", "ΔIC", "held-out gap after", "shrink", "consistent", "status", "why not"):
-            table.add_column(column)
+        rows = []
         for v in it.verdicts[:12]:
             ratio = "∞" if not math.isfinite(v.ratio) else f"{v.ratio:.2g}×"
-            table.add_row(v.label, f"{v.delta_ic:.1f}", gap_cell(v.gap_after), f"{100 * v.shrink:.0f} % ({ratio})",
-                          f"{100 * v.consistency:.0f} %", v.status, "; ".join(v.reasons))
-        console.print(table)
-    console.print(f"[dim]{result.n_train} training / {result.n_held_out} held-out keystrokes, "
-                  f"{result.seconds:.1f} s[/dim]")
+            rows.append([v.label, f"{v.delta_ic:.1f}", gap_cell(v.gap_after), f"{100 * v.shrink:.0f} % ({ratio})",
+                         f"{100 * v.consistency:.0f} %", v.status, "; ".join(v.reasons)])
+        print_table(CANDIDATE_COLUMNS, rows,
+                    title=f"Iteration {it.index + 1}: held-out gap of the current model {it.gap_before.text()}")
+    say(f"{result.n_train} training / {result.n_held_out} held-out keystrokes, {result.seconds:.1f} s")
     if model_out is not None:
-        console.print(f"Model: {model_out}")
+        say_written("model", model_out)
     if report is not None:
-        console.print(f"Report: {report}")
+        say_written("report", report)
+
+
+CANDIDATE_COLUMNS = (
+    Column("candidate"), Column("ΔIC", justify="right"), Column("held-out gap after", justify="right"),
+    Column("shrink", 2, justify="right"), Column("consistent", 3, justify="right"), Column("status"),
+    Column("why not", 1, wrap=True),
+)
 
 
 def register(app: typer.Typer) -> None:
@@ -74,13 +89,15 @@ def register(app: typer.Typer) -> None:
         presses: Annotated[Path | None, typer.Option(
             "--presses", help="CSV of the commanded presses (t_start_s, speeds, acceleration, depth, distance, "
                               "hold) for runs that do not record them, e.g. an imported Motive take.")] = None,
-        no_progress: Annotated[bool, typer.Option("--no-progress", help="No progress display.")] = False,
+        no_progress: NoProgressFlag = False,
     ) -> None:
         """Localise where the model and the measurements disagree, name the missing effect, refit."""
+        out = writable(out, "--out")
         if model_out is None and out is not None:
             model_out = out.with_suffix(".model.json")
-        result = discover_runs(runs, data, model, seed=seed, model_out=model_out, vacuum_kpa=vacuum_kpa, schedule=presses,
-                               progress=progress_display(not (json_out or no_progress)))
+        model_out = writable(model_out, "--model-out")
+        result = discover_runs(runs, data, model, seed=seed, model_out=model_out, vacuum_kpa=vacuum_kpa,
+                               schedule=presses, progress=command_progress(json_out, no_progress))
         if out is not None:
             build_discover_report(result, out, model_path=model_out)
         if json_out:
