@@ -25,6 +25,7 @@ from pianobot.cli.common import (
     say_written,
     writable,
 )
+from pianobot.executor import ExecutorSettings
 from pianobot.reports.discover_report import build_discover_report, gap_cell
 
 RunIds = Annotated[
@@ -89,6 +90,11 @@ def register(app: typer.Typer) -> None:
         presses: Annotated[Path | None, typer.Option(
             "--presses", help="CSV of the commanded presses (t_start_s, speeds, acceleration, depth, distance, "
                               "hold) for runs that do not record them, e.g. an imported Motive take.")] = None,
+        workers: Annotated[int | None, typer.Option(
+            "--workers", min=1, help="Processes for the candidate fits (default: the machine's cores; "
+                                     "small work stays in this process).")] = None,
+        scheduler: Annotated[str | None, typer.Option(
+            "--scheduler", help="Dask scheduler address (tcp://HOST:PORT) to run the candidate fits on.")] = None,
         no_progress: NoProgressFlag = False,
     ) -> None:
         """Localise where the model and the measurements disagree, name the missing effect, refit."""
@@ -97,7 +103,8 @@ def register(app: typer.Typer) -> None:
             model_out = out.with_suffix(".model.json")
         model_out = writable(model_out, "--model-out")
         result = discover_runs(runs, data, model, seed=seed, model_out=model_out, vacuum_kpa=vacuum_kpa,
-                               schedule=presses, progress=command_progress(json_out, no_progress))
+                               schedule=presses, progress=command_progress(json_out, no_progress),
+                               executor=ExecutorSettings.resolve(workers=workers, scheduler=scheduler))
         if out is not None:
             build_discover_report(result, out, model_path=model_out)
         if json_out:

@@ -105,20 +105,24 @@ def _iterate(setting: Setting, current: GreyBoxFit, start: KeystrokeModel, setti
         def screen_one(spec: CandidateSpec) -> Evaluated:
             screened = search.screen(setting, current, spec)
             full = search.as_full(setting, current, spec, screened)
-            task.advance(note=spec.label)
             return search.evaluate(setting, full, criterion, sigma_m, spec.label, spec, joint=False)
 
-        evaluated = mapper(screen_one, specs)
+        evaluated = []
+        for e in mapper(screen_one, specs):  # progress advances here, as results come back
+            evaluated.append(e)
+            task.advance(note=e.label)
         ranked = sorted(evaluated, key=lambda e: e.ic)[: settings.joint_refits]
 
         def refit(e: Evaluated) -> Evaluated:
             assert e.spec is not None
             fit = search.joint(setting, current, e.spec, e.fit, start)
-            task.advance(note=f"{e.spec.label} (joint)")
             joint = search.evaluate(setting, fit, criterion, sigma_m, e.label, e.spec)
             return joint if joint.ic <= e.ic else e
 
-        refitted = {e.label: e for e in mapper(refit, ranked)}
+        refitted = {}
+        for e in mapper(refit, ranked):
+            refitted[e.label] = e
+            task.advance(note=f"{e.label} (joint)")
     final = [refitted.get(e.label, e) for e in evaluated]
     verdicts = [_verdict(e, reference, rule, False) for e in final]
     # Intervals (a central Jacobian and noise draws each) only where the rest of the rule holds.

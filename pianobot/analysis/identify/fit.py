@@ -251,13 +251,11 @@ def _bootstrap_intervals(
         sub = batch.subset(picks[i])
         return _derived(GreyBoxFit(MeasuredArm.of(sub), layout).fit(theta).theta_, layout)
 
+    found: list[dict[str, float]] = []
     with progress.task("bootstrap refits", total=draws) as task:
-        def counted(i: int) -> dict[str, float]:
-            out = refit(i)
+        for i, out in enumerate(mapper(refit, range(draws))):
+            found.append(out)
             task.advance(note=f"keystroke set {i + 1} of {draws}")
-            return out
-
-        found = mapper(counted, list(range(draws)))
     return {n: (float(np.percentile([d[n] for d in found], 2.5)), float(np.percentile([d[n] for d in found], 97.5)))
             for n in found[0]}
 
