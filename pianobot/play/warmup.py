@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 import pandas as pd
+from sklearn.model_selection import GroupKFold
 
 from pianobot.analysis.learn import LearnedPredictor, training_set
 from pianobot.analysis.predictors import OUTPUT_COLUMNS, FloatArray, grid_inverse, grid_velocity_range
@@ -40,6 +41,7 @@ from pianobot.play.strokes import StrokeGeometry
 from pianobot.spec import RigSpec
 
 FIT_KINDS = ("gp", "poly", "spline")  # `pianobot fit`'s smooth kinds; the held-out error picks
+CV_FOLDS = 6  # grouped folds of the held-out error (two strokes out of a dozen per fold)
 SURVEY_MIN = 4  # keystrokes per level of the first pass, at least
 SETTLE_S = 0.1  # after each warm-up stroke: the note-off arrives, the key comes to rest
 
@@ -152,14 +154,13 @@ class WarmUpPredictor:
         speed = trials["down_velocity_mps"].to_numpy(float)
         onset = _logged(trials).assign(hold_s=0.0, t_on_s=trials["t_on_s"].to_numpy(float) * speed,
                                        midi_hold_s=np.nan)  # the hold map is learned apart
-        cv = _held_out_errors(onset, seed)
+        fitted = {kind: _fit(kind, onset, seed) for kind in FIT_KINDS}
+        cv = _held_out_errors(onset, fitted, seed)
         kind_v = str(cv.sort_values(["velocity_mae", "kind"]).iloc[0]["kind"])
         kind_l = str(cv.sort_values(["lead_rmse_s", "kind"]).iloc[0]["kind"])
         cv = cv.assign(loudness=cv["kind"] == kind_v, lead=cv["kind"] == kind_l)
-        loudness = _fit(kind_v, onset, seed)
-        lead = loudness if kind_l == kind_v else _fit(kind_l, onset, seed)
-        hold = _fit(kind_l, _logged(trials), seed)
-        return cls(loudness, lead, hold, (float(speed.min()), float(speed.max())), cv)
+        hold = _fit(kind_l, _logged(trials), seed, warm=fitted[kind_l])
+        return cls(fitted[kind_v], fitted[kind_l], hold, (float(speed.min()), float(speed.max())), cv)
 
     def predict(self, frame: pd.DataFrame) -> pd.DataFrame:
         """Outcome per row (see `StrokePredictor.predict`)."""
@@ -188,27 +189,32 @@ def _logged(trials: pd.DataFrame) -> pd.DataFrame:
     return trials.assign(down_velocity_mps=np.log(trials["down_velocity_mps"].to_numpy(float)))
 
 
-def _fit(kind: str, frame: pd.DataFrame, seed: int) -> LearnedPredictor:
+def _fit(kind: str, frame: pd.DataFrame, seed: int, warm: LearnedPredictor | None = None) -> LearnedPredictor:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # GP kernel bounds on a dozen keystrokes: harmless
-        return LearnedPredictor(kind, seed).fit(training_set(frame))
+        return LearnedPredictor(kind, seed).fit(training_set(frame), warm=warm)
 
 
-def _held_out_errors(onset: pd.DataFrame, seed: int) -> pd.DataFrame:
-    """Per kind: loudness MAE and lead RMSE on sounded strokes held out one speed at a time."""
+def _held_out_errors(onset: pd.DataFrame, fitted: dict[str, LearnedPredictor], seed: int) -> pd.DataFrame:
+    """Per kind: loudness MAE and lead RMSE on sounded strokes held out (grouped by speed).
+
+    As `pianobot fit` does: grouped folds (repeats of one speed never on both sides), each fold
+    warm-started from the fit on all strokes.
+    """
     sounded = np.isfinite(onset["on_velocity"].to_numpy(float)) & (onset["status"] == "ok").to_numpy()
     groups = np.unique(np.round(onset["down_velocity_mps"].to_numpy(float), 9), return_inverse=True)[1].ravel()
+    folds = min(CV_FOLDS, int(np.unique(groups).size))
+    splits = list(GroupKFold(n_splits=folds).split(onset, groups=groups)) if folds >= 2 else []
     speed = np.exp(onset["down_velocity_mps"].to_numpy(float))
     rows = []
-    for kind in FIT_KINDS:
+    for kind, full in fitted.items():
         velocity, lead = np.full(len(onset), np.nan), np.full(len(onset), np.nan)
-        for g in np.unique(groups[sounded]):
-            test = groups == g
+        for train, test in splits:
             try:
-                model = _fit(kind, onset[~test], seed)
+                model = _fit(kind, onset.iloc[train], seed, warm=full)
             except InputError:  # too few sounded strokes left to fit
                 continue
-            out = model.predict(onset[test])
+            out = model.predict(onset.iloc[test])
             velocity[test], lead[test] = out["on_velocity"].to_numpy(float), out["lead_s"].to_numpy(float)
         dv = np.abs(velocity - onset["on_velocity"].to_numpy(float))[sounded]
         dl = ((lead - onset["t_on_s"].to_numpy(float)) / speed)[sounded]

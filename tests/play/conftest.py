@@ -1,11 +1,13 @@
-"""A model fitted from a sim sweep (the calibration spec), shared by the play tests."""
+"""Shared by the play tests: a model fitted from a sim sweep, the test songs, the world's truth."""
 
 from __future__ import annotations
 
 import warnings
 from pathlib import Path
 
+import numpy as np
 import pytest
+from play_reference import TruthTable, truth_table
 
 from pianobot.analysis.learn import LearnedPredictor, training_set
 from pianobot.run import run_sweep
@@ -25,3 +27,29 @@ def fitted_model(tmp_path_factory: pytest.TempPathFactory) -> LearnedPredictor:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # GP kernel bounds: harmless for this small fit
         return LearnedPredictor("gp").fit(training_set(trials))
+
+
+@pytest.fixture(scope="session")
+def song_files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """The play test songs (built in code) written as MIDI files."""
+    from pianobot.io.midifile import write_song
+    from pianobot.play.library import TEST_SONGS
+
+    folder = tmp_path_factory.mktemp("songs")
+    return {name: write_song(folder / f"{name}.mid", (spec := make()).to_notes(), tempo_bpm=spec.tempo_bpm)
+            for name, make in TEST_SONGS.items()}
+
+
+@pytest.fixture(scope="session")
+def soft_truth() -> list[TruthTable]:
+    """The default world's truth for the reference tempo: every vacuum level and hover the soft
+    finger's play settings allow, down velocities spread geometrically over its envelope."""
+    from pianobot.physics.trajectory import Press
+    from pianobot.physics.world import World
+    from pianobot.play.settings import PlaySettings
+
+    settings = PlaySettings()
+    speeds = np.geomspace(0.005, 0.06, 48)
+    world = World.default(0)
+    return [truth_table(world, level, Press(d, settings.play_depth_m, 0.03, 0.7, 2.0), speeds)
+            for level in settings.levels_kpa for d in settings.distances_m]
