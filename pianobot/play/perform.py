@@ -163,7 +163,7 @@ class Performer:
             # Song time zero on the rig clock: the first motion starts lead_in after the setup.
             origin = now + plan.settings.lead_in_s - min(0.0, float(played["start_s"].min()))
             loop = _SongLoop(self, plan, origin, adapter)
-            records = list(played.itertuples(index=False))
+            records: list[Any] = list(played.itertuples(index=False))
             with self.progress.task("notes", total=len(records)) as task:
                 for i, row in enumerate(records):
                     try:

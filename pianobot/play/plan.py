@@ -34,7 +34,16 @@ from pianobot.errors import InputError
 from pianobot.io.midifile import Note
 from pianobot.plan import key_change_s
 from pianobot.play.dynamics import DynamicsMap, DynamicsMode
-from pianobot.play.schedule import FASTER, LATE, LOUDER, SKIPPED, NoteTimes, Scheduled, need_s, schedule
+from pianobot.play.schedule import (
+    FASTER,
+    LATE,
+    LOUDER,
+    SKIPPED,
+    NoteTimes,
+    Scheduled,
+    need_s,
+    schedule,
+)
 from pianobot.play.settings import PlaySettings
 from pianobot.play.strokes import StrokeGeometry, StrokeTable
 from pianobot.play.tempo import Feasibility, TempoChoice, TempoRequest, choose_tempo, tempo_limits

@@ -79,8 +79,11 @@ class _Candidates:
                 s = speeds[rows]
                 lead[rows], busy[rows] = table.lead(s), table.busy0(s)
                 hold0[rows], slope[rows] = table.hold0(s), table.slope(s)
-        self.lead, self.busy, self.hold0, self.slope = lead.tolist(), busy.tolist(), hold0.tolist(), slope.tolist()
-        self.speeds = speeds.tolist()
+        self.lead: list[list[float]] = lead.tolist()
+        self.busy: list[list[float]] = busy.tolist()
+        self.hold0: list[list[float]] = hold0.tolist()
+        self.slope: list[list[float]] = slope.tolist()
+        self.speeds: list[list[float]] = speeds.tolist()
 
 
 def _grid(lo: FloatArray, hi: FloatArray, k: int) -> FloatArray:

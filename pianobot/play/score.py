@@ -86,7 +86,7 @@ class Score:
     def per_note_records(self) -> list[dict[str, Any]]:
         """The per-note table as JSON-able records (NaN → None)."""
         frame = self.per_note.astype(object).where(self.per_note.notna(), None)
-        return list(frame.to_dict(orient="records"))
+        return [{str(k): v for k, v in row.items()} for row in frame.to_dict(orient="records")]
 
 
 def _arrays(notes: Sequence[Note], shift_s: float) -> tuple[FloatArray, FloatArray]:

@@ -31,7 +31,13 @@ from pianobot.play.plan import Plan, plan_model, stroke_tables
 from pianobot.play.score import Score, score_performance
 from pianobot.play.settings import Finger, PlaySettings
 from pianobot.play.tempo import TempoRequest
-from pianobot.play.warmup import WarmUp, design_warmup, estimated_lab_time_s, fit_warmup, survey_size
+from pianobot.play.warmup import (
+    WarmUp,
+    design_warmup,
+    estimated_lab_time_s,
+    fit_warmup,
+    survey_size,
+)
 from pianobot.progress import NO_PROGRESS, Progress
 from pianobot.spec import RigSpec, load_rig
 from pianobot.spec.rig import Travel
@@ -182,7 +188,7 @@ def play_song(
         plan = plan_naive(line.notes, settings, rig_spec, tempo=request, written_bpm=song.tempo_bpm)
         label, strokes = "none (naive: 0.001·v m/s)", 0
     else:
-        predictor, label = _predictor(model, settings.finger)
+        predictor, label = starting_model(model, settings.finger)
         plan = plan_model(line.notes, predictor, settings, rig_spec, dynamics=mode, tempo=request,
                           written_bpm=song.tempo_bpm)
     prior = plan
@@ -241,7 +247,9 @@ def play_song(
     return PlayResult(song, line, plan, performance, score, warnings, files, label, warm, prior)
 
 
-def _predictor(model: Path | StrokePredictor | None, finger: Finger) -> tuple[StrokePredictor, str]:
+def starting_model(model: Path | StrokePredictor | None, finger: Finger) -> tuple[StrokePredictor, str]:
+    """The model the plan starts from and its label: a file, a predictor, or the published
+    physics model (with a rigid finger's stiffness for the rigid finger)."""
     if model is None:
         if finger == "rigid":
             study = KeystrokeModel.study()

@@ -33,7 +33,12 @@ import pandas as pd
 from sklearn.model_selection import GroupKFold
 
 from pianobot.analysis.learn import LearnedPredictor, training_set
-from pianobot.analysis.predictors import OUTPUT_COLUMNS, FloatArray, grid_inverse, grid_velocity_range
+from pianobot.analysis.predictors import (
+    OUTPUT_COLUMNS,
+    FloatArray,
+    grid_inverse,
+    grid_velocity_range,
+)
 from pianobot.errors import InputError
 from pianobot.plan import Trial, lab_time
 from pianobot.play.settings import PlaySettings
