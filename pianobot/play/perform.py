@@ -21,6 +21,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import math
+import os
 from collections.abc import Sequence
 from contextlib import ExitStack
 from dataclasses import dataclass, field
@@ -103,7 +104,7 @@ class Performer:
             self._stack.close()
             raise
         self.clock = self.device.clock
-        self.collected_to_s = self.clock.now()
+        self.collected_to_s = self.started_s = self.clock.now()
         self.writer.update_meta(rig={"spec": spec, "description": self.device.describe()})
         return self
 
@@ -113,6 +114,14 @@ class Performer:
                 self.writer.finish("failed", f"{type(exc).__name__}: {exc}")
         finally:
             self._stack.close()
+
+    def replan(self, plan: pd.DataFrame) -> None:
+        """Replace plan.parquet (before the song starts): the warm-up as played and the song as it
+        will be played, so the run's plan names every keystroke it holds."""
+        temp = self.writer.path / ".plan.parquet.tmp"
+        plan.to_parquet(temp, index=False)
+        os.replace(temp, self.writer.path / "plan.parquet")
+        self.writer.update_meta(trials_planned=len(plan))
 
     @property
     def run_id(self) -> str:
@@ -183,7 +192,8 @@ class Performer:
         recovery = float(pd.Series(self.recoveries).median()) if self.recoveries else math.nan
         history = [] if adapter is None else list(adapter.history)
         self.writer.update_meta(origin_s=origin, observed_recovery_s=recovery, rig_warnings=self.warnings,
-                                adaptation=None if adapter is None else history)
+                                adaptation=None if adapter is None else history,
+                                lab_time_s=self.clock.now() - self.started_s)
         self.writer.finish(status, reason)
         return Performance(tuple(notes), pd.DataFrame(rows), self.run_id, self.run_path, status, reason,
                            origin, history, recovery, tuple(self.warnings))

@@ -201,6 +201,7 @@ def play_song(
                           prior_plan=prior)
     song_key = hashlib.sha256(Path(song_path).read_bytes()).hexdigest()[:16]
     design: list[Any] = []
+    focus: list[Any] = []
     levels: list[float] = []
     if strokes and plan.geometry is not None:
         levels = sorted({float(v) for v in plan.played["vacuum_kpa"]}) or sorted(plan.tables)
@@ -233,8 +234,10 @@ def play_song(
                                    speed_ranges=warm.speed_ranges_mps)
             plan = plan_model(line.notes, warm.predictor, settings, rig_spec, dynamics=mode, tables=tables,
                               tempo=request, written_bpm=song.tempo_bpm)
-        _write_parquet(plan.notes.assign(trial_id=[trial_id_for(song_key, int(i)) for i in plan.notes["note_index"]]),
-                       performer.run_path / "song_plan.parquet")
+        song_plan = plan.notes.assign(trial_id=[trial_id_for(song_key, int(i)) for i in plan.notes["note_index"]])
+        _write_parquet(song_plan, performer.run_path / "song_plan.parquet")
+        if warm is not None:
+            performer.replan(_initial_plan(design + focus, plan, song_key))
         performer.writer.update_meta(plan_summary=plan.summary(), warnings=list(plan.warnings),
                                      warmup=None if warm is None else warm.summary())
         performance = performer.play(plan, adapter)
@@ -267,7 +270,8 @@ def _at_tempo(notes: tuple[Note, ...], scale: float) -> list[Note]:
 
 
 def _initial_plan(design: list[Any], plan: Plan, song_key: str) -> pd.DataFrame:
-    """plan.parquet: the warm-up keystrokes and the song as planned before the warm-up."""
+    """plan.parquet: the warm-up keystrokes and the song's notes (the plan before the warm-up
+    when the run is created; after the warm-up, its strokes and the song as it will be played)."""
     warm = pd.DataFrame([{"trial_id": t.trial_id, "index": t.index, "phase": "warmup", "pitch": t.note,
                           **t.parameters()} for t in design])
     song = plan.notes.assign(trial_id=[trial_id_for(song_key, int(i)) for i in plan.notes["note_index"]],
