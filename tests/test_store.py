@@ -228,8 +228,10 @@ def test_journal_appends_fsynced_lines_and_skips_a_torn_tail(data_dir: Path) -> 
 def test_a_live_writer_locks_the_run(data_dir: Path) -> None:
     writer = _create(data_dir, ["a"])
     paths = RunPaths(writer.path)
-    assert paths.lock.read_text().strip() == str(os.getpid())
-    paths.lock.write_text("1\n")  # pid 1 is alive: another process holds it
+    record = json.loads(paths.lock.read_text())
+    assert record["pid"] == os.getpid() and record["host"] and record["start_utc"]
+    writer.close()
+    paths.lock.write_text("1\n")  # an old-style lock of pid 1, which is alive
     with pytest.raises(RunLocked):
         RunWriter.reopen(data_dir, writer.run_id)
     paths.lock.write_text("999999999\n")  # a dead writer's lock is taken over

@@ -9,14 +9,17 @@ from __future__ import annotations
 
 from pianobot.store.journal import read_journal
 from pianobot.store.layout import RunPaths, resolve_run, runs_dir
+from pianobot.store.lock import LockLost, RunLock, RunLocked, read_holder
 from pianobot.store.reader import Run, RunSummary, list_runs, load_run, summarize_run
 from pianobot.store.schema import SCHEMA_VERSION, TABLE_SCHEMAS, empty_frame
-from pianobot.store.writer import RunLocked, RunWriter
+from pianobot.store.writer import RunWriter
 
 __all__ = [
     "SCHEMA_VERSION",
     "TABLE_SCHEMAS",
     "Run",
+    "LockLost",
+    "RunLock",
     "RunLocked",
     "RunPaths",
     "RunSummary",
@@ -24,6 +27,7 @@ __all__ = [
     "empty_frame",
     "list_runs",
     "load_run",
+    "read_holder",
     "read_journal",
     "resolve_run",
     "runs_dir",

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import errno
 import os
 from pathlib import Path
 from typing import Any
@@ -26,6 +25,7 @@ from pianobot.store.layout import (
     write_json_atomic,
     write_parquet_atomic,
 )
+from pianobot.store.lock import RunLock, RunLocked  # noqa: F401  (re-exported: RunLocked used to live here)
 from pianobot.store.schema import (
     RUN_KINDS,
     RUN_STATUSES,
@@ -38,10 +38,6 @@ from pianobot.store.schema import (
 from pianobot.store.tables import committed_batches, dedupe_trials, drop_orphan_parts
 
 
-class RunLocked(RuntimeError):
-    """Another live process is writing this run."""
-
-
 class RunWriter:
     """The one writer of a run folder.
 
@@ -52,9 +48,13 @@ class RunWriter:
 
     def __init__(self, paths: RunPaths, *, fsync: bool = True) -> None:
         self.paths = paths
-        self._lock_fd: int | None = _acquire_lock(paths.lock)
-        self._journal = Journal(paths.journal, fsync=fsync)
-        self._meta = read_json(paths.run_json)
+        self._lock = RunLock(paths.lock, purpose="writer").acquire()
+        try:
+            self._journal = Journal(paths.journal, fsync=fsync)
+            self._meta = read_json(paths.run_json)
+        except BaseException:
+            self._lock.release()
+            raise
         known = committed_batches(paths)
         self._next_batch = max(known, default=0) + 1
 
@@ -154,6 +154,7 @@ class RunWriter:
             "midi": None if midi is None else to_table(midi, "midi", self.run_id),
             "trials": to_table(trials, "trials", self.run_id),
         }
+        self._lock.verify()
         batch = self._next_batch
         for name, table in tables.items():  # trials last: it commits the batch
             if table is not None and (table.num_rows or name == "trials"):
@@ -200,6 +201,7 @@ class RunWriter:
         A compacted file records in its metadata which batches it holds, so a crash between
         writing it and removing the parts never makes a reader count a batch twice.
         """
+        self._lock.verify()
         drop_orphan_parts(self.paths)
         parts = self.paths.part_batches()
         committed = sorted(parts["trials"])
@@ -214,10 +216,7 @@ class RunWriter:
     def close(self) -> None:
         """Release the journal and the run lock (idempotent)."""
         self._journal.close()
-        if self._lock_fd is not None:
-            os.close(self._lock_fd)
-            self._lock_fd = None
-            self.paths.lock.unlink(missing_ok=True)
+        self._lock.release()
 
     def __enter__(self) -> RunWriter:
         return self
@@ -257,32 +256,3 @@ def _compact_table(paths: RunPaths, name: str, committed: list[int], parts: dict
         os.replace(temp, target)
     finally:
         temp.unlink(missing_ok=True)
-
-
-def _acquire_lock(path: Path) -> int:
-    """Create run.lock holding our pid; a lock left by a dead process is taken over."""
-    for _ in range(2):
-        try:
-            fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
-        except FileExistsError:
-            if _lock_is_live(path):
-                raise RunLocked(f"run {path.parent.name} is being written by another process") from None
-            path.unlink(missing_ok=True)
-            continue
-        os.write(fd, f"{os.getpid()}\n".encode())
-        return fd
-    raise RunLocked(f"could not lock run {path.parent.name}")
-
-
-def _lock_is_live(path: Path) -> bool:
-    try:
-        pid = int(path.read_text().strip() or "0")
-    except (OSError, ValueError):
-        return False
-    if pid <= 0 or pid == os.getpid():
-        return False
-    try:
-        os.kill(pid, 0)
-    except OSError as exc:
-        return exc.errno == errno.EPERM
-    return True
