@@ -34,7 +34,6 @@ import numpy as np
 
 from pianobot.analysis.predictors import PhysicsPredictor
 from pianobot.io.midifile import write_song
-from pianobot.physics.trajectory import Press
 from pianobot.physics.world import World, WorldConfig
 from pianobot.play import PlayResult, PlaySettings, play_rig, play_song
 from pianobot.play.library import TEST_SONGS, etude
@@ -44,21 +43,20 @@ HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "results" / "play.json"
 RIGID_RIG = HERE.parent / "experiments" / "rigs" / "sim-rigid.yaml"
 sys.path.insert(0, str(HERE.parent / "tests" / "play"))
-from play_reference import fastest_sustainable_bpm, truth_table  # noqa: E402
+from play_reference import fastest_sustainable_bpm, strokes, truth_table  # noqa: E402
 
 FINGERS = {"soft": "sim", "rigid": str(RIGID_RIG)}
 
 
 def _truth(finger: str) -> list[Any]:
-    """The world's truth tables for the reference tempo (every level and hover play may use)."""
+    """The world's truth tables for the reference tempo (every level, every stroke shape)."""
     settings = PlaySettings(finger=finger)  # type: ignore[arg-type]
     rig = play_rig(FINGERS[finger])
     world = World(WorldConfig.model_validate({k: v for k, v in rig.world.items() if k != "preset"}), 0)
-    cap = rig.envelope_for(finger)["down_velocity_mps"].high  # type: ignore[arg-type]
-    speeds = np.geomspace(0.005, cap, 48)
-    levels = [p for p in settings.levels_kpa if rig.envelope_for(finger)["vacuum_kpa"].contains(p)]  # type: ignore[arg-type]
-    return [truth_table(world, level, Press(d, settings.play_depth_m, 0.03, 0.7, 2.0), speeds)
-            for level in levels for d in settings.distances_m]
+    envelope = rig.envelope_for(finger)  # type: ignore[arg-type]
+    presses = strokes(settings.play_depth_m, np.geomspace(0.008, envelope["down_velocity_mps"].high, 28))
+    levels = [p for p in settings.levels_kpa if envelope["vacuum_kpa"].contains(p)]
+    return [truth_table(world, level, presses) for level in levels]
 
 
 def _row(result: PlayResult) -> dict[str, Any]:

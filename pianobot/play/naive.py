@@ -15,6 +15,7 @@ as soon as the arm is free, however late (no skipping, no shortening).
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 
 import numpy as np
 import pandas as pd
@@ -38,7 +39,8 @@ def plan_naive(notes: Sequence[Note], settings: PlaySettings, rig: RigSpec, *,
     choice = written_only(tempo or TempoRequest(), written_bpm)
     scale = choice.scale
     limits = envelope_limits(settings, rig)
-    geometry = fastest_geometry(settings, rig)
+    # The demo pressed in one move from its hover: no fast approach.
+    geometry = replace(fastest_geometry(settings, rig), approach_velocity_mps=0.0)
     v_lo, v_hi = limits.get("down_velocity_mps", (0.0, 0.06))
     vacuum = vacuum_levels(settings, rig)[0]
     hold_cap = limits.get("hold_s", (0.0, 2.0))[1]
@@ -60,7 +62,7 @@ def plan_naive(notes: Sequence[Note], settings: PlaySettings, rig: RigSpec, *,
         "note_index": np.arange(len(notes)), "pitch": [n.pitch for n in notes],
         "written_onset_s": onset / scale, "onset_s": onset, "offset_s": onset + duration,
         "song_velocity": velocity.astype(int), "target_velocity": velocity, "vacuum_kpa": vacuum,
-        "down_velocity_mps": speed, **geometry.to_dict(), "hold_s": hold,
+        "down_velocity_mps": speed, **geometry.to_dict(), "approach_m": 0.0, "hold_s": hold,
         "predicted_velocity": nan, "predicted_lead_s": 0.0, "predicted_midi_hold_s": nan,
         "predicted_release_s": nan, "move_s": move, "vacuum_change_s": 0.0, "start_s": start,
         "busy_s": busy, "late_s": start - onset, "tempo_limit_bpm": nan, "status": "play",

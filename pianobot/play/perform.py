@@ -32,10 +32,11 @@ import numpy as np
 import pandas as pd
 
 from pianobot.io.midifile import Note
-from pianobot.physics.trajectory import press_duration_s
+from pianobot.physics.trajectory import Press, press_duration_s
 from pianobot.plan import Trial
 from pianobot.play.adapt import OnlineAdapter, adapted_stroke
 from pianobot.play.plan import Plan
+from pianobot.play.strokes import stroke_trial
 from pianobot.play.warmup import SETTLE_S as WARMUP_SETTLE_S
 from pianobot.progress import NO_PROGRESS, Progress
 from pianobot.rig import open_rig
@@ -279,9 +280,11 @@ class _SongLoop:
         p._move(int(row.pitch), float(row.distance_m))
         gap = p._collect_gap()
         # A played note is a planned trial like any other (repeat 0), so the rig and store read it.
-        stroke = Trial(str(row.trial_id), int(row.note_index), 0, int(row.pitch), float(row.vacuum_kpa),
-                       speed, float(row.up_velocity_mps), float(row.acceleration_mps2), float(row.depth_m),
-                       float(row.distance_m), hold, 0.0)
+        geometry = self.plan.geometry
+        press = geometry.press(speed, hold) if geometry is not None else Press(
+            float(row.distance_m), float(row.depth_m), speed, float(row.up_velocity_mps),
+            float(row.acceleration_mps2), hold)
+        stroke = stroke_trial(str(row.trial_id), int(row.note_index), int(row.pitch), float(row.vacuum_kpa), press)
         data = p._keystroke(stroke, start)
         data = dataclasses.replace(data, midi=tuple(gap) + data.midi)
         on_velocity = data.row.get("on_velocity", math.nan)

@@ -57,7 +57,7 @@ LOUDER_TEXT = "louder than asked to keep time"
 PLAN_COLUMNS: tuple[str, ...] = (
     "note_index", "pitch", "written_onset_s", "onset_s", "offset_s", "song_velocity", "target_velocity",
     "vacuum_kpa", "down_velocity_mps", "up_velocity_mps", "acceleration_mps2", "depth_m",
-    "distance_m", "hold_s", "predicted_velocity", "predicted_lead_s", "predicted_midi_hold_s",
+    "distance_m", "approach_m", "hold_s", "predicted_velocity", "predicted_lead_s", "predicted_midi_hold_s",
     "predicted_release_s", "move_s", "vacuum_change_s", "start_s", "busy_s", "late_s",
     "tempo_limit_bpm", "status", "reason",
 )
@@ -98,7 +98,7 @@ class Plan:
             "late": int((frame["late_s"] > 0).sum()),
             "louder_to_keep_time": int(frame["reason"].str.contains(LOUDER_TEXT).sum()),
             "tempo": None if self.tempo is None else self.tempo.to_dict(),
-            "geometry": None if self.geometry is None else self.geometry.to_dict(),
+            "geometry": None if self.geometry is None else self.geometry.describe(),
             "dynamics": None if self.dynamics is None else self.dynamics.to_dict(),
             "reachable_by_vacuum": {
                 f"{k:g}": list(t.velocity_range) for k, t in sorted(self.tables.items())
@@ -125,9 +125,12 @@ def geometries(settings: PlaySettings, rig: RigSpec) -> list[StrokeGeometry]:
     depth = checked("depth_m", settings.play_depth_m)
     up = checked("up_velocity_mps", settings.up_velocity_mps or top("up_velocity_mps", 0.7))
     accelerations = settings.accelerations_mps2 or (top("acceleration_mps2", 2.0),)
+    fast = rig.approach  # the rig's two-segment press: speed of the fast move, clearance it keeps
+    clearance = max(fast.clearance_m, settings.approach_clearance_m)
     return [
-        StrokeGeometry(checked("distance_m", d), depth, checked("acceleration_mps2", a), up)
-        for a in accelerations for d in settings.distances_m
+        StrokeGeometry(checked("distance_m", d), depth, checked("acceleration_mps2", a), up,
+                       fast.velocity_mps if settings.fast_approach else 0.0, fast.acceleration_mps2, clearance)
+        for a in accelerations for d in settings.hovers_m
     ]
 
 
@@ -345,7 +348,7 @@ def _frame(notes: Sequence[Note], prepared: _Prepared, choice: TempoChoice, s: S
         "song_velocity": [x.velocity for x in notes], "target_velocity": prepared.targets,
         "vacuum_kpa": times.level, "down_velocity_mps": speed, "up_velocity_mps": g.up_velocity_mps,
         "acceleration_mps2": g.acceleration_mps2, "depth_m": g.depth_m, "distance_m": g.distance_m,
-        "hold_s": s.hold_s, "predicted_velocity": velocity, "predicted_lead_s": lead,
+        "approach_m": [g.press(float(v), 0.0).approach_m for v in speed], "hold_s": s.hold_s, "predicted_velocity": velocity, "predicted_lead_s": lead,
         "predicted_midi_hold_s": midi_hold, "predicted_release_s": lead + midi_hold,
         "move_s": s.move_s, "vacuum_change_s": s.vacuum_change_s,
         "start_s": np.where(skipped, onset - lead, s.start_s), "busy_s": busy0 + s.hold_s,

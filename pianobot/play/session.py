@@ -40,7 +40,7 @@ from pianobot.play.warmup import (
 )
 from pianobot.progress import NO_PROGRESS, Progress
 from pianobot.spec import RigSpec, load_rig
-from pianobot.spec.rig import Travel
+from pianobot.spec.rig import Approach, Travel
 
 PlannerName = Literal["model", "naive"]
 PLANNERS: tuple[str, ...] = ("model", "naive")
@@ -49,6 +49,10 @@ FINGERS: tuple[str, ...] = ("soft", "rigid")
 # a 50 mm lift): lift just clear of the black keys (~12 mm above the white ones) and move
 # briskly, half a UR5's top speed so the finger stays steady. One white key over: ~0.37 s.
 PLAYER_TRAVEL = Travel(velocity_mps=0.5, acceleration_mps2=4.0, lift_m=0.012)
+# A player's two-segment press: the fast approach at the travel moves' speed, stopping 1 mm above
+# the key (the sweeps' default keeps 5 mm and 1.5 s of the spec's motion before contact, to leave
+# the keystroke exactly as specified; a player instead warms up on the very strokes it plays).
+PLAYER_APPROACH = Approach(velocity_mps=0.5, acceleration_mps2=4.0, clearance_m=0.001, settle_s=0.0)
 # A rigid finger's stiffness for the starting model (the published model is the soft finger's):
 # stiff enough that the arm's travel reaches the key almost one to one.
 RIGID_FINGER_K1_NPM = 5000.0
@@ -104,14 +108,16 @@ class PlayResult:
 def play_rig(rig: str | Path | RigSpec) -> RigSpec:
     """The rig to play on: "sim" (the built-in sim rig) or a rig file, with a player's moves.
 
-    The built-in travel settings are a sweep's (slow, with a 50 mm lift between keys). A
-    simulated rig whose file says nothing about `travel:` (the built-in one included) plays with
-    a player's moves instead (`PLAYER_TRAVEL`); sweeps keep theirs. Travel a rig file sets, and
-    every real rig's, is used as written: those are the lab's.
+    The built-in travel and approach settings are a sweep's (slow, with a 50 mm lift between
+    keys; fast approaches that keep 5 mm and 1.5 s of the spec's motion). A simulated rig whose
+    file says nothing about `travel:` or `approach:` (the built-in one included) plays with a
+    player's moves instead (`PLAYER_TRAVEL`, `PLAYER_APPROACH`); sweeps keep theirs. Settings a
+    rig file writes, and every real rig's, are used as written: those are the lab's.
     """
     spec = rig if isinstance(rig, RigSpec) else _load_rig(rig)
-    if spec.kind == "sim" and "travel" not in spec.model_fields_set:
-        spec = spec.model_copy(update={"travel": PLAYER_TRAVEL})
+    if spec.kind == "sim":
+        player = {"travel": PLAYER_TRAVEL, "approach": PLAYER_APPROACH}
+        spec = spec.model_copy(update={k: v for k, v in player.items() if k not in spec.model_fields_set})
     return spec
 
 

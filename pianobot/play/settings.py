@@ -1,8 +1,9 @@
 """How `play` presses keys: candidate stroke geometries, vacuum levels, timing margins, warm-up.
 
 The finger decides the defaults: a soft finger presses deep (its pad compresses ~15–20 mm
-before the key moves) at a vacuum level per phrase; a rigid finger presses just past the key's
-dip and has no vacuum line. `resolved()` fills every `None` from the finger.
+before the key moves) at a vacuum level per phrase and keeps 2 mm above the key when the arm
+stops; a rigid finger presses just past what sounds the key, may wait 1 mm above it and has no
+vacuum line. Every `None` below means the finger's default.
 """
 
 from __future__ import annotations
@@ -14,8 +15,15 @@ from pydantic import BaseModel, ConfigDict, Field
 Finger = Literal["soft", "rigid"]
 
 # Press depth below first contact: the soft pad needs most of its proven 20–35 mm to push the
-# key to the bottom; a rigid finger travels just past the 10 mm dip.
-DEFAULT_DEPTH_M: dict[str, float] = {"soft": 0.025, "rigid": 0.010}
+# key to the bottom; a rigid finger sounds the key well before its proven 8–15 mm, and every
+# millimetre below the note-on is time the arm spends going down and up again after it.
+DEFAULT_DEPTH_M: dict[str, float] = {"soft": 0.025, "rigid": 0.008}
+# Hover heights (where the arm waits above the key) and the lowest height a stopped arm may
+# leave the fingertip at (where a fast approach ends). A finger is a spring on the arm: when the
+# arm stops at the travel moves' 4 m/s² the fingertip sways by m·a/k — about 1.6 mm for the soft
+# pad at -80 kPa (70 g, ~170 N/m), 0.1 mm for a rigid finger — so the soft finger keeps 2 mm.
+DEFAULT_DISTANCES_M: dict[str, tuple[float, ...]] = {"soft": (0.002, 0.005, 0.01), "rigid": (0.001, 0.002, 0.005, 0.01)}
+DEFAULT_CLEARANCE_M: dict[str, float] = {"soft": 0.002, "rigid": 0.001}
 # Vacuum levels a phrase may use; a rigid finger has no vacuum line (0 kPa, its envelope).
 DEFAULT_VACUUM_LEVELS_KPA: dict[str, tuple[float, ...]] = {"soft": (-80.0, -60.0, -40.0), "rigid": (0.0,)}
 
@@ -34,9 +42,15 @@ class PlaySettings(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     finger: Finger = Field("soft", description="Selects the safety envelope and the defaults.")
-    distances_m: tuple[float, ...] = Field(
-        (0.002, 0.005, 0.01), min_length=1,
-        description="Hover heights above the key the planner may choose from (each in [0, 0.05]).",
+    distances_m: tuple[float, ...] | None = Field(
+        None, min_length=1,
+        description="Hover heights above the key the planner may choose from (each in [0, 0.05]; "
+        "null: the finger's default).",
+    )
+    clearance_m: float | None = Field(
+        None, ge=0.0, le=0.05,
+        description="Lowest height above the key where a fast approach may stop (null: the "
+        "finger's default; never below the rig's approach clearance).",
     )
     depth_m: float | None = Field(None, ge=0.0, le=0.1, description="Press depth below first contact.")
     accelerations_mps2: tuple[float, ...] | None = Field(
@@ -53,6 +67,10 @@ class PlaySettings(BaseModel):
     )
     speeds: int = Field(48, ge=4, le=400, description="Down velocities tabulated per vacuum level.")
     tabulate_hold_s: float = Field(0.4, gt=0.0, le=2.0, description="Second hold at which hold is tabulated.")
+    fast_approach: bool = Field(
+        True, description="Approach at the rig's fast-move speed to just above the key, then press "
+        "at the contact speed (a two-segment press), where that reaches the key sooner.",
+    )
     loudness_tolerance: float = Field(
         1.0, ge=0.0, le=20.0,
         description="A note may sound this many MIDI velocity steps louder than its target when "
@@ -90,6 +108,16 @@ class PlaySettings(BaseModel):
     def play_depth_m(self) -> float:
         """The press depth (the finger's default when unset)."""
         return self.depth_m if self.depth_m is not None else DEFAULT_DEPTH_M[self.finger]
+
+    @property
+    def hovers_m(self) -> tuple[float, ...]:
+        """The hover heights the planner may choose from (the finger's default when unset)."""
+        return self.distances_m if self.distances_m is not None else DEFAULT_DISTANCES_M[self.finger]
+
+    @property
+    def approach_clearance_m(self) -> float:
+        """The lowest stop of a fast approach above the key (the finger's default when unset)."""
+        return self.clearance_m if self.clearance_m is not None else DEFAULT_CLEARANCE_M[self.finger]
 
     @property
     def levels_kpa(self) -> tuple[float, ...]:

@@ -10,19 +10,23 @@ single-valued and picks the slowest speed that reaches a loudness.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
 from pianobot.analysis.predictors import StrokePredictor
-from pianobot.physics.trajectory import Press
-from pianobot.plan import move_durations_s
+from pianobot.physics.trajectory import Press, contact_time_s, press_duration_s
+from pianobot.plan import Trial
 from pianobot.play.settings import PlaySettings
 
 FloatArray = npt.NDArray[np.float64]
 
+# The contact-speed move starts this much above the height where it would just reach its speed.
+GAP_MARGIN = 1.25
+# A fast approach shorter than this is not worth a second moveL (the controller's round trip).
+MIN_APPROACH_M = 1e-3
 # When the model's hold does not respond to the commanded hold (a learned model trained at one
 # hold), holding the arm down longer keeps the key down just as much longer.
 FALLBACK_HOLD_SLOPE = 1.0
@@ -30,34 +34,59 @@ FALLBACK_HOLD_SLOPE = 1.0
 
 @dataclass(frozen=True)
 class StrokeGeometry:
-    """The part of a press fixed for a song: hover distance, depth, acceleration, up velocity.
+    """The part of a press fixed for a song: hover, depth, acceleration, up velocity, approach.
 
-    Per note only the down velocity (loudness) and the hold (length) change. A short hover and
-    a high acceleration and up velocity make the press cycle short, which a fast tempo needs.
+    Per note only the down velocity (loudness) and the hold (length) change. The arm waits
+    `distance_m` above the key (the hover). A slow stroke does not crawl all of that way: a fast
+    approach (`approach_velocity_mps`, `approach_acceleration_mps2`) takes the arm down to just
+    above the key, and the contact-speed move starts there — at the lowest height from which the
+    arm reaches its commanded speed before contact (v²/2a, with a margin), and never below
+    `clearance_m` (a stopped arm's finger must stay off the key). So every note has its own
+    hover for the contact-speed move, and the arm meets the key at the commanded speed either
+    way. The approach is used only where it makes the way to the key shorter; the stroke is a
+    function of the down velocity alone, so the warm-up plays exactly the strokes the song uses.
     """
 
     distance_m: float
     depth_m: float
     acceleration_mps2: float
     up_velocity_mps: float
+    approach_velocity_mps: float = 0.0  # 0: no fast approach
+    approach_acceleration_mps2: float = 1.0
+    clearance_m: float = 0.005
+
+    def contact_gap_m(self, down_velocity_mps: float) -> float:
+        """Height above the key where the contact-speed move starts (the note's own hover)."""
+        v = float(down_velocity_mps)
+        return min(self.distance_m, max(self.clearance_m, GAP_MARGIN * v * v / (2.0 * self.acceleration_mps2)))
 
     def press(self, down_velocity_mps: float, hold_s: float) -> Press:
-        """The press of one note with this geometry."""
-        return Press(self.distance_m, self.depth_m, float(down_velocity_mps), self.up_velocity_mps,
-                     self.acceleration_mps2, float(hold_s))
+        """The press of one note with this geometry (two-segment where that is faster)."""
+        plain = Press(self.distance_m, self.depth_m, float(down_velocity_mps), self.up_velocity_mps,
+                      self.acceleration_mps2, float(hold_s))
+        approach = self.distance_m - self.contact_gap_m(down_velocity_mps)
+        if self.approach_velocity_mps <= 0.0 or approach < MIN_APPROACH_M:
+            return plain
+        fast = replace(plain, approach_m=approach, travel_velocity_mps=self.approach_velocity_mps,
+                       travel_acceleration_mps2=self.approach_acceleration_mps2)
+        return fast if contact_time_s(fast) < contact_time_s(plain) else plain
 
     def durations_s(self, down_velocity_mps: npt.ArrayLike, hold_s: npt.ArrayLike = 0.0) -> FloatArray:
         """Motion start → arm back up, for many down velocities and holds (exact moveL timing)."""
-        v = np.asarray(down_velocity_mps, dtype=np.float64)
-        travel = np.full(v.shape, self.distance_m + self.depth_m)
-        accel = np.full(v.shape, self.acceleration_mps2)
-        down = move_durations_s(travel, v, accel)
-        up = move_durations_s(travel, np.full(v.shape, self.up_velocity_mps), accel)
-        return np.asarray(down + np.asarray(hold_s, dtype=np.float64) + up, dtype=np.float64)
+        v, h = np.broadcast_arrays(np.asarray(down_velocity_mps, dtype=np.float64),
+                                   np.asarray(hold_s, dtype=np.float64))
+        out = [press_duration_s(self.press(float(a), float(b))) for a, b in zip(v.ravel(), h.ravel(), strict=True)]
+        return np.asarray(out, dtype=np.float64).reshape(v.shape)
 
     def to_dict(self) -> dict[str, float]:
+        """The press parameters (the columns a predictor reads)."""
         return {"distance_m": self.distance_m, "depth_m": self.depth_m,
                 "acceleration_mps2": self.acceleration_mps2, "up_velocity_mps": self.up_velocity_mps}
+
+    def describe(self) -> dict[str, float]:
+        """Everything, for run.json and the JSON output."""
+        return {**self.to_dict(), "approach_velocity_mps": self.approach_velocity_mps,
+                "approach_acceleration_mps2": self.approach_acceleration_mps2, "clearance_m": self.clearance_m}
 
 
 @dataclass(frozen=True)
@@ -179,6 +208,14 @@ class StrokeTable:
     def busy_s(self, speed_mps: float, hold_s: float) -> float:
         """Motion start → the next press or move may start: the press itself plus the recovery."""
         return busy_s(self.geometry, self.settings, speed_mps, hold_s)
+
+
+def stroke_trial(trial_id: str, index: int, pitch: int, vacuum_kpa: float, press: Press) -> Trial:
+    """A planned keystroke (repeat 0) for the rig and the store, carrying the press's fast moves."""
+    return Trial(trial_id, index, 0, int(pitch), float(vacuum_kpa), press.down_velocity_mps, press.up_velocity_mps,
+                 press.acceleration_mps2, press.depth_m, press.distance_m, press.hold_s, 0.0,
+                 approach_m=press.approach_m, retract_m=press.retract_m,
+                 travel_velocity_mps=press.travel_velocity_mps, travel_acceleration_mps2=press.travel_acceleration_mps2)
 
 
 def busy_s(geometry: StrokeGeometry, settings: PlaySettings, speed_mps: float, hold_s: float) -> float:

@@ -42,7 +42,7 @@ from pianobot.analysis.predictors import (
 from pianobot.errors import InputError
 from pianobot.plan import Trial, lab_time
 from pianobot.play.settings import PlaySettings
-from pianobot.play.strokes import StrokeGeometry
+from pianobot.play.strokes import StrokeGeometry, stroke_trial
 from pianobot.spec import RigSpec
 
 FIT_KINDS = ("gp", "poly", "spline")  # `pianobot fit`'s smooth kinds; the held-out error picks
@@ -93,9 +93,8 @@ def design_warmup(pitches: Sequence[int], geometry: StrokeGeometry, levels_kpa: 
         for j, speed in enumerate(speeds):
             index = start + len(trials)
             hold = settings.warmup_hold_s if (j + (survey is not None)) % 2 else 0.0
-            trials.append(Trial(warmup_trial_id(song_key, index), index, 0, keys[index % len(keys)], float(level),
-                                float(speed), geometry.up_velocity_mps, geometry.acceleration_mps2,
-                                geometry.depth_m, geometry.distance_m, hold, 0.0))
+            trials.append(stroke_trial(warmup_trial_id(song_key, index), index, keys[index % len(keys)], level,
+                                       geometry.press(float(speed), hold)))
     return trials
 
 

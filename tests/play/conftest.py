@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from play_reference import TruthTable, truth_table
+from play_reference import TruthTable, strokes, truth_table
 
 from pianobot.analysis.learn import LearnedPredictor, training_set
 from pianobot.run import run_sweep
@@ -42,14 +42,12 @@ def song_files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 
 @pytest.fixture(scope="session")
 def soft_truth() -> list[TruthTable]:
-    """The default world's truth for the reference tempo: every vacuum level and hover the soft
-    finger's play settings allow, down velocities spread geometrically over its envelope."""
-    from pianobot.physics.trajectory import Press
+    """The default world's truth for the reference tempo: every vacuum level the soft finger's
+    play settings allow, every stroke shape, down velocities spread over its envelope."""
     from pianobot.physics.world import World
     from pianobot.play.settings import PlaySettings
 
     settings = PlaySettings()
-    speeds = np.geomspace(0.005, 0.06, 48)
+    presses = strokes(settings.play_depth_m, np.geomspace(0.008, 0.06, 28))
     world = World.default(0)
-    return [truth_table(world, level, Press(d, settings.play_depth_m, 0.03, 0.7, 2.0), speeds)
-            for level in settings.levels_kpa for d in settings.distances_m]
+    return [truth_table(world, level, presses) for level in settings.levels_kpa]

@@ -119,7 +119,7 @@ def test_the_warm_up_learns_another_piano_and_without_it_the_song_falls_apart(
     print(f"changed world: warm-up F1 {warmed.score.f1:.3f} onset RMS {warmed.score.onset_rms_ms:.1f} ms "
           f"velocity MAE {warmed.score.velocity_mae:.2f}; without: F1 {cold.score.f1:.3f}")
     assert warmed.score.f1 >= 0.95 and warmed.score.onset_rms_ms <= 20.0 and warmed.score.velocity_mae <= 4.0
-    assert cold.score.f1 <= warmed.score.f1 - 0.2
+    assert cold.score.f1 < warmed.score.f1 - 0.1
     assert cold.score.onset_rms_ms > 2 * warmed.score.onset_rms_ms
     assert cold.score.velocity_mae > 2 * warmed.score.velocity_mae
     assert cold.warmup is None and cold.to_dict()["warmup"] is None
