@@ -20,9 +20,11 @@ from pianobot.cli.common import DEFAULT_DATA, DataDir, JsonFlag, emit_json
 from pianobot.play import PlayResult, play_song
 from pianobot.progress import progress_display
 
-PLAN_SHOWN = ("note_index", "pitch", "onset_s", "song_velocity", "target_velocity", "vacuum_kpa",
-              "down_velocity_mps", "hold_s", "predicted_velocity", "predicted_lead_s", "start_s",
-              "move_s", "tempo_limit_bpm", "status", "reason")
+# The dry run's table: what a note asks, the stroke chosen, when it starts, how fast the song
+# could go for it; everything else is in `--json` (plan_notes).
+PLAN_SHOWN = {"note_index": "note", "pitch": "pitch", "onset_s": "onset s", "target_velocity": "target",
+              "down_velocity_mps": "speed m/s", "predicted_lead_s": "lead s", "start_s": "start s",
+              "tempo_limit_bpm": "limit bpm", "status": "status", "reason": "reason"}
 
 
 def _fmt(value: Any) -> str:
@@ -44,8 +46,8 @@ def _tempo_line(result: PlayResult) -> str:
 
 def _print_plan(result: PlayResult) -> None:
     table = Table(title=f"{result.plan.planner} plan of {result.song.source}")
-    for column in PLAN_SHOWN:
-        table.add_column(column)
+    for header in PLAN_SHOWN.values():
+        table.add_column(header)
     for row in result.plan.notes[list(PLAN_SHOWN)].itertuples(index=False):
         table.add_row(*(_fmt(v) for v in row))
     console = Console()

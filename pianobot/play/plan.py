@@ -53,6 +53,8 @@ from pianobot.spec import RigSpec
 # the regulator's real settling varies with the size of the step.
 VACUUM_BUDGET_FACTOR = 1.25
 LOUDER_TEXT = "louder than asked to keep time"
+# A target this close to a level's reachable range is not worth a warning (half a MIDI step).
+CLIP_TOLERANCE = 0.5
 
 PLAN_COLUMNS: tuple[str, ...] = (
     "note_index", "pitch", "written_onset_s", "onset_s", "offset_s", "song_velocity", "target_velocity",
@@ -365,7 +367,7 @@ def _reasons(prepared: _Prepared, s: Scheduled, velocity: np.ndarray) -> list[st
         parts = []
         table = prepared.tables[float(prepared.times.level[i])]
         t_lo, t_hi = table.velocity_range
-        if not t_lo - 1e-6 <= target <= t_hi + 1e-6:
+        if not t_lo - CLIP_TOLERANCE <= target <= t_hi + CLIP_TOLERANCE:
             parts.append(f"target {target:.1f} clipped to the reachable {t_lo:.1f}–{t_hi:.1f}")
         if flag & SKIPPED:
             parts.append("no time to release and re-strike: the arm is not free when this note's "

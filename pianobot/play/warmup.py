@@ -147,10 +147,11 @@ class WarmUpPredictor:
     """
 
     def __init__(self, loudness: LearnedPredictor, lead: LearnedPredictor, hold: LearnedPredictor,
-                 speeds_mps: tuple[float, float], cv: pd.DataFrame) -> None:
+                 speeds_mps: tuple[float, float], cv: pd.DataFrame, heard: tuple[float, float] = (1.0, 127.0)) -> None:
         self.loudness, self.lead, self.hold = loudness, lead, hold
         self.speeds_mps = speeds_mps  # the warm-up's slowest and fastest stroke
         self.cv_ = cv
+        self.heard = heard  # the quietest and loudest on-velocity the warm-up heard
 
     @classmethod
     def fit(cls, trials: pd.DataFrame, seed: int = 0) -> WarmUpPredictor:
@@ -164,13 +165,17 @@ class WarmUpPredictor:
         kind_l = str(cv.sort_values(["lead_rmse_s", "kind"]).iloc[0]["kind"])
         cv = cv.assign(loudness=cv["kind"] == kind_v, lead=cv["kind"] == kind_l)
         hold = _fit(kind_l, _logged(trials), seed, warm=fitted[kind_l])
-        return cls(fitted[kind_v], fitted[kind_l], hold, (float(speed.min()), float(speed.max())), cv)
+        heard = trials.loc[trials["status"] == "ok", "on_velocity"].to_numpy(float)
+        return cls(fitted[kind_v], fitted[kind_l], hold, (float(speed.min()), float(speed.max())), cv,
+                   (float(np.nanmin(heard)), float(np.nanmax(heard))))
 
     def predict(self, frame: pd.DataFrame) -> pd.DataFrame:
         """Outcome per row (see `StrokePredictor.predict`)."""
         speed = frame["down_velocity_mps"].to_numpy(float)
         logged = frame.assign(down_velocity_mps=np.log(np.maximum(speed, 1e-6)))
         out = self.loudness.predict(logged)
+        # No louder or quieter than anything heard: a fit between sparse strokes may overshoot.
+        out["on_velocity"] = np.clip(out["on_velocity"].to_numpy(float), *self.heard)
         out["lead_s"] = self.lead.predict(logged)["lead_s"].to_numpy(float) / speed
         out["midi_hold_s"] = self.hold.predict(logged)["midi_hold_s"]
         return out[list(OUTPUT_COLUMNS)]
