@@ -18,8 +18,28 @@ STATUS_COLORS = {"matched": "tab:green", "late": "tab:red", "early": "tab:purple
 
 def piano_roll(target: Sequence[Note], played: Sequence[Note], path: Path, *, title: str = "",
                status: Sequence[str] | None = None) -> Path:
-    """Write a PNG: pitch over time, target notes outlined in the colour of their status
-    (matched, late, early, missed; skipped dashed), played notes filled (darker = louder)."""
+    """Write the piano roll (`piano_roll_figure`) as a PNG."""
+    return _save(piano_roll_figure(target, played, title=title, status=status), path)
+
+
+def warmup_figure(trials: pd.DataFrame, predictor: Any, path: Path, *, title: str = "") -> Path:
+    """Write the warm-up figure (`warmup_fit_figure`) as a PNG."""
+    return _save(warmup_fit_figure(trials, predictor, title=title), path)
+
+
+def _save(fig: Any, path: Path) -> Path:
+    import matplotlib.pyplot as plt
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+def piano_roll_figure(target: Sequence[Note], played: Sequence[Note], *, title: str = "",
+                      status: Sequence[str] | None = None) -> Any:
+    """Pitch over time: target notes outlined in the colour of their status (matched, late,
+    early, missed; skipped dashed), played notes filled (darker = louder). A matplotlib Figure."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -55,14 +75,11 @@ def piano_roll(target: Sequence[Note], played: Sequence[Note], path: Path, *, ti
     ax.plot([], [], color="tab:orange", linewidth=6, label="played")
     ax.legend(loc="upper right", fontsize=8)
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
-    plt.close(fig)
-    return path
+    return fig
 
 
-def warmup_figure(trials: pd.DataFrame, predictor: Any, path: Path, *, title: str = "") -> Path:
-    """Write a PNG of the warm-up: loudness and lead over down velocity, strokes and the fit."""
+def warmup_fit_figure(trials: pd.DataFrame, predictor: Any, *, title: str = "") -> Any:
+    """The warm-up: loudness and lead over down velocity, its strokes and the fitted maps."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -92,7 +109,4 @@ def warmup_figure(trials: pd.DataFrame, predictor: Any, path: Path, *, title: st
     loud.legend(fontsize=8)
     fig.suptitle(title or "warm-up: keystrokes (dots) and the fitted maps (lines)")
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
-    plt.close(fig)
-    return path
+    return fig

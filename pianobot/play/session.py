@@ -28,6 +28,7 @@ from pianobot.play.figure import piano_roll, warmup_figure
 from pianobot.play.naive import plan_naive
 from pianobot.play.perform import Performance, Performer, trial_id_for
 from pianobot.play.plan import Plan, plan_model, stroke_tables
+from pianobot.play.report import write_play_report
 from pianobot.play.score import Score, score_performance
 from pianobot.play.settings import Finger, PlaySettings
 from pianobot.play.tempo import TempoRequest
@@ -294,7 +295,7 @@ def _write_parquet(frame: pd.DataFrame, path: Path) -> None:
 
 def _write_outputs(performance: Performance, target: list[Note], score: Score, plan: Plan,
                    plot: Path | None, label: str, warm: WarmUp | None) -> dict[str, str]:
-    """performance.mid, the piano roll, the warm-up figure, score.json and the per-note table."""
+    """performance.mid, the piano roll, the warm-up figure, report.html, score.json and the per-note table."""
     root = performance.run_path
     files = {"performance_mid": str(write_performance(root / "performance.mid", performance.notes))}
     tempo = f" at {plan.tempo.played_bpm:.4g} bpm" if plan.tempo is not None else ""
@@ -310,6 +311,8 @@ def _write_outputs(performance: Performance, target: list[Note], score: Score, p
     if performance.adaptation:
         pd.DataFrame(performance.adaptation).to_parquet(root / "adaptation.parquet", index=False)
         files["adaptation"] = str(root / "adaptation.parquet")
+    files["report"] = str(write_play_report(root / "report.html", performance=performance, plan=plan, score=score,
+                                            target=target, warmup=warm, model=label, title=title))
     payload = {**score.to_dict(), "planner": plan.planner, "model": label, "plan": plan.summary(),
                "warmup": None if warm is None else warm.summary(), "per_note": score.per_note_records()}
     (root / "score.json").write_text(json.dumps(payload, indent=2, default=_json_default) + "\n", encoding="utf-8")

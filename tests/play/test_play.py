@@ -86,8 +86,12 @@ def test_the_play_run_holds_the_warm_up_and_the_song(defaults: dict[str, PlayRes
     assert set(warm.speed_ranges_mps) == {float(v) for v in result.plan.notes["vacuum_kpa"]}
     assert {"target_velocity", "predicted_velocity", "onset_target_s"} <= set(run.trials.columns)
     assert "sim-truth" in set(run.samples["source"])
-    for name in ("performance.mid", "pianoroll.png", "warmup.png", "score.json", "song_plan.parquet"):
+    for name in ("performance.mid", "pianoroll.png", "warmup.png", "score.json", "song_plan.parquet", "report.html"):
         assert (run.path / name).is_file()
+    report = (run.path / "report.html").read_text()
+    for heading in ("Performance", "Tempo and plan", "Warm-up", "Notes"):
+        assert f">{heading}<" in report
+    assert report.count("data:image/png;base64") == 2  # the piano roll and the warm-up fit
     assert (run.path / "pianoroll.png").read_bytes()[:4] == b"\x89PNG"
     payload = json.loads((run.path / "score.json").read_text())
     assert len(payload["per_note"]) == 24
