@@ -36,8 +36,10 @@ from pianobot.analysis.predictors import PhysicsPredictor
 from pianobot.io.midifile import write_song
 from pianobot.physics.world import World, WorldConfig
 from pianobot.play import PlayResult, PlaySettings, play_rig, play_song
+from pianobot.play.geometry import fastest_geometry
 from pianobot.play.library import TEST_SONGS, etude
-from pianobot.play.plan import fastest_geometry, plan_model, stroke_tables
+from pianobot.play.plan import plan_model
+from pianobot.play.strokes import stroke_tables
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "results" / "play.json"

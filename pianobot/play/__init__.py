@@ -3,13 +3,14 @@
     result = play_song(Path("experiments/songs/twinkle.mid"), data_dir=Path("data"))
     print(result.score.f1, result.plan.dynamics.describe())
 
-Modules: `warmup` (the calibration on the piano before the song), `tempo` (the user's tempo
-request and the fastest tempo the finger keeps), `plan` (the model-based planner), `schedule`
-(fitting the presses into the song's time), `naive` (the study's demo logic as a baseline),
-`strokes` (a model tabulated for fast inverses), `dynamics` (loudness mapping), `perform`
-(execution on the rig as a run), `adapt` and `corrections` (online correction while playing),
-`score` (mir_eval, strict and tempo-relative), `figure` (piano roll, warm-up fit), `library`
-(test songs in code), `session` (the whole `play` command).
+Modules: `warmup` (the calibration on the piano before the song) and `warmup_model` (what it
+fits), `tempo` (the user's tempo request and the fastest tempo the finger keeps), `plan` (the
+model-based planner), `schedule` (fitting the presses into the song's time), `geometry` (hover,
+depth, the two-segment press), `strokes` (a model tabulated for fast inverses), `dynamics`
+(loudness mapping), `naive` (the study's demo logic as a baseline), `perform` (execution on the
+rig as a run), `adapt` and `corrections` (online correction while playing), `score` (mir_eval,
+strict and tempo-relative), `figure` and `report` (piano roll, warm-up fit, the run's HTML
+page), `library` (test songs in code), `session` (the whole `play` command).
 """
 
 from __future__ import annotations

@@ -23,7 +23,8 @@ import pandas as pd
 from pianobot.errors import InputError
 from pianobot.io.midifile import Note
 from pianobot.plan import key_change_s
-from pianobot.play.plan import PLAN_COLUMNS, Plan, envelope_limits, fastest_geometry, vacuum_levels
+from pianobot.play.geometry import envelope_limits, fastest_geometry, vacuum_levels
+from pianobot.play.plan import PLAN_COLUMNS, Plan
 from pianobot.play.settings import PlaySettings
 from pianobot.play.tempo import TempoRequest, written_only
 from pianobot.spec import RigSpec

@@ -35,8 +35,8 @@ from pianobot.io.midifile import Note
 from pianobot.physics.trajectory import Press, press_duration_s
 from pianobot.plan import Trial
 from pianobot.play.adapt import OnlineAdapter, adapted_stroke
+from pianobot.play.geometry import stroke_trial
 from pianobot.play.plan import Plan
-from pianobot.play.strokes import stroke_trial
 from pianobot.play.warmup import SETTLE_S as WARMUP_SETTLE_S
 from pianobot.progress import NO_PROGRESS, Progress
 from pianobot.rig import open_rig

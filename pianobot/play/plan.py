@@ -21,7 +21,6 @@ then the widest loudness range, then the shortest hover.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -34,6 +33,7 @@ from pianobot.errors import InputError
 from pianobot.io.midifile import Note
 from pianobot.plan import key_change_s
 from pianobot.play.dynamics import DynamicsMap, DynamicsMode
+from pianobot.play.geometry import StrokeGeometry, geometries
 from pianobot.play.schedule import (
     FASTER,
     LATE,
@@ -45,7 +45,7 @@ from pianobot.play.schedule import (
     schedule,
 )
 from pianobot.play.settings import PlaySettings
-from pianobot.play.strokes import StrokeGeometry, StrokeTable
+from pianobot.play.strokes import StrokeTable, stroke_tables
 from pianobot.play.tempo import Feasibility, TempoChoice, TempoRequest, choose_tempo, tempo_limits
 from pianobot.spec import RigSpec
 
@@ -107,74 +107,6 @@ class Plan:
             },
             "vacuum_levels_used_kpa": sorted({float(v) for v in self.played["vacuum_kpa"]}),
         }
-
-
-def geometries(settings: PlaySettings, rig: RigSpec) -> list[StrokeGeometry]:
-    """The candidate stroke geometries; InputError if a setting leaves the finger's envelope."""
-    env = rig.envelope_for(settings.finger)
-
-    def checked(name: str, value: float) -> float:
-        if name in env and not env[name].contains(value):
-            raise InputError(
-                f"{name} = {value:g} is outside the {settings.finger} finger's envelope "
-                f"[{env[name].low:g}, {env[name].high:g}]", f"play settings: {name}",
-            )
-        return float(value)
-
-    def top(name: str, fallback: float) -> float:
-        return float(env[name].high) if name in env else fallback
-
-    depth = checked("depth_m", settings.play_depth_m)
-    up = checked("up_velocity_mps", settings.up_velocity_mps or top("up_velocity_mps", 0.7))
-    accelerations = settings.accelerations_mps2 or (top("acceleration_mps2", 2.0),)
-    fast = rig.approach  # the rig's two-segment press: speed of the fast move, clearance it keeps
-    clearance = max(fast.clearance_m, settings.approach_clearance_m)
-    return [
-        StrokeGeometry(checked("distance_m", d), depth, checked("acceleration_mps2", a), up,
-                       fast.velocity_mps if settings.fast_approach else 0.0, fast.acceleration_mps2, clearance)
-        for a in accelerations for d in settings.hovers_m
-    ]
-
-
-def fastest_geometry(settings: PlaySettings, rig: RigSpec) -> StrokeGeometry:
-    """The candidate with the shortest press cycle: shortest hover, highest acceleration."""
-    return min(geometries(settings, rig), key=lambda g: (g.distance_m, -g.acceleration_mps2))
-
-
-def envelope_limits(settings: PlaySettings, rig: RigSpec) -> dict[str, tuple[float, float]]:
-    """The finger's envelope on this rig as (low, high) per parameter (geometry checked too)."""
-    geometries(settings, rig)
-    return {name: (lim.low, lim.high) for name, lim in rig.envelope_for(settings.finger).items()}
-
-
-def vacuum_levels(settings: PlaySettings, rig: RigSpec) -> list[float]:
-    """The settings' vacuum levels inside the finger's envelope; InputError if none is."""
-    v_lo, v_hi = envelope_limits(settings, rig).get("vacuum_kpa", (-math.inf, math.inf))
-    levels = [float(p) for p in settings.levels_kpa if v_lo - 1e-9 <= p <= v_hi + 1e-9]
-    if not levels:
-        raise InputError(
-            f"no vacuum level of {list(settings.levels_kpa)} lies in the {settings.finger} finger's "
-            f"envelope [{v_lo:g}, {v_hi:g}] kPa", "play settings: vacuum_levels_kpa",
-        )
-    return levels
-
-
-def stroke_tables(predictor: StrokePredictor, settings: PlaySettings, rig: RigSpec,
-                  geometry: StrokeGeometry | None = None, levels: Sequence[float] | None = None,
-                  speed_ranges: dict[float, tuple[float, float]] | None = None) -> dict[float, StrokeTable]:
-    """One table per allowed vacuum level (or `levels`) for a geometry (default: the fastest).
-
-    `speed_ranges` per level limits the down velocities to where the model is trusted (a
-    warm-up's mapped range), inside the envelope.
-    """
-    geometry = geometry or fastest_geometry(settings, rig)
-    chosen = vacuum_levels(settings, rig) if levels is None else [float(p) for p in levels]
-    cap = envelope_limits(settings, rig).get("down_velocity_mps", (0.0, 0.06))[1]
-    out = {}
-    for p in chosen:
-        lo, hi = (speed_ranges or {}).get(p, (settings.min_down_velocity_mps, cap))
-        out[p] = StrokeTable.build(predictor, p, geometry, settings, min(hi, cap), max(lo, 1e-4))
-    return out
 
 
 def reachable_range(tables: dict[float, StrokeTable]) -> tuple[float, float]:

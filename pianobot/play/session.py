@@ -27,10 +27,11 @@ from pianobot.play.dynamics import DYNAMICS_MODES, DynamicsMode
 from pianobot.play.figure import piano_roll, warmup_figure
 from pianobot.play.naive import plan_naive
 from pianobot.play.perform import Performance, Performer, trial_id_for
-from pianobot.play.plan import Plan, plan_model, stroke_tables
+from pianobot.play.plan import Plan, plan_model
 from pianobot.play.report import write_play_report
 from pianobot.play.score import Score, score_performance
 from pianobot.play.settings import Finger, PlaySettings
+from pianobot.play.strokes import stroke_tables
 from pianobot.play.tempo import TempoRequest
 from pianobot.play.warmup import (
     WarmUp,

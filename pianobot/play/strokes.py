@@ -10,83 +10,23 @@ single-valued and picks the slowest speed that reaches a loudness.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
 from pianobot.analysis.predictors import StrokePredictor
-from pianobot.physics.trajectory import Press, contact_time_s, press_duration_s
-from pianobot.plan import Trial
+from pianobot.play.geometry import StrokeGeometry, envelope_limits, fastest_geometry, vacuum_levels
 from pianobot.play.settings import PlaySettings
+from pianobot.spec import RigSpec
 
 FloatArray = npt.NDArray[np.float64]
 
-# The contact-speed move starts this much above the height where it would just reach its speed.
-GAP_MARGIN = 1.25
-# A fast approach shorter than this is not worth a second moveL (the controller's round trip).
-MIN_APPROACH_M = 1e-3
 # When the model's hold does not respond to the commanded hold (a learned model trained at one
 # hold), holding the arm down longer keeps the key down just as much longer.
 FALLBACK_HOLD_SLOPE = 1.0
-
-
-@dataclass(frozen=True)
-class StrokeGeometry:
-    """The part of a press fixed for a song: hover, depth, acceleration, up velocity, approach.
-
-    Per note only the down velocity (loudness) and the hold (length) change. The arm waits
-    `distance_m` above the key (the hover). A slow stroke does not crawl all of that way: a fast
-    approach (`approach_velocity_mps`, `approach_acceleration_mps2`) takes the arm down to just
-    above the key, and the contact-speed move starts there — at the lowest height from which the
-    arm reaches its commanded speed before contact (v²/2a, with a margin), and never below
-    `clearance_m` (a stopped arm's finger must stay off the key). So every note has its own
-    hover for the contact-speed move, and the arm meets the key at the commanded speed either
-    way. The approach is used only where it makes the way to the key shorter; the stroke is a
-    function of the down velocity alone, so the warm-up plays exactly the strokes the song uses.
-    """
-
-    distance_m: float
-    depth_m: float
-    acceleration_mps2: float
-    up_velocity_mps: float
-    approach_velocity_mps: float = 0.0  # 0: no fast approach
-    approach_acceleration_mps2: float = 1.0
-    clearance_m: float = 0.005
-
-    def contact_gap_m(self, down_velocity_mps: float) -> float:
-        """Height above the key where the contact-speed move starts (the note's own hover)."""
-        v = float(down_velocity_mps)
-        return min(self.distance_m, max(self.clearance_m, GAP_MARGIN * v * v / (2.0 * self.acceleration_mps2)))
-
-    def press(self, down_velocity_mps: float, hold_s: float) -> Press:
-        """The press of one note with this geometry (two-segment where that is faster)."""
-        plain = Press(self.distance_m, self.depth_m, float(down_velocity_mps), self.up_velocity_mps,
-                      self.acceleration_mps2, float(hold_s))
-        approach = self.distance_m - self.contact_gap_m(down_velocity_mps)
-        if self.approach_velocity_mps <= 0.0 or approach < MIN_APPROACH_M:
-            return plain
-        fast = replace(plain, approach_m=approach, travel_velocity_mps=self.approach_velocity_mps,
-                       travel_acceleration_mps2=self.approach_acceleration_mps2)
-        return fast if contact_time_s(fast) < contact_time_s(plain) else plain
-
-    def durations_s(self, down_velocity_mps: npt.ArrayLike, hold_s: npt.ArrayLike = 0.0) -> FloatArray:
-        """Motion start → arm back up, for many down velocities and holds (exact moveL timing)."""
-        v, h = np.broadcast_arrays(np.asarray(down_velocity_mps, dtype=np.float64),
-                                   np.asarray(hold_s, dtype=np.float64))
-        out = [press_duration_s(self.press(float(a), float(b))) for a, b in zip(v.ravel(), h.ravel(), strict=True)]
-        return np.asarray(out, dtype=np.float64).reshape(v.shape)
-
-    def to_dict(self) -> dict[str, float]:
-        """The press parameters (the columns a predictor reads)."""
-        return {"distance_m": self.distance_m, "depth_m": self.depth_m,
-                "acceleration_mps2": self.acceleration_mps2, "up_velocity_mps": self.up_velocity_mps}
-
-    def describe(self) -> dict[str, float]:
-        """Everything, for run.json and the JSON output."""
-        return {**self.to_dict(), "approach_velocity_mps": self.approach_velocity_mps,
-                "approach_acceleration_mps2": self.approach_acceleration_mps2, "clearance_m": self.clearance_m}
 
 
 @dataclass(frozen=True)
@@ -210,14 +150,6 @@ class StrokeTable:
         return busy_s(self.geometry, self.settings, speed_mps, hold_s)
 
 
-def stroke_trial(trial_id: str, index: int, pitch: int, vacuum_kpa: float, press: Press) -> Trial:
-    """A planned keystroke (repeat 0) for the rig and the store, carrying the press's fast moves."""
-    return Trial(trial_id, index, 0, int(pitch), float(vacuum_kpa), press.down_velocity_mps, press.up_velocity_mps,
-                 press.acceleration_mps2, press.depth_m, press.distance_m, press.hold_s, 0.0,
-                 approach_m=press.approach_m, retract_m=press.retract_m,
-                 travel_velocity_mps=press.travel_velocity_mps, travel_acceleration_mps2=press.travel_acceleration_mps2)
-
-
 def busy_s(geometry: StrokeGeometry, settings: PlaySettings, speed_mps: float, hold_s: float) -> float:
     """Motion start → the arm is back up and recovered: the press itself plus `recovery_s`."""
     return float(geometry.durations_s(np.array([speed_mps]), hold_s)[0]) + settings.recovery_s
@@ -243,3 +175,21 @@ def _filled(values: FloatArray) -> FloatArray:
         return np.full(values.shape, np.nan)
     idx = np.arange(values.size)
     return np.asarray(np.interp(idx, idx[ok], values[ok]), dtype=np.float64)
+
+
+def stroke_tables(predictor: StrokePredictor, settings: PlaySettings, rig: RigSpec,
+                  geometry: StrokeGeometry | None = None, levels: Sequence[float] | None = None,
+                  speed_ranges: dict[float, tuple[float, float]] | None = None) -> dict[float, StrokeTable]:
+    """One table per allowed vacuum level (or `levels`) for a geometry (default: the fastest).
+
+    `speed_ranges` per level limits the down velocities to where the model is trusted (a
+    warm-up's mapped range), inside the envelope.
+    """
+    geometry = geometry or fastest_geometry(settings, rig)
+    chosen = vacuum_levels(settings, rig) if levels is None else [float(p) for p in levels]
+    cap = envelope_limits(settings, rig).get("down_velocity_mps", (0.0, 0.06))[1]
+    out = {}
+    for p in chosen:
+        lo, hi = (speed_ranges or {}).get(p, (settings.min_down_velocity_mps, cap))
+        out[p] = StrokeTable.build(predictor, p, geometry, settings, min(hi, cap), max(lo, 1e-4))
+    return out

@@ -12,10 +12,11 @@ from pianobot.errors import InputError
 from pianobot.io.midifile import Note
 from pianobot.play import TempoRequest, play_rig
 from pianobot.play.dynamics import DynamicsMap
+from pianobot.play.geometry import StrokeGeometry
 from pianobot.play.plan import plan_model
 from pianobot.play.score import score_performance
 from pianobot.play.settings import PlaySettings
-from pianobot.play.strokes import StrokeGeometry, StrokeTable
+from pianobot.play.strokes import StrokeTable
 
 
 def test_dynamics_map_linear_and_absolute() -> None:

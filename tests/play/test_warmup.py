@@ -16,7 +16,7 @@ import pandas as pd
 import pytest
 
 from pianobot.play import PlaySettings, play_rig
-from pianobot.play.strokes import StrokeGeometry
+from pianobot.play.geometry import StrokeGeometry
 from pianobot.play.warmup import design_warmup, fit_warmup, survey_size, useful_speeds
 
 GEOMETRY = StrokeGeometry(distance_m=0.002, depth_m=0.025, acceleration_mps2=2.0, up_velocity_mps=0.7)
