@@ -210,3 +210,19 @@ def test_the_rigid_finger_plays_at_the_written_tempo_where_the_dry_run_says_it_i
     assert result.plan.tempo.played_bpm == pytest.approx(bpm, rel=1e-4)
     print(f"rigid {name} at {bpm:g} bpm: F1 {result.score.f1:.3f}, onset RMS {result.score.onset_rms_ms:.1f} ms")
     assert result.score.f1 >= 0.95
+
+
+@pytest.mark.slow
+def test_the_default_command_learns_a_piano_simulated_by_independent_code(
+        song_files: dict[str, Path], tmp_path: Path) -> None:
+    """The truth lab's finger, key and piano (`tests/truth`: its own arm, integrator, base numbers
+    and two-contact readout) share nothing with `pianobot.physics`; the warm-up learns them."""
+    from truth_world import TruthWorld
+
+    result = play_song(song_files["rise_and_fall"], data_dir=tmp_path, seed=0, world=TruthWorld("stiff-key"))
+    score, tempo, warm = result.score, result.plan.tempo, result.warmup
+    assert score is not None and tempo is not None and warm is not None
+    print(f"truth lab (stiff-key): {tempo.played_bpm:g} bpm, F1 {score.f1:.3f}, onset RMS {score.onset_rms_ms:.1f} ms, "
+          f"velocity MAE {score.velocity_mae:.2f}")
+    assert score.f1 >= 0.95 and score.onset_rms_ms <= 20.0 and score.velocity_mae <= 4.0
+    assert tempo.played_bpm < tempo.written_bpm and (result.plan.notes["status"] == "play").all()
