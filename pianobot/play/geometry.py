@@ -9,14 +9,14 @@ the arm executes (a two-segment press where that reaches the key sooner).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
 from pianobot.errors import InputError
-from pianobot.physics.trajectory import Press, contact_time_s, press_duration_s
-from pianobot.plan import Trial
+from pianobot.physics.trajectory import Press
+from pianobot.plan import Trial, move_durations_s
 from pianobot.play.settings import PlaySettings
 from pianobot.spec import RigSpec
 
@@ -51,28 +51,50 @@ class StrokeGeometry:
     approach_acceleration_mps2: float = 1.0
     clearance_m: float = 0.005
 
-    def contact_gap_m(self, down_velocity_mps: float) -> float:
-        """Height above the key where the contact-speed move starts (the note's own hover)."""
-        v = float(down_velocity_mps)
-        return min(self.distance_m, max(self.clearance_m, GAP_MARGIN * v * v / (2.0 * self.acceleration_mps2)))
+    def contact_gap_m(self, down_velocity_mps: npt.ArrayLike) -> FloatArray:
+        """Height above the key where the contact-speed move starts (each note's own hover)."""
+        v = np.asarray(down_velocity_mps, dtype=np.float64)
+        gap = np.maximum(self.clearance_m, GAP_MARGIN * v * v / (2.0 * self.acceleration_mps2))
+        return np.asarray(np.minimum(self.distance_m, gap), dtype=np.float64)
+
+    def approach_m(self, down_velocity_mps: npt.ArrayLike) -> FloatArray:
+        """The fast approach of each down velocity's press (0: none; exact moveL timing).
+
+        It is used where it is at least `MIN_APPROACH_M` long and the arm meets the key sooner
+        than by crawling the whole hover at the contact speed.
+        """
+        v = np.asarray(down_velocity_mps, dtype=np.float64)
+        approach = self.distance_m - self.contact_gap_m(v)
+        if self.approach_velocity_mps <= 0.0:
+            return np.zeros(v.shape)
+        travel = self.distance_m + self.depth_m
+        a = self.acceleration_mps2
+        plain = _time_to(np.full(v.shape, self.distance_m), np.full(v.shape, travel), v, a)
+        fast_move = move_durations_s(approach, np.full(v.shape, self.approach_velocity_mps),
+                                     np.full(v.shape, self.approach_acceleration_mps2))
+        fast = fast_move + _time_to(self.distance_m - approach, travel - approach, v, a)
+        return np.asarray(np.where((approach >= MIN_APPROACH_M) & (fast < plain), approach, 0.0), dtype=np.float64)
 
     def press(self, down_velocity_mps: float, hold_s: float) -> Press:
         """The press of one note with this geometry (two-segment where that is faster)."""
-        plain = Press(self.distance_m, self.depth_m, float(down_velocity_mps), self.up_velocity_mps,
-                      self.acceleration_mps2, float(hold_s))
-        approach = self.distance_m - self.contact_gap_m(down_velocity_mps)
-        if self.approach_velocity_mps <= 0.0 or approach < MIN_APPROACH_M:
-            return plain
-        fast = replace(plain, approach_m=approach, travel_velocity_mps=self.approach_velocity_mps,
-                       travel_acceleration_mps2=self.approach_acceleration_mps2)
-        return fast if contact_time_s(fast) < contact_time_s(plain) else plain
+        approach = float(self.approach_m(float(down_velocity_mps)))
+        return Press(self.distance_m, self.depth_m, float(down_velocity_mps), self.up_velocity_mps,
+                     self.acceleration_mps2, float(hold_s), approach_m=approach,
+                     travel_velocity_mps=self.approach_velocity_mps if approach > 0 else 0.25,
+                     travel_acceleration_mps2=self.approach_acceleration_mps2 if approach > 0 else 1.0)
 
     def durations_s(self, down_velocity_mps: npt.ArrayLike, hold_s: npt.ArrayLike = 0.0) -> FloatArray:
         """Motion start → arm back up, for many down velocities and holds (exact moveL timing)."""
         v, h = np.broadcast_arrays(np.asarray(down_velocity_mps, dtype=np.float64),
                                    np.asarray(hold_s, dtype=np.float64))
-        out = [press_duration_s(self.press(float(a), float(b))) for a, b in zip(v.ravel(), h.ravel(), strict=True)]
-        return np.asarray(out, dtype=np.float64).reshape(v.shape)
+        approach = self.approach_m(v)
+        travel = self.distance_m + self.depth_m
+        fast = move_durations_s(approach, np.full(v.shape, max(self.approach_velocity_mps, 1e-9)),
+                                np.full(v.shape, self.approach_acceleration_mps2))
+        down = move_durations_s(travel - approach, v, np.full(v.shape, self.acceleration_mps2))
+        up = move_durations_s(np.full(v.shape, travel), np.full(v.shape, self.up_velocity_mps),
+                              np.full(v.shape, self.acceleration_mps2))
+        return np.asarray(np.where(approach > 0, fast, 0.0) + down + h + up, dtype=np.float64)
 
     def to_dict(self) -> dict[str, float]:
         """The press parameters (the columns a predictor reads)."""
@@ -83,6 +105,18 @@ class StrokeGeometry:
         """Everything, for run.json and the JSON output."""
         return {**self.to_dict(), "approach_velocity_mps": self.approach_velocity_mps,
                 "approach_acceleration_mps2": self.approach_acceleration_mps2, "clearance_m": self.clearance_m}
+
+
+def _time_to(s_m: npt.ArrayLike, travel_m: npt.ArrayLike, v_mps: FloatArray, a_mps2: float) -> FloatArray:
+    """Time a moveL from rest over `travel_m` (speed v, acceleration a) takes to cover `s_m`."""
+    s, d = np.asarray(s_m, dtype=np.float64), np.asarray(travel_m, dtype=np.float64)
+    peak = np.minimum(v_mps, np.sqrt(a_mps2 * d))
+    ramp_m, ramp_s = peak * peak / (2.0 * a_mps2), peak / a_mps2
+    total = 2.0 * ramp_s + (d - 2.0 * ramp_m) / peak
+    out = np.where(s <= ramp_m, np.sqrt(2.0 * s / a_mps2),
+                   np.where(s <= d - ramp_m, ramp_s + (s - ramp_m) / peak,
+                            total - np.sqrt(2.0 * np.maximum(d - s, 0.0) / a_mps2)))
+    return np.asarray(out, dtype=np.float64)
 
 
 def stroke_trial(trial_id: str, index: int, pitch: int, vacuum_kpa: float, press: Press) -> Trial:

@@ -282,7 +282,7 @@ def _frame(notes: Sequence[Note], prepared: _Prepared, choice: TempoChoice, s: S
         "song_velocity": [x.velocity for x in notes], "target_velocity": prepared.targets,
         "vacuum_kpa": times.level, "down_velocity_mps": speed, "up_velocity_mps": g.up_velocity_mps,
         "acceleration_mps2": g.acceleration_mps2, "depth_m": g.depth_m, "distance_m": g.distance_m,
-        "approach_m": [g.press(float(v), 0.0).approach_m for v in speed], "hold_s": s.hold_s, "predicted_velocity": velocity, "predicted_lead_s": lead,
+        "approach_m": g.approach_m(speed), "hold_s": s.hold_s, "predicted_velocity": velocity, "predicted_lead_s": lead,
         "predicted_midi_hold_s": midi_hold, "predicted_release_s": lead + midi_hold,
         "move_s": s.move_s, "vacuum_change_s": s.vacuum_change_s,
         "start_s": np.where(skipped, onset - lead, s.start_s), "busy_s": busy0 + s.hold_s,

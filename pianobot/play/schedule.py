@@ -67,11 +67,13 @@ class Scheduled:
 
 
 class _Candidates:
-    """Per-note candidate strokes and their timing terms (n × k arrays as nested lists)."""
+    """Per-note candidate strokes and their timing terms: n × k arrays, and the same as flat
+    lists (row-major) for the scheduler's scalar loop — flat, because millions of small nested
+    lists would keep the garbage collector busy for longer than the whole plan takes."""
 
     def __init__(self, speeds: FloatArray, level: FloatArray, tables: dict[float, StrokeTable]) -> None:
-        self.speed = speeds
         shape = speeds.shape
+        self.k = shape[1]
         lead, busy, hold0, slope = (np.full(shape, np.nan) for _ in range(4))
         for key, table in tables.items():
             rows = level == key
@@ -79,11 +81,12 @@ class _Candidates:
                 s = speeds[rows]
                 lead[rows], busy[rows] = table.lead(s), table.busy0(s)
                 hold0[rows], slope[rows] = table.hold0(s), table.slope(s)
-        self.lead: list[list[float]] = lead.tolist()
-        self.busy: list[list[float]] = busy.tolist()
-        self.hold0: list[list[float]] = hold0.tolist()
-        self.slope: list[list[float]] = slope.tolist()
-        self.speeds: list[list[float]] = speeds.tolist()
+        self.arrays = {"lead": lead, "busy": busy, "hold0": hold0}
+        self.lead: list[float] = lead.ravel().tolist()
+        self.busy: list[float] = busy.ravel().tolist()
+        self.hold0: list[float] = hold0.ravel().tolist()
+        self.slope: list[float] = slope.ravel().tolist()
+        self.speeds: list[float] = speeds.ravel().tolist()
 
 
 def _grid(lo: FloatArray, hi: FloatArray, k: int) -> FloatArray:
@@ -98,9 +101,7 @@ def need_s(notes: NoteTimes, tables: dict[float, StrokeTable], settings: PlaySet
     `gap_s[i]` is the move (and vacuum change) between notes i−1 and i. Element 0 is 0.
     """
     c = _Candidates(notes.fast_mps[:, None], notes.level, tables)
-    lead = np.asarray(c.lead, dtype=np.float64)[:, 0]
-    busy = np.asarray(c.busy, dtype=np.float64)[:, 0]
-    hold0 = np.asarray(c.hold0, dtype=np.float64)[:, 0]
+    lead, busy, hold0 = (c.arrays[name][:, 0] for name in ("lead", "busy", "hold0"))
     out = np.zeros(lead.size)
     if lead.size > 1:
         after = busy[:-1] - lead[:-1] + gap_s[1:] + lead[1:]
@@ -125,6 +126,7 @@ def schedule(notes: NoteTimes, tables: dict[float, StrokeTable], settings: PlayS
     near = _Candidates(_grid(notes.aim_mps, notes.fast_mps, CANDIDATES), notes.level, tables)
     caps = np.array([(caps_mps or {}).get(float(k), float(tables[float(k)].speeds_mps[-1])) for k in notes.level])
     loud = _Candidates(_grid(notes.fast_mps, caps, CANDIDATES), notes.level, tables)
+    K = CANDIDATES
     onset, pitch, level = notes.onset_s.tolist(), notes.pitch.tolist(), notes.level.tolist()
     wanted = notes.wanted_hold_s.tolist()
     speed, hold, start, late = [np.nan] * n, [0.0] * n, [np.nan] * n, [0.0] * n
@@ -138,9 +140,9 @@ def schedule(notes: NoteTimes, tables: dict[float, StrokeTable], settings: PlayS
     def ends(c: _Candidates, i: int, k: int, s: float, h: float, to: int) -> float:
         """When the arm may start note `to` after note i played with candidate k from s, hold h."""
         mv, vac = between(i, to)
-        free = s + c.busy[i][k] + h + mv + vac
+        free = s + c.busy[i * K + k] + h + mv + vac
         if pitch[i] == pitch[to]:
-            free = max(free, s + c.lead[i][k] + c.hold0[i][k] + c.slope[i][k] * h + margin)
+            free = max(free, s + c.lead[i * K + k] + c.hold0[i * K + k] + c.slope[i * K + k] * h + margin)
         return free
 
     prev: int | None = None
@@ -152,11 +154,11 @@ def schedule(notes: NoteTimes, tables: dict[float, StrokeTable], settings: PlayS
             ps = start[prev]
             free0 = ends(pc, prev, pk, ps, 0.0, i)
         nxt = i + 1 if i + 1 < n else None
-        deadline = onset[nxt] - near.lead[nxt][-1] if nxt is not None else np.inf
+        deadline = onset[nxt] - near.lead[nxt * K + K - 1] if nxt is not None else np.inf
         pick: tuple[_Candidates, int, float, int] | None = None  # (candidates, k, start, flags)
         fallback: tuple[_Candidates, int, float, int] | None = None
         for k in range(CANDIDATES):
-            s = onset[i] - near.lead[i][k]
+            s = onset[i] - near.lead[i * K + k]
             if s < free0 - EPS_S:
                 continue
             f = FASTER if k else ON_TIME
@@ -167,12 +169,12 @@ def schedule(notes: NoteTimes, tables: dict[float, StrokeTable], settings: PlayS
         pick = pick or fallback
         if pick is None:
             k = CANDIDATES - 1
-            lateness = free0 - (onset[i] - near.lead[i][k])
+            lateness = free0 - (onset[i] - near.lead[i * K + k])
             if lateness <= late_limit + EPS_S:
                 pick = (near, k, free0, LATE | (FASTER if k else ON_TIME))
             else:
                 for k in range(CANDIDATES):
-                    s = onset[i] - loud.lead[i][k]
+                    s = onset[i] - loud.lead[i * K + k]
                     if s >= free0 - late_limit - EPS_S:
                         pick = (loud, k, max(s, free0), LOUDER | (LATE if s < free0 - EPS_S else ON_TIME))
                         break
@@ -182,17 +184,17 @@ def schedule(notes: NoteTimes, tables: dict[float, StrokeTable], settings: PlayS
         if pick is None:  # play it as soon as the arm is free, however late
             pick = (loud, CANDIDATES - 1, free0, LOUDER | LATE)
         c, k, s, f = pick
-        speed[i], start[i], flags[i], chosen[i] = c.speeds[i][k], s, f, (c, k)
-        late[i] = max(0.0, s - (onset[i] - c.lead[i][k]))
+        speed[i], start[i], flags[i], chosen[i] = c.speeds[i * K + k], s, f, (c, k)
+        late[i] = max(0.0, s - (onset[i] - c.lead[i * K + k]))
         hold[i] = wanted[i]
         if prev is None:
             prev = i
             continue
         moves[i], vacuum[i] = between(prev, i)
         # The previous note keeps the longest hold (up to its length) that still frees the arm by s.
-        room = s - ps - pc.busy[prev][pk] - moves[i] - vacuum[i]
+        room = s - ps - pc.busy[prev * K + pk] - moves[i] - vacuum[i]
         if pitch[prev] == pitch[i]:
-            room = min(room, (s - ps - pc.lead[prev][pk] - pc.hold0[prev][pk] - margin) / pc.slope[prev][pk])
+            room = min(room, (s - ps - pc.lead[prev * K + pk] - pc.hold0[prev * K + pk] - margin) / pc.slope[prev * K + pk])
         hold[prev] = min(hold[prev], max(0.0, room))
         prev = i
     return Scheduled(np.asarray(speed), np.asarray(hold), np.asarray(start), np.asarray(late),
