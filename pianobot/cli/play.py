@@ -18,6 +18,7 @@ from rich.table import Table
 
 from pianobot.cli.common import DEFAULT_DATA, DataDir, JsonFlag, emit_json
 from pianobot.play import PlayResult, play_song
+from pianobot.play.warmup import WarmUpFailed
 from pianobot.progress import progress_display
 
 # The dry run's table: what a note asks, the stroke chosen, when it starts, how fast the song
@@ -115,10 +116,14 @@ def play(
         from pianobot.errors import InputError
 
         raise InputError("give either --warmup N or --no-warmup", "--no-warmup")
-    result = play_song(song, data_dir=data, model=model, planner=planner, adapt=adapt, dry_run=dry_run,
-                       tempo=tempo, tempo_scale=tempo_scale, transpose=transpose, track=track, dynamics=dynamics,
-                       rig=rig, finger=finger, warmup=0 if no_warmup else warmup, seed=seed, plot=plot,
-                       progress=progress_display(not json_out))
+    try:
+        result = play_song(song, data_dir=data, model=model, planner=planner, adapt=adapt, dry_run=dry_run,
+                           tempo=tempo, tempo_scale=tempo_scale, transpose=transpose, track=track,
+                           dynamics=dynamics, rig=rig, finger=finger, warmup=0 if no_warmup else warmup, seed=seed,
+                           plot=plot, progress=progress_display(not json_out))
+    except WarmUpFailed as exc:  # the run is stored (status failed) with the warm-up's keystrokes
+        print(f"error: warm-up: {exc}", file=sys.stderr)
+        raise typer.Exit(1) from None
     for line in result.warnings:
         print(f"warning: {line}", file=sys.stderr)
     if json_out:

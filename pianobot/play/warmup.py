@@ -29,7 +29,6 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from pianobot.errors import InputError
 from pianobot.plan import Trial, lab_time
 from pianobot.play.geometry import StrokeGeometry, stroke_trial
 from pianobot.play.settings import PlaySettings
@@ -119,6 +118,10 @@ def estimated_lab_time_s(survey: Sequence[Trial], rig: RigSpec, strokes_per_leve
     return estimate.vacuum_s + per_stroke * strokes_per_level * levels
 
 
+class WarmUpFailed(RuntimeError):
+    """The warm-up heard too little to learn the piano from (the run is kept, status failed)."""
+
+
 @dataclass(frozen=True)
 class WarmUp:
     """The warm-up as played and the model fitted to it."""
@@ -168,7 +171,7 @@ def fit_warmup(trials: pd.DataFrame, geometry: StrokeGeometry, *, lab_time_s: fl
     are the range the planner may use at that level (where the fit has seen enough).
 
     Raises:
-        InputError: the warm-up heard too few notes to learn from (the piano does not sound,
+        WarmUpFailed: the warm-up heard too few notes to learn from (the piano does not sound,
             MIDI is not connected, or the finger cannot reach the key).
     """
     played = trials[trials["status"].isin(["ok", "silent"])]
@@ -176,9 +179,9 @@ def fit_warmup(trials: pd.DataFrame, geometry: StrokeGeometry, *, lab_time_s: fl
     levels = tuple(sorted({float(v) for v in sounded["vacuum_kpa"]
                            if (sounded["vacuum_kpa"] == v).sum() >= 3}))
     if len(sounded) < 3 or not levels:
-        raise InputError(
+        raise WarmUpFailed(
             f"the warm-up heard {len(sounded)} note(s) from {len(trials)} keystroke(s): too few to learn "
-            "this piano (is the MIDI input connected, does the finger reach the key?)", "warm-up",
+            "this piano (is the MIDI input connected, does the finger reach the key?)"
         )
     predictor = WarmUpPredictor.fit(played, seed)
     ranges = {}

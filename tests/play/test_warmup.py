@@ -82,9 +82,9 @@ def test_a_warm_up_that_hears_nothing_is_a_clear_error() -> None:
     settings, rig = PlaySettings(), play_rig("sim")
     survey = design_warmup([60], GEOMETRY, [-80.0], settings, rig, strokes_per_level=6, song_key="s")
     rows = played(survey).assign(status="silent", on_velocity=math.nan, t_on_s=math.nan)
-    from pianobot.errors import InputError
+    from pianobot.play.warmup import WarmUpFailed
 
-    with pytest.raises(InputError, match="warm-up heard 0 note"):
+    with pytest.raises(WarmUpFailed, match="warm-up heard 0 note"):
         fit_warmup(rows, GEOMETRY, lab_time_s=1.0)
 
 
