@@ -5,7 +5,8 @@ integrator's long steps against short steps only (the obvious baseline), in the 
 
 Writes JSON to benchmarks/results/truth.json (and a summary to stdout): seconds per scenario
 (mocap takes of 24 keystrokes, MIDI-only logs of 135, both including the second simulation that
-measures the effect's size), and for a clean shallow take, a clean deep take and a clean log the
+measures the effect's size) and whether pianobot's importer reads each file back as the session it
+is (every press / every keystroke's on-velocity), and for a clean shallow take, a clean deep take and a clean log the
 integrator's time with long steps vs with the 20.8 µs step throughout, the ratio, and the largest
 difference between the two trajectories.
 """
@@ -69,6 +70,23 @@ def step_ratio() -> list[dict[str, Any]]:
     return rows
 
 
+def imports_cleanly(made: Any, data_dir: Path) -> bool:
+    """Whether pianobot's importer reads the file as the lab session it is: every press of a
+    take segmented, every keystroke of a log with the on-velocity the piano sent."""
+    from pianobot.io.importers import import_keystroke_log, import_mocap
+    from pianobot.store import load_run
+
+    if made.scenario.kind == "mocap":
+        result = import_mocap(made.files["take"], data_dir, vacuum_kpa=made.scenario.vacuum_kpa)
+        return result.trials == len(made.truth["presses"])
+    result = import_keystroke_log(made.files["log"], data_dir)
+    trials = load_run(result.run_id, data_dir).trials.sort_values("index")
+    want = [np.nan if r["on_velocity"] is None else r["on_velocity"] for r in made.truth["strokes"]]
+    return result.trials == len(want) and bool(
+        np.array_equal(trials["on_velocity"].to_numpy(), np.array(want, float), equal_nan=True)
+    )
+
+
 def suite_timing(only: list[str]) -> list[dict[str, Any]]:
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
@@ -78,10 +96,12 @@ def suite_timing(only: list[str]) -> list[dict[str, Any]]:
             t0 = time.perf_counter()
             made = materialise(s, tmp)
             seconds = time.perf_counter() - t0
+            ok = imports_cleanly(made, Path(tmp) / "data")
             rows.append({"scenario": s.name, "kind": s.kind, "strength": s.strength,
-                         "seconds": seconds, "effect_size": made.truth.get("effect_size"),
+                         "seconds": seconds, "imports": ok,
+                         "effect_size": made.truth.get("effect_size"),
                          "unresolved_steps": made.truth["outcome"]["unresolved_steps"]})  # fmt: skip
-            print(f"{s.name:48s} {seconds:6.2f} s", flush=True)
+            print(f"{s.name:48s} {seconds:6.2f} s  import {'ok' if ok else 'MISMATCH'}", flush=True)
     return rows
 
 
@@ -102,7 +122,8 @@ def main() -> int:
         times = [r["seconds"] for r in suite if r["kind"] == kind]
         if times:
             summary[kind] = {"scenarios": len(times), "median_s": float(np.median(times)),
-                             "max_s": float(np.max(times)), "total_s": float(np.sum(times))}  # fmt: skip
+                             "max_s": float(np.max(times)), "total_s": float(np.sum(times)),
+                             "import_ok": sum(r["imports"] for r in suite if r["kind"] == kind)}  # fmt: skip
     result = {"step_ratio": ratio, "suite": suite, "summary": summary}
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(result, indent=1) + "\n")

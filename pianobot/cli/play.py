@@ -13,24 +13,52 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import typer
-from rich.console import Console
-from rich.table import Table
 
-from pianobot.cli.common import DEFAULT_DATA, DataDir, JsonFlag, emit_json
+from pianobot.cli.common import (
+    DEFAULT_DATA,
+    Column,
+    DataDir,
+    JsonFlag,
+    NoProgressFlag,
+    command_progress,
+    emit_json,
+    print_fields,
+    print_table,
+    say,
+    say_written,
+)
 from pianobot.play import PlayResult, play_song
 from pianobot.play.warmup import WarmUpFailed
-from pianobot.progress import progress_display
 
-# The dry run's table: what a note asks, the stroke chosen, when it starts, how fast the song
-# could go for it; everything else is in `--json` (plan_notes).
-PLAN_SHOWN = {"note_index": "note", "pitch": "pitch", "onset_s": "onset s", "target_velocity": "target",
-              "down_velocity_mps": "speed m/s", "predicted_lead_s": "lead s", "start_s": "start s",
-              "tempo_limit_bpm": "limit bpm", "status": "status", "reason": "reason"}
+# (column, heading with unit, scale, format, priority): priority 0 always shows, the highest
+# number is dropped first on a narrow terminal (`--json` keeps every column, plan_notes).
+PLAN_COLUMNS: tuple[tuple[str, str, float, str, int], ...] = (
+    ("note_index", "#", 1.0, "d", 0),
+    ("pitch", "pitch", 1.0, "d", 0),
+    ("onset_s", "onset (s)", 1.0, ".2f", 0),
+    ("song_velocity", "song vel.", 1.0, ".0f", 3),
+    ("target_velocity", "target vel.", 1.0, ".0f", 0),
+    ("vacuum_kpa", "vacuum (kPa)", 1.0, ".0f", 2),
+    ("down_velocity_mps", "down (mm/s)", 1e3, ".1f", 0),
+    ("hold_s", "hold (ms)", 1e3, ".0f", 3),
+    ("predicted_velocity", "predicted vel.", 1.0, ".1f", 1),
+    ("predicted_lead_s", "lead (ms)", 1e3, ".0f", 1),
+    ("start_s", "motion start (s)", 1.0, ".3f", 2),
+    ("tempo_limit_bpm", "limit (bpm)", 1.0, ".0f", 0),
+    ("status", "status", 1.0, "", 0),
+    ("reason", "reason", 1.0, "", 0),
+)
 
 
-def _fmt(value: Any) -> str:
-    if isinstance(value, float):
-        return "-" if math.isnan(value) else f"{value:.3g}"
+def _fmt(value: Any, scale: float = 1.0, spec: str = ".3g") -> str:
+    if isinstance(value, bool) or value is None:
+        return "-" if value is None else str(value)
+    if isinstance(value, int | float):
+        if isinstance(value, float) and math.isnan(value):
+            return "-"
+        if spec == "d":
+            return str(int(value))
+        return format(float(value) * scale, spec or ".3g")
     return str(value)
 
 
@@ -46,55 +74,50 @@ def _tempo_line(result: PlayResult) -> str:
 
 
 def _print_plan(result: PlayResult) -> None:
-    table = Table(title=f"{result.plan.planner} plan of {result.song.source}")
-    for header in PLAN_SHOWN.values():
-        table.add_column(header)
-    for row in result.plan.notes[list(PLAN_SHOWN)].itertuples(index=False):
-        table.add_row(*(_fmt(v) for v in row))
-    console = Console()
-    console.print(table)
+    notes = result.plan.notes
+    specs = [c for c in PLAN_COLUMNS if c[0] in notes.columns]
+    columns = [Column(head, prio, "left" if name in ("status", "reason") else "right",
+                      wrap=name == "reason") for name, head, _, _, prio in specs]
+    rows = [[_fmt(row[name], scale, spec) for name, _, scale, spec, _ in specs]
+            for _, row in notes.iterrows()]
+    print_table(columns, rows, title=f"{result.plan.planner} plan of {result.song.source}")
     summary = result.plan.summary()
     geometry = summary["geometry"] or {}
-    console.print(f"mapping: {summary['dynamics']['text'] if summary['dynamics'] else 'none'}; "
-                  f"{summary['planned']} of {summary['notes']} notes planned, {summary['skipped']} skipped; "
-                  f"stroke: hover {geometry.get('distance_m', float('nan')) * 1e3:.0f} mm, "
-                  f"{geometry.get('acceleration_mps2', float('nan')):g} m/s², up {geometry.get('up_velocity_mps', float('nan')):g} m/s",
-                  highlight=False, markup=False)
-    console.print(_tempo_line(result), highlight=False, markup=False, soft_wrap=True)
+    say(f"mapping: {summary['dynamics']['text'] if summary['dynamics'] else 'none'}; "
+        f"{summary['planned']} of {summary['notes']} notes planned, {summary['skipped']} skipped; "
+        f"stroke: hover {geometry.get('distance_m', float('nan')) * 1e3:.0f} mm, "
+        f"{geometry.get('acceleration_mps2', float('nan')):g} m/s², "
+        f"up {geometry.get('up_velocity_mps', float('nan')) * 1e3:.0f} mm/s")
+    say(_tempo_line(result))
 
 
 def _print_score(result: PlayResult) -> None:
     assert result.score is not None and result.performance is not None
-    score = result.score.to_dict()
-    table = Table(title=f"{result.plan.planner} planner on {result.song.source}")
-    table.add_column("measure")
-    table.add_column("value", justify="right")
-    for key, value in score.items():
+    fields: list[tuple[str, Any]] = []
+    for key, value in result.score.to_dict().items():
         if isinstance(value, dict):
-            for sub, inner in value.items():
-                table.add_row(f"{key}.{sub}", _fmt(inner))
+            fields.extend((f"{key}.{sub}", _fmt(inner)) for sub, inner in value.items())
         else:
-            table.add_row(key, _fmt(value))
+            fields.append((key, _fmt(value)))
     mapping = result.plan.summary()["dynamics"]
-    table.add_row("mapping", mapping["text"] if mapping else "none (velocity → speed)")
-    console = Console()
-    console.print(table)
+    fields.append(("mapping", mapping["text"] if mapping else "none (velocity → speed)"))
+    print_fields(fields, title=f"{result.plan.planner} planner on {result.song.source}")
     if result.warmup is not None:
         w = result.warmup.summary()
-        console.print(f"warm-up: {w['strokes']} keystrokes ({w['sounded']} sounded) in {w['lab_time_s']:.1f} s "
-                      f"of lab time; fit on strokes held out: velocity MAE "
-                      f"{w.get('velocity_mae_held_out', float('nan')):.2f}, lead RMSE "
-                      f"{w.get('lead_rmse_ms_held_out', float('nan')):.1f} ms",
-                      highlight=False, markup=False)
-    console.print(_tempo_line(result), highlight=False, markup=False, soft_wrap=True)
-    console.print(f"run {result.performance.run_id}: {result.performance.status}; "
-                  f"files: {', '.join(result.files.values())}", highlight=False, markup=False, soft_wrap=True)
+        say(f"warm-up: {w['strokes']} keystrokes ({w['sounded']} sounded) in {w['lab_time_s']:.1f} s of lab time; "
+            f"fit on strokes held out: velocity MAE {w.get('velocity_mae_held_out', float('nan')):.2f}, "
+            f"lead RMSE {w.get('lead_rmse_ms_held_out', float('nan')):.1f} ms")
+    say(_tempo_line(result))
+    say(f"run {result.performance.run_id}: {result.performance.status}")
+    for what, path in result.files.items():
+        say_written(what.replace("_", " "), path)
 
 
 def play(
     song: Annotated[Path, typer.Argument(help="A type-0 or type-1 MIDI file.")],
     data: DataDir = DEFAULT_DATA,
     json_out: JsonFlag = False,
+    no_progress: NoProgressFlag = False,
     model: Annotated[Path | None, typer.Option("--model", help="Model or predictor file to start from (default: the published physics model).")] = None,
     planner: Annotated[str, typer.Option("--planner", help="model | naive (the study's demo logic).")] = "model",
     adapt: Annotated[bool, typer.Option("--adapt", help="Keep correcting the model from the piano's MIDI during the song.")] = False,
@@ -120,7 +143,7 @@ def play(
         result = play_song(song, data_dir=data, model=model, planner=planner, adapt=adapt, dry_run=dry_run,
                            tempo=tempo, tempo_scale=tempo_scale, transpose=transpose, track=track,
                            dynamics=dynamics, rig=rig, finger=finger, warmup=0 if no_warmup else warmup, seed=seed,
-                           plot=plot, progress=progress_display(not json_out))
+                           plot=plot, progress=command_progress(json_out, no_progress))
     except WarmUpFailed as exc:  # the run is stored (status failed) with the warm-up's keystrokes
         print(f"error: warm-up: {exc}", file=sys.stderr)
         raise typer.Exit(1) from None

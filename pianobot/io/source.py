@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
 
 from pianobot.errors import InputError
@@ -24,3 +25,35 @@ def read_input_bytes(path: Path, kind: str) -> bytes:
     if b"\x00" in data:
         raise InputError(f"not {kind} (binary data)", where)
     return data
+
+
+def text_lines(path: Path, kind: str) -> Iterator[tuple[int, str]]:
+    """The numbered lines (1-based, line ends removed) of a UTF-8 text file, read as a stream.
+
+    Memory stays bounded however long the file is. A UTF-8 byte-order mark is dropped. Raises
+    InputError naming the file (and line) when it is missing, unreadable, binary, not UTF-8
+    text, or holds nothing but blank lines.
+    """
+    where = str(path)
+    try:
+        handle = path.open("rb")
+    except FileNotFoundError:
+        raise InputError("no such file", where) from None
+    except OSError as exc:
+        raise InputError(f"cannot read the file ({exc.strerror or exc})", where) from None
+    blank = True
+    with handle:
+        for number, raw in enumerate(handle, start=1):
+            if b"\x00" in raw:
+                raise InputError(f"not {kind} (binary data on line {number})", where)
+            if number == 1 and raw.startswith(b"\xef\xbb\xbf"):
+                raw = raw[3:]
+            try:
+                text = raw.decode("utf-8")
+            except UnicodeDecodeError:
+                raise InputError(f"not {kind} (line {number} is not UTF-8 text)", where) from None
+            text = text.rstrip("\r\n")
+            blank = blank and not text.strip()
+            yield number, text
+    if blank:
+        raise InputError("the file is empty", where)

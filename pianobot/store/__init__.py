@@ -12,7 +12,7 @@ from pianobot.store.layout import RunPaths, resolve_run, runs_dir
 from pianobot.store.lock import LockLost, RunLock, RunLocked, read_holder
 from pianobot.store.reader import Run, RunSummary, list_runs, load_run, summarize_run
 from pianobot.store.schema import SCHEMA_VERSION, TABLE_SCHEMAS, empty_frame
-from pianobot.store.writer import RunWriter
+from pianobot.store.writer import RunWriter, encode_part
 
 __all__ = [
     "SCHEMA_VERSION",
@@ -24,6 +24,7 @@ __all__ = [
     "RunPaths",
     "RunSummary",
     "RunWriter",
+    "encode_part",
     "empty_frame",
     "list_runs",
     "load_run",

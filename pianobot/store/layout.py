@@ -159,6 +159,30 @@ def write_parquet_atomic(path: Path, table: pa.Table) -> None:
     fsync_dir(path.parent)
 
 
+def encode_parquet(table: pa.Table) -> bytes:
+    """A whole Parquet file in memory, written as `write_parquet_atomic` writes it.
+
+    For work done elsewhere (a parallel sweep's worker) that only the run's writer stores.
+    """
+    sink = pa.BufferOutputStream()
+    pq.write_table(table, sink, **parquet_options(table.schema))
+    return bytes(sink.getvalue())
+
+
+def write_bytes_atomic(path: Path, data: bytes) -> None:
+    """Write a file's bytes so readers see either nothing or the whole file."""
+    temp = _temp_name(path)
+    try:
+        with open(temp, "wb") as handle:
+            handle.write(data)
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(temp, path)
+    finally:
+        temp.unlink(missing_ok=True)
+    fsync_dir(path.parent)
+
+
 def parquet_options(schema: pa.Schema) -> dict[str, Any]:
     """Writer options: zstd, and dictionary encoding only for text columns.
 

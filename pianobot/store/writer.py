@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
@@ -15,6 +14,7 @@ from pianobot.store.journal import Journal
 from pianobot.store.layout import (
     TABLE_NAMES,
     RunPaths,
+    encode_parquet,
     git_commit,
     new_run_id,
     parquet_options,
@@ -22,6 +22,7 @@ from pianobot.store.layout import (
     resolve_run,
     runs_dir,
     utc_now,
+    write_bytes_atomic,
     write_json_atomic,
     write_parquet_atomic,
 )
@@ -36,6 +37,9 @@ from pianobot.store.schema import (
     with_metadata,
 )
 from pianobot.store.tables import committed_batches, dedupe_trials, drop_orphan_parts
+
+if TYPE_CHECKING:  # pandas takes a third of a second to import: only where frames are made
+    import pandas as pd
 
 
 class RunWriter:
@@ -162,6 +166,19 @@ class RunWriter:
         self._next_batch += 1
         return batch
 
+    def append_encoded(self, parts: dict[str, bytes]) -> int:
+        """Write one batch that was encoded elsewhere (`encode_part`): the same order and
+        atomicity as `append` (samples, midi, then the trials part that commits the batch)."""
+        if "trials" not in parts:
+            raise ValueError("an encoded batch needs its trials part")
+        self._lock.verify()  # the run is still ours (a parallel sweep's driver holds the lock)
+        batch = self._next_batch
+        for name in ("samples", "midi", "trials"):
+            if name in parts:
+                write_bytes_atomic(self.paths.part(name, batch), parts[name])
+        self._next_batch += 1
+        return batch
+
     def journal(self, event: str, **fields: Any) -> None:
         """Append one event to journal.jsonl (fsync'd)."""
         self._journal.write(event, fields)
@@ -225,6 +242,11 @@ class RunWriter:
         self.close()
 
 
+def encode_part(table: pd.DataFrame | pa.Table, name: str, run_id: str) -> bytes:
+    """One part of table `name` of run `run_id`, encoded as `RunWriter.append` would write it."""
+    return encode_parquet(with_metadata(to_table(table, name, run_id), name))
+
+
 def _compact_table(paths: RunPaths, name: str, committed: list[int], parts: dict[int, Path]) -> None:
     target = paths.table(name)
     held: set[int] = set()
@@ -247,8 +269,10 @@ def _compact_table(paths: RunPaths, name: str, committed: list[int], parts: dict
     temp = target.with_name(f".{target.name}.{os.getpid()}.compact.tmp")
     try:
         with pq.ParquetWriter(temp, schema, **parquet_options(schema)) as out:
+            # Text columns (ids, sources) read as dictionaries: no million-fold string copies.
+            text = [f.name for f in schema if pa.types.is_string(f.type)]
             for source in sources:
-                parquet = pq.ParquetFile(source)
+                parquet = pq.ParquetFile(source, read_dictionary=text)
                 for group in range(parquet.num_row_groups):
                     out.write_table(parquet.read_row_group(group).cast(schema))
         with open(temp, "rb+") as handle:

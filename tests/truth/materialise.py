@@ -1,7 +1,8 @@
 """Simulate a scenario and write what the lab records, plus truth.json with the answer.
 
 Folder of a mocap scenario: `take.csv` (Motive export), `presses.csv` (what the lab's script
-commanded: motion starts on the take's clock, speeds, acceleration, travel, hold), `truth.json`.
+commanded: motion starts on the arm's clock — the take's, unless the hidden effect is a mocap
+clock error — speeds, acceleration, depth, hover distance, hold), `truth.json`.
 Folder of a MIDI-only scenario: `soft_<|p|>_angle_<deg>.txt` (ctrl_midi log), `truth.json`.
 """
 
