@@ -143,7 +143,8 @@ def play(
         result = play_song(song, data_dir=data, model=model, planner=planner, adapt=adapt, dry_run=dry_run,
                            tempo=tempo, tempo_scale=tempo_scale, transpose=transpose, track=track,
                            dynamics=dynamics, rig=rig, finger=finger, warmup=0 if no_warmup else warmup, seed=seed,
-                           plot=plot, progress=command_progress(json_out, no_progress))
+                           plot=plot, progress=command_progress(json_out, no_progress),
+                           on_warning=lambda line: print(f"warning: rig: {line}", file=sys.stderr))
     except WarmUpFailed as exc:  # the run is stored (status failed) with the warm-up's keystrokes
         print(f"error: warm-up: {exc}", file=sys.stderr)
         raise typer.Exit(1) from None

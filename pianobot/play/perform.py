@@ -22,7 +22,7 @@ import dataclasses
 import hashlib
 import math
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -80,7 +80,8 @@ class Performer:
 
     def __init__(self, rig: RigSpec, *, data_dir: Path, name: str, song_key: str, meta: dict[str, Any],
                  plan: pd.DataFrame, seed: int | None = None, world: Any | None = None,
-                 progress: Progress = NO_PROGRESS) -> None:
+                 progress: Progress = NO_PROGRESS, on_warning: Callable[[str], None] | None = None) -> None:
+        self.on_warning = on_warning
         self.rig_spec, self.data_dir, self.name, self.song_key = rig, Path(data_dir), name, song_key
         self.seed = int(rig.seed if seed is None else seed)
         self.meta, self.initial_plan, self.world, self.progress = meta, plan, world, progress
@@ -106,7 +107,13 @@ class Performer:
             raise
         self.clock = self.device.clock
         self.collected_to_s = self.started_s = self.clock.now()
-        self.writer.update_meta(rig={"spec": spec, "description": self.device.describe()})
+        rig_warnings = list(self.device.warnings)
+        self.writer.update_meta(rig={"spec": spec, "description": self.device.describe(),
+                                     **({"warnings": rig_warnings} if rig_warnings else {})})
+        for line in rig_warnings:  # before any motion: the user may want to stop here
+            if self.on_warning is not None:
+                self.on_warning(line)
+        self.warnings.extend(rig_warnings)
         return self
 
     def __exit__(self, kind: type[BaseException] | None, exc: BaseException | None, tb: object) -> None:

@@ -12,6 +12,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -163,13 +164,15 @@ def play_song(
     settings: PlaySettings | None = None,
     world: Any | None = None,
     progress: Progress = NO_PROGRESS,
+    on_warning: Callable[[str], None] | None = None,
 ) -> PlayResult:
     """Plan (and unless `dry_run`, warm up, play and score) a song; see `pianobot play --help`.
 
     `model` is a model/predictor file, a StrokePredictor, or None for the published physics
     model (the warm-up's starting point). `tempo`: None (auto unless `tempo_scale` is given),
     "auto", "written" or bpm. `warmup`: keystrokes per vacuum level (None: the settings', 0: none).
-    `world` replaces the sim rig's physics World (tests).
+    `world` replaces the sim rig's physics World (tests). `on_warning` hears what the rig found when
+    it was opened (e.g. the UR's speed slider below 100 %), before any motion.
     """
     if planner not in PLANNERS:
         raise InputError(f"planner should be one of {', '.join(PLANNERS)}, got {planner!r}", "--planner")
@@ -229,7 +232,7 @@ def play_song(
     name = f"play-{Path(song_path).stem}-{planner}{'-adapt' if adapt else ''}"
     warm: WarmUp | None = None
     with Performer(rig_spec, data_dir=data_dir, name=name, song_key=song_key, meta=meta, plan=initial,
-                   seed=seed, world=world, progress=progress) as performer:
+                   seed=seed, world=world, progress=progress, on_warning=on_warning) as performer:
         if design:
             survey, survey_s = performer.warm_up(design)
             focus = design_warmup([n.pitch for n in line.notes], plan.geometry, levels, settings,  # type: ignore[arg-type]

@@ -15,8 +15,6 @@ SONGS = Path(__file__).resolve().parents[2] / "experiments" / "songs"
 PLAY_RIG = Path(__file__).resolve().parents[2] / "experiments" / "rigs" / "sim-play.yaml"
 
 
-
-
 def _type2(path: Path) -> Path:
     mid = mido.MidiFile(type=2)
     for note in (60, 62):
@@ -108,8 +106,16 @@ def test_bad_play_options_are_one_line_and_exit_2(args: list[str], where: str, t
 
 def test_play_prints_the_score_the_tempo_and_the_warm_up(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                                          monkeypatch: pytest.MonkeyPatch) -> None:
+    from pianobot.rig.station import Rig
+
+    # What the rig finds when it opens (a UR's speed slider below 100 %) is said before the song.
+    monkeypatch.setattr(Rig, "warnings", property(lambda self: ("speed slider at 50 %",)))
     code, out, err = cli(["play", str(SONGS / "scale_crescendo.mid"), "--data", str(tmp_path), "--warmup", "8"],
                          capsys, monkeypatch)
     assert code == 0
     assert "warm-up: 8 keystrokes" in out and "playing at" in out and "f1" in out
     assert "too fast for this finger" in err
+    assert err.splitlines()[0] == "warning: rig: speed slider at 50 %"
+    assert "report written to" in out
+    run = json.loads(next((tmp_path / "runs").glob("*/run.json")).read_text())
+    assert run["rig"]["warnings"] == ["speed slider at 50 %"]
