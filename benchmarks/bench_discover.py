@@ -93,7 +93,7 @@ def score(result: DiscoveryResult, expected_family: str | None, cpu_s: float, n:
         "gap_ratio": first.ratio if first else None,
         "gap_before": result.gap_before.to_dict(), "gap_after": result.gap_after.to_dict(),
         "base_holdout_rms_x2_mm": 1e3 * result.base_holdout_rms_x2_m, "verdict": result.verdict,
-        "unexplained": None if result.unexplained is None else result.unexplained.label,
+        "unexplained": None if result.unexplained is None else result.unexplained.term,
         "cpu_s": cpu_s, "n_keystrokes": n, "mode": result.mode,
     }
 
