@@ -98,16 +98,17 @@ def score(result: DiscoveryResult, expected_family: str | None, cpu_s: float, n:
     }
 
 
-def identify_holdout(run_id: str, data_dir: Path) -> dict[str, float]:
-    """What `pianobot identify RUN` reports as its held-out error (its own load, split and fit,
-    without the lab's schedule), and the published model's on the same keystrokes: the baseline
+def identify_holdout(run_id: str, data_dir: Path, presses: Path | None) -> dict[str, float]:
+    """What `pianobot identify RUN --presses presses.csv` reports as its held-out error (its own
+    load, split and fit), and the published model's on the same keystrokes: the baseline
     discovery's base fit is judged against."""
-    from pianobot.analysis.greybox.load import load_keystrokes
+    from pianobot.analysis.greybox.load import load_keystrokes, read_schedule
     from pianobot.analysis.greybox.split import split_holdout
     from pianobot.analysis.identify.fit import identify_trajectories, rms_x2_m
     from pianobot.physics.msd import MSDParams
 
-    batch = load_keystrokes([run_id], data_dir, need_motion=True).batch
+    schedule = None if presses is None else read_schedule(presses)
+    batch = load_keystrokes([run_id], data_dir, need_motion=True, schedule=schedule).batch
     train, test = split_holdout(batch)
     start = time.process_time()
     fit = identify_trajectories(train, prior=MSDParams(), coupling="auto")
@@ -172,7 +173,7 @@ def truth_suite(only: list[str] | None, log: Callable[[str], None], subset: str 
                    **score(result, family, cpu, batch.n, tuple(truth.get("accepted_effects") or ()),
                            tuple(truth.get("always_present") or ()))}
             if family is None and result.mode == "trajectories":
-                row.update(identify_holdout(run_id, Path(scratch) / "data"))
+                row.update(identify_holdout(run_id, Path(scratch) / "data", made.files.get("presses")))
                 row["base_vs_identify"] = row["base_holdout_rms_x2_mm"] / row["identify_holdout_rms_x2_mm"]
             rows.append(row)
             if sink is not None:

@@ -72,6 +72,9 @@ def register(app: typer.Typer) -> None:
         force_log: Annotated[list[str] | None, typer.Option(help="P=FILE or a folder of P.txt force logs.")] = None,
         compression_m: Annotated[float, typer.Option(help="Compression of the force-log presses.")] = STUDY_COMPRESSION_M,
         plot: PlotOption = None,
+        presses: Annotated[Path | None, typer.Option(
+            "--presses", help="CSV of the commanded presses (t_start_s, speeds, acceleration, depth, distance, "
+                              "hold) for runs that do not record them, e.g. an imported Motive take.")] = None,
         workers: Annotated[int | None, typer.Option(
             "--workers", min=1, help="Processes for the bootstrap refits (default: the machine's cores; "
                                      "small work stays in this process).")] = None,
@@ -88,7 +91,8 @@ def register(app: typer.Typer) -> None:
         result = identify_runs(runs, data, out=out, coupling=cast(Coupling, coupling), bootstrap=bootstrap, seed=seed,
                                x0_source=x0_source, vacuum_kpa=vacuum_kpa, static=static,
                                progress=command_progress(json_out, no_progress),
-                               executor=ExecutorSettings.resolve(workers=workers, scheduler=scheduler))
+                               executor=ExecutorSettings.resolve(workers=workers, scheduler=scheduler),
+                               schedule=presses)
         findings = identify_findings(result.fit.params, [Interval(e.name, e.value, e.unit, e.ci95)
                                                          for e in result.fit.estimates],
                                      keystrokes_per_level(runs, data, vacuum_kpa, result.fit.n_keystrokes))

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 import pianobot
-from pianobot.analysis.greybox.load import load_keystrokes
+from pianobot.analysis.greybox.load import load_keystrokes, read_schedule
 from pianobot.analysis.greybox.split import split_holdout
 from pianobot.analysis.identify.damping import DampingCheck, damping_check
 from pianobot.analysis.identify.fit import Coupling, TrajectoryFit, identify_trajectories, rms_x2_m
@@ -62,14 +62,17 @@ def identify_runs(
     run_ids: Sequence[str], data_dir: Path, *, out: Path | None, coupling: Coupling = "auto",
     bootstrap: int = 20, seed: int = 0, x0_source: str = "auto", vacuum_kpa: float | None = None,
     static: StaticStiffness | None = None, progress: Progress = NO_PROGRESS,
-    executor: ExecutorSettings | None = None,
+    executor: ExecutorSettings | None = None, schedule: Path | None = None,
 ) -> IdentifyResult:
     """Identify the model from the runs' trajectories; compare with the published parameters on
     held-out keystrokes (every third per level); write the model file when `out` is given.
 
     The bootstrap refits run through the executor `executor` asks for (None: in this process),
-    sized by how long the held-out fit took; results do not depend on where they ran."""
-    loaded = load_keystrokes(run_ids, data_dir, x0_source=x0_source, vacuum_kpa=vacuum_kpa, need_motion=True)
+    sized by how long the held-out fit took; results do not depend on where they ran.
+    `schedule`: the commanded presses (`greybox.load.read_schedule`) of runs that do not record
+    them (an imported Motive take: without it the fingertip is assumed to start on the key)."""
+    loaded = load_keystrokes(run_ids, data_dir, x0_source=x0_source, vacuum_kpa=vacuum_kpa, need_motion=True,
+                             schedule=None if schedule is None else read_schedule(schedule))
     batch, hashes, trials = loaded.batch, loaded.hashes, loaded.trials
     published = MSDParams()
     train, test = split_holdout(batch)
