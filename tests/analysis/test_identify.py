@@ -22,7 +22,8 @@ from pianobot.analysis.identify.fit import (
 from pianobot.analysis.identify.run import identify_runs
 from pianobot.analysis.identify.static_stiffness import force_log_levels, static_stiffness_from_logs
 from pianobot.errors import InputError
-from pianobot.physics.msd import MSDParams, peak_response
+from pianobot.physics.linear import peak_response
+from pianobot.physics.msd import MSDParams
 
 TRUTH = MSDParams(k1_a_npm=70.0, k1_b_npm_per_kpa=1.4, c1_nspm=0.45, k2_npm=330.0, c2_nspm=0.33)
 

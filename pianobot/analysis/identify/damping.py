@@ -23,7 +23,8 @@ import numpy.typing as npt
 
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
 from pianobot.analysis.greybox.noise import noise_sigma_m
-from pianobot.physics.msd import MSDParams, state_space
+from pianobot.physics.linear import state_space
+from pianobot.physics.msd import MSDParams
 
 FloatArray = npt.NDArray[np.float64]
 MIN_EXTREMA = 4

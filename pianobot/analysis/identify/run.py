@@ -18,8 +18,9 @@ from pianobot.analysis.identify.fit import Coupling, TrajectoryFit, identify_tra
 from pianobot.analysis.identify.readout import ReadoutFit, fit_readout
 from pianobot.analysis.identify.static_stiffness import StaticStiffness
 from pianobot.executor import ExecutorSettings, open_executor
+from pianobot.physics.linear import peak_response
 from pianobot.physics.model import KeystrokeModel, save_model
-from pianobot.physics.msd import MSDParams, peak_response
+from pianobot.physics.msd import MSDParams
 from pianobot.progress import NO_PROGRESS, Progress
 
 
