@@ -281,13 +281,39 @@ def summary(own: list[dict[str, Any]], truth: list[dict[str, Any]]) -> dict[str,
     return out
 
 
+def collect(paths: list[Path], out: Path) -> None:
+    """One result file from runs split across processes (a shared machine gives each process a
+    share of a core, so the suite is run in parts): rows are re-summarised together."""
+    truth: list[dict[str, Any]] = []
+    own: list[dict[str, Any]] = []
+    real: list[dict[str, Any]] = []
+    for path in paths:
+        if path.suffix == ".jsonl":
+            truth += [json.loads(line) for line in path.read_text(encoding="utf-8").splitlines() if line.strip()]
+        else:
+            payload = json.loads(path.read_text(encoding="utf-8"))
+            own += payload.get("own_world", [])
+            real += payload.get("real", [])
+    payload = {"benchmark": "discover", "summary": summary(own, truth), "truth": truth, "own_world": own,
+               "real": real, "assembled_from": [p.name for p in paths]}
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(_finite(payload), indent=2, default=str) + "\n", encoding="utf-8")
+    print(json.dumps(_finite(payload["summary"]), indent=2))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     parser.add_argument("--suite", nargs="*", default=["truth", "own", "real"], choices=["truth", "own", "real"])
     parser.add_argument("--only", nargs="*", default=None, help="scenario names (or parts of names) to run")
     parser.add_argument("--truth-subset", default="full", choices=["full", "small"])
     parser.add_argument("--out", type=Path, default=RESULTS)
+    parser.add_argument("--collect", nargs="*", type=Path, default=None,
+                        help="assemble finished runs instead of running: truth rows (*.rows.jsonl of runs split "
+                             "with --only) and earlier JSON outputs (their own-world and real sections)")
     args = parser.parse_args()
+    if args.collect is not None:
+        collect(args.collect, args.out)
+        return
 
     def log(line: str) -> None:
         print(line, flush=True)
