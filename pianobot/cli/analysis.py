@@ -143,8 +143,6 @@ def register(app: typer.Typer) -> None:
         result = fit_runs(runs, data, kinds=kinds, out_dir=out_dir, folds=folds,
                           physics_model=physics_model, progress=command_progress(json_out, no_progress))
         table, saved = result.cv, result.saved
-        for finding in result.findings:
-            print_warning(finding.text())
         if plot is not None:
             predictors = {kind: load_predictor(path) for kind, path in saved.items()}
             if "physics" in kinds:
@@ -152,12 +150,16 @@ def register(app: typer.Typer) -> None:
                                          else PhysicsPredictor.published())
             save_png(learned_maps(load_trials(runs, data), predictors), plot)
         if json_out:
+            for finding in result.findings:
+                print_warning(finding.text())
             emit_json({"cv": table.to_dict(orient="records"), "saved": {k: str(v) for k, v in saved.items()},
                        "warnings": as_dicts(result.findings), "plot": None if plot is None else str(plot)})
             return
         print_cv(table, saved)
         if plot is not None:
             say_written("figure", plot)
+        for finding in result.findings:  # last, beside the numbers they qualify
+            print_warning(finding.text())
 
     @app.command()
     def report(
