@@ -44,9 +44,10 @@ def keystroke_log(
     ] = "auto",
     columns: Annotated[
         str | None,
-        typer.Option("--columns", help="Declare the control-list columns in order, e.g. "
-                     "vacuum_kpa,velocity_mps,skip,hold_s "
-                     "(skip ignores a value; a unit-less name keeps it as an extra column)."),
+        typer.Option("--columns", help="Declare the control-list columns, comma-separated in the "
+                     "log's order, named as in the trials table (e.g. vacuum_kpa, velocity_mps, "
+                     "depth_m, hold_s; skip ignores a value; a unit-less name keeps it as an extra "
+                     "column)."),
     ] = None,
     layout_file: Annotated[
         Path | None, typer.Option("--layout-file", help="A YAML file declaring the columns (name, finger, columns).")
@@ -62,8 +63,9 @@ def keystroke_log(
 ) -> None:
     """Import a dict-per-line keystroke log (control lists or named keys).
 
-    MIDI events stay on the line that printed them unless the read backlog and the predicted
-    stroke timing show they belong to an earlier keystroke; each moved event's evidence is kept.
+    MIDI events stay on the line that printed them unless the read backlog
+    and the predicted stroke timing show they belong to an earlier
+    keystroke; each moved event's evidence is kept.
     """
     declared = columns.split(",") if columns is not None else None
     result = import_keystroke_log(file, data, layout=layout, columns=declared, layout_file=layout_file,
@@ -127,8 +129,9 @@ def mocap(
 ) -> None:
     """Import a Motive CSV take: keystrokes segmented from the arm marker, or aligned to a run.
 
-    Marker tracks Motive split after an occlusion are joined first; roles are inferred only when
-    the evidence is clear, otherwise the candidates are named.
+    Marker tracks Motive split after an occlusion are joined first; roles
+    are inferred only when the evidence is clear, otherwise the candidates
+    are named.
     """
     writable(plot, "--plot")
     markers = _rig_markers(rig) if rig is not None else {}
