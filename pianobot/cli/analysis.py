@@ -80,7 +80,7 @@ def register(app: typer.Typer) -> None:
         static = static_stiffness_from_logs(levels, compression_m=compression_m) if levels else None
         progress = command_progress(json_out, no_progress)
         # identify_runs reports no steps yet: an elapsed-time spinner shows the fits are alive.
-        with progress.task(f"identify: held-out fit, full fit and {bootstrap} bootstrap refits"):
+        with progress.task(f"identify: fits and {bootstrap} bootstrap refits"):
             result = identify_runs(runs, data, out=out, coupling=coupling, bootstrap=bootstrap, seed=seed,
                                    x0_source=x0_source, vacuum_kpa=vacuum_kpa, static=static)
         findings = identify_findings(result.fit.params, [Interval(e.name, e.value, e.unit, e.ci95)
