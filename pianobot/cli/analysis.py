@@ -104,7 +104,8 @@ def register(app: typer.Typer) -> None:
         console = output_console()
         console.print(f"held-out RMS x2: identified {1e3 * result.holdout_rms_identified_m:.4f} mm, "
                       f"published {1e3 * result.holdout_rms_published_m:.4f} mm")
-        peaks = ", ".join(f"{hz:.2f} Hz at {level} kPa" for level, hz in result.peak_hz.items())
+        peaks = ", ".join((f"{hz:.2f} Hz" if hz > 0 else "none (largest at 0 Hz)") + f" at {level} kPa"
+                          for level, hz in result.peak_hz.items())
         console.print(f"x2/x0 resonance peak: {peaks}")
         if result.damping is not None:
             d = result.damping
