@@ -51,6 +51,8 @@ def test_sweep_draws_wall_clock_and_lab_eta_on_a_terminal(monkeypatch: pytest.Mo
                           terminal=True)
     assert code == 0
     assert "sweep" in err and "16/16" in err and "ETA" in err and "lab " in err
+    # The work before the first trial (seconds for a large spec or a cold simulator) has its rows.
+    assert "sweep: expanding the plan" in err and "sweep: opening the rig" in err
     assert "ETA" not in out  # progress never lands on stdout
 
 
