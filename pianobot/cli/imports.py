@@ -45,10 +45,9 @@ def keystroke_log(
     ] = "auto",
     columns: Annotated[
         str | None,
-        typer.Option("--columns", help="Declare the control-list columns, comma-separated in the "
-                     "log's order, named as in the trials table (e.g. vacuum_kpa, velocity_mps, "
-                     "depth_m, hold_s; skip ignores a value; a unit-less name keeps it as an extra "
-                     "column)."),
+        typer.Option("--columns", help="Declare the control-list columns in order, e.g. "
+                     "vacuum_kpa,velocity_mps,skip,hold_s "
+                     "(skip ignores a value; a unit-less name keeps it as an extra column)."),
     ] = None,
     layout_file: Annotated[
         Path | None, typer.Option("--layout-file", help="A YAML file declaring the columns (name, finger, columns).")
