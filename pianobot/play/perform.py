@@ -112,7 +112,7 @@ class Performer:
                                      **({"warnings": rig_warnings} if rig_warnings else {})})
         for line in rig_warnings:  # before any motion: the user may want to stop here
             if self.on_warning is not None:
-                self.on_warning(line)
+                self.on_warning(f"rig: {line}")
         self.warnings.extend(rig_warnings)
         return self
 

@@ -171,8 +171,11 @@ def play_song(
     `model` is a model/predictor file, a StrokePredictor, or None for the published physics
     model (the warm-up's starting point). `tempo`: None (auto unless `tempo_scale` is given),
     "auto", "written" or bpm. `warmup`: keystrokes per vacuum level (None: the settings', 0: none).
-    `world` replaces the sim rig's physics World (tests). `on_warning` hears what the rig found when
-    it was opened (e.g. the UR's speed slider below 100 %), before any motion.
+    `world` replaces the sim rig's physics World (tests). `on_warning` hears each warning when it is
+    known, before the motion it concerns: the song's (chords reduced to a melody) once it is read,
+    the rig's (e.g. the UR's speed slider below 100 %) once it is open, the plan's (the written
+    tempo is too fast, and the one played instead) after the warm-up, before the song;
+    `PlayResult.warnings` holds the song's and the plan's again.
     """
     if planner not in PLANNERS:
         raise InputError(f"planner should be one of {', '.join(PLANNERS)}, got {planner!r}", "--planner")
@@ -194,6 +197,9 @@ def play_song(
     rig_spec = play_rig(rig)
     song, line = load_song(Path(song_path), tempo_scale=tempo_scale, transpose=transpose, track=track,
                            rule=settings.melody_rule)
+    tell = on_warning or (lambda _: None)
+    for text in (*song.warnings, *line.warnings):
+        tell(text)
     mode: DynamicsMode = "absolute" if dynamics == "absolute" else "mapped"
     if planner == "naive":
         plan = plan_naive(line.notes, settings, rig_spec, tempo=request, written_bpm=song.tempo_bpm)
@@ -232,7 +238,7 @@ def play_song(
     name = f"play-{Path(song_path).stem}-{planner}{'-adapt' if adapt else ''}"
     warm: WarmUp | None = None
     with Performer(rig_spec, data_dir=data_dir, name=name, song_key=song_key, meta=meta, plan=initial,
-                   seed=seed, world=world, progress=progress, on_warning=on_warning) as performer:
+                   seed=seed, world=world, progress=progress, on_warning=tell) as performer:
         if design:
             survey, survey_s = performer.warm_up(design)
             focus = design_warmup([n.pitch for n in line.notes], plan.geometry, levels, settings,  # type: ignore[arg-type]
@@ -251,6 +257,8 @@ def play_song(
             performer.replan(_initial_plan(design + focus, plan, song_key))
         performer.writer.update_meta(plan_summary=plan.summary(), warnings=list(plan.warnings),
                                      warmup=None if warm is None else warm.summary())
+        for text in plan.warnings:  # the tempo played and why, before the song starts
+            tell(text)
         performance = performer.play(plan, adapter)
     assert plan.tempo is not None
     target = _at_tempo(line.notes, plan.tempo.scale)

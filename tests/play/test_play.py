@@ -26,15 +26,28 @@ from pianobot.store import load_run
 SONGS = Path(__file__).resolve().parents[2] / "experiments" / "songs"
 TWINKLE = SONGS / "twinkle.mid"
 RIGID = str(Path(__file__).resolve().parents[2] / "experiments" / "rigs" / "sim-rigid.yaml")
+HEARD_BEFORE_THE_SONG: list[str] = []  # ode's warnings as its song started (the defaults fixture)
 
 
 @pytest.fixture(scope="module")
 def defaults(song_files: dict[str, Path], tmp_path_factory: pytest.TempPathFactory) -> dict[str, PlayResult]:
     """Every test song played with the default command (built-in sim rig, seed 0)."""
+    from pianobot.play.perform import Performer
+
     data = tmp_path_factory.mktemp("defaults")
     out = {}
+    heard: list[str] = []
+    play = Performer.play
+
+    def play_noting_what_was_heard(self: Performer, *args: object, **kwargs: object) -> object:
+        HEARD_BEFORE_THE_SONG.extend(heard)
+        return play(self, *args, **kwargs)  # type: ignore[arg-type]
+
     for name, path in song_files.items():
-        result = play_song(path, data_dir=data, seed=0)
+        with pytest.MonkeyPatch.context() as patch:
+            if name == "ode":
+                patch.setattr(Performer, "play", play_noting_what_was_heard)
+            result = play_song(path, data_dir=data, seed=0, on_warning=heard.append if name == "ode" else None)
         out[name] = result
         s, t = result.score, result.plan.tempo
         assert s is not None and t is not None
@@ -67,6 +80,7 @@ def test_the_written_tempo_is_too_fast_for_one_soft_finger_and_the_output_says_s
     assert tempo is not None and tempo.played_bpm < tempo.written_bpm
     lines = [w for w in result.warnings if "too fast for this finger" in w]
     assert len(lines) == 1 and f"{tempo.played_bpm:.4g} bpm" in lines[0] and "--tempo written" in lines[0]
+    assert lines[0] in HEARD_BEFORE_THE_SONG  # said before the song, not only after it
     assert tempo.limiting_notes and all(0 < i < len(result.melody.notes) for i in tempo.limiting_notes)
 
 
