@@ -126,7 +126,7 @@ def play(
     tempo_scale: Annotated[float, typer.Option("--tempo-scale", help="Multiply the written tempo (0.5 = half speed); alone, plays at that tempo.")] = 1.0,
     warmup: Annotated[int | None, typer.Option("--warmup", help="Warm-up keystrokes per vacuum level before the song (default 12).")] = None,
     no_warmup: Annotated[bool, typer.Option("--no-warmup", help="Play with the starting model as it is.")] = False,
-    finger: Annotated[str | None, typer.Option("--finger", help="soft (default) | rigid: the safety envelope and stroke defaults.")] = None,
+    finger: Annotated[str | None, typer.Option("--finger", help="soft (default) | rigid: the safety envelope and stroke defaults (on the built-in rig, also the simulated finger).")] = None,
     transpose: Annotated[int, typer.Option("--transpose", help="Semitones to add to every note.")] = 0,
     track: Annotated[int | None, typer.Option("--track", help="Play only this track (0-based).")] = None,
     dynamics: Annotated[str, typer.Option("--dynamics", help="mapped (song range → reachable range) | absolute (clip).")] = "mapped",

@@ -59,6 +59,9 @@ PLAYER_APPROACH = Approach(velocity_mps=0.5, acceleration_mps2=4.0, clearance_m=
 # A rigid finger's stiffness for the starting model (the published model is the soft finger's):
 # stiff enough that the arm's travel reaches the key almost one to one.
 RIGID_FINGER_K1_NPM = 5000.0
+# The built-in sim rig's world with `--finger rigid`: no vacuum line, ~25x the soft finger's
+# stiffness (not the starting model's value: the warm-up is what learns it).
+BUILTIN_RIGID_FINGER = {"k1_a_npm": 2000.0, "k1_b_npm_per_kpa": 0.0}
 
 
 @dataclass(frozen=True)
@@ -108,8 +111,12 @@ class PlayResult:
         return out
 
 
-def play_rig(rig: str | Path | RigSpec) -> RigSpec:
+def play_rig(rig: str | Path | RigSpec, finger: Finger = "soft") -> RigSpec:
     """The rig to play on: "sim" (the built-in sim rig) or a rig file, with a player's moves.
+
+    On the built-in rig, `finger="rigid"` simulates a rigid finger (`BUILTIN_RIGID_FINGER`, as
+    `experiments/rigs/sim-rigid.yaml`): the soft finger's world would not reach the key with a
+    rigid finger's shallow strokes. A rig file's world is used as written.
 
     The built-in travel and approach settings are a sweep's (slow, with a 50 mm lift between
     keys; fast approaches that keep 5 mm and 1.5 s of the spec's motion). A simulated rig whose
@@ -121,6 +128,9 @@ def play_rig(rig: str | Path | RigSpec) -> RigSpec:
     if spec.kind == "sim":
         player = {"travel": PLAYER_TRAVEL, "approach": PLAYER_APPROACH}
         spec = spec.model_copy(update={k: v for k, v in player.items() if k not in spec.model_fields_set})
+        if finger == "rigid" and isinstance(rig, str) and rig == "sim":
+            msd = {**spec.world.get("msd", {}), **BUILTIN_RIGID_FINGER}
+            spec = spec.model_copy(update={"world": {**spec.world, "msd": msd}})
     return spec
 
 
@@ -194,7 +204,7 @@ def play_song(
     request = tempo if isinstance(tempo, TempoRequest) else TempoRequest.parse(tempo)
     if tempo is None and tempo_scale != 1.0:
         request = TempoRequest("written", None, True)  # --tempo-scale alone asks for that tempo
-    rig_spec = play_rig(rig)
+    rig_spec = play_rig(rig, settings.finger)
     song, line = load_song(Path(song_path), tempo_scale=tempo_scale, transpose=transpose, track=track,
                            rule=settings.melody_rule)
     tell = on_warning or (lambda _: None)
