@@ -21,7 +21,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from pianobot.physics.msd import LinearParams, MSDParams, frequency_response, peak_response
+from pianobot.physics.linear import frequency_response, peak_response
+from pianobot.physics.msd import LinearParams, MSDParams
 
 #: The study's law k1 = a + b·|p|: its slope b (N/m per kPa of vacuum).
 STUDY_K1_SLOPE_NPM_PER_KPA = MSDParams().k1_b_npm_per_kpa

@@ -138,15 +138,21 @@ def register(app: typer.Typer) -> None:
         runs: RunIds,
         data: DataDir = DEFAULT_DATA,
         json_out: JsonFlag = False,
-        model: Annotated[list[str] | None, typer.Option("--model", help="gp | poly | spline | mlp | physics (repeatable).")] = None,
+        model: Annotated[list[str] | None, typer.Option("--model", help="gp | poly | spline | mlp | physics | sequence (repeatable; with sequence, the others are its per-note baselines).")] = None,
         out_dir: Annotated[Path, typer.Option("--out-dir", help="Folder for the saved predictors.")] = Path("models"),
         folds: Annotated[int, typer.Option(min=2, help="Grouped CV folds.")] = 5,
         physics_model: Annotated[Path | None, typer.Option(help="Model file for --model physics.")] = None,
         plot: PlotOption = None,
         no_progress: NoProgressFlag = False,
+        context: Annotated[str, typer.Option("--context", help="With --model sequence: previous strokes k to compare, e.g. 0,1,2,3.")] = "0,1,2,3",
     ) -> None:
         """Cross-validate learned maps to on-velocity, hold and silence; save each as a predictor."""
         kinds = model or ["gp"]
+        if "sequence" in kinds:
+            from pianobot.cli.sequence_fit import fit_sequence_command
+
+            fit_sequence_command(runs, data, kinds, out_dir, folds, context, json_out, no_progress)
+            return
         writable(plot, "--plot")
         progress = command_progress(json_out, no_progress)
         with progress.task("fit: loading scikit-learn"):

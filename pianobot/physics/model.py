@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from pianobot.atomic_files import write_text_atomic
 from pianobot.errors import InputError
 from pianobot.physics.effects import Effects
 from pianobot.physics.msd import MSDParams
@@ -112,7 +113,11 @@ def save_model(
     intervals: Mapping[str, Any] | None = None,
     provenance: Mapping[str, Any] | None = None,
 ) -> Path:
-    """Write a model file (JSON, schema `pianobot.model/1`) atomically; returns the path."""
+    """Write a model file (JSON, schema `pianobot.model/1`) atomically; returns the path.
+
+    Through `pianobot.atomic_files`: a temp file beside `path`, fsync'd and renamed over it, so a
+    crash or a full disk leaves the old model file whole (or none), never half a new one.
+    """
     target = Path(path)
     payload = {
         "schema": MODEL_SCHEMA,
@@ -122,9 +127,7 @@ def save_model(
         "provenance": _finite(dict(provenance)) if provenance is not None else None,
     }
     target.parent.mkdir(parents=True, exist_ok=True)
-    tmp = target.with_name(target.name + ".tmp")
-    tmp.write_text(json.dumps(payload, indent=2, default=str) + "\n", encoding="utf-8")
-    tmp.replace(target)
+    write_text_atomic(target, json.dumps(payload, indent=2, default=str) + "\n")
     return target
 
 

@@ -19,7 +19,8 @@ from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
 
 from pianobot.errors import InputError
-from pianobot.physics.msd import MSDParams, frequency_response
+from pianobot.physics.linear import frequency_response
+from pianobot.physics.msd import MSDParams
 from pianobot.reports.style import (
     FULL_WIDTH_IN,
     label_axes,
