@@ -13,7 +13,7 @@ import sys
 import typer
 
 from pianobot import __version__
-from pianobot.cli.common import install_help_conventions, print_error
+from pianobot.cli.common import install_help_conventions, loading_row, print_error
 from pianobot.errors import InputError
 
 app = typer.Typer(
@@ -101,7 +101,8 @@ def main() -> None:
         # --version, --help, no arguments or an unknown command: the table of contents answers.
         _table_of_contents()()
         return
-    _register(command)
+    with loading_row(f"{command}: loading", args):
+        _register(command)
     try:
         app()
     except InputError as exc:
