@@ -62,18 +62,22 @@ class _BoundedLoader(yaml.SafeLoader):
         self._depth = 0
         self._composed = 0
 
-    def compose_node(self, parent: yaml.Node | None, index: Any) -> yaml.Node:
+    def compose_node(self, parent: yaml.Node | None, index: Any) -> yaml.Node | None:
         self._depth += 1
         self._composed += 1
         if self._depth > MAX_DEPTH:
-            raise _Refused(f"nesting deeper than {MAX_DEPTH} levels", self.peek_event().start_mark)
+            raise _Refused(f"nesting deeper than {MAX_DEPTH} levels", self._mark())
         if self._composed > MAX_VALUES:
-            raise _Refused(f"more than {MAX_VALUES:,} values", self.peek_event().start_mark)
+            raise _Refused(f"more than {MAX_VALUES:,} values", self._mark())
         try:
-            node: yaml.Node = super().compose_node(parent, index)
+            return super().compose_node(parent, index)
         finally:
             self._depth -= 1
-        return node
+
+    def _mark(self) -> yaml.Mark | None:
+        event = self.peek_event()  # type: ignore[no-untyped-call]
+        mark: yaml.Mark | None = getattr(event, "start_mark", None)
+        return mark
 
     def construct_yaml_int(self, node: yaml.ScalarNode) -> int:
         if len(str(node.value)) > MAX_NUMBER_CHARS:
