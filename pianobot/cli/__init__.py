@@ -7,10 +7,14 @@ owns the invoked command is imported, so `pianobot runs` does not pay for scikit
 from __future__ import annotations
 
 import importlib
+import os
 import pkgutil
 import sys
 
 import typer
+
+# typer carries its own copy of click; its exceptions are what the app raises.
+from typer._click import exceptions as click_errors
 
 from pianobot import __version__
 from pianobot.cli.common import print_error
@@ -73,11 +77,44 @@ def _register(command: str | None = None) -> None:
 
 
 def main() -> None:
-    """Entry point: one-line errors and exit code 2 for bad input, never a traceback."""
+    """Entry point: one-line errors and exit code 2 for bad input, never a traceback.
+
+    Bad input is an InputError (a spec, a file, a run), a command-line usage error (an unknown
+    option, `--seed x`), or a file the system refuses (a folder where a file belongs, a
+    read-only folder, a full disk): each gets one line on stderr and exit code 2.
+    """
     args = sys.argv[1:]
     _register(args[0] if args and not args[0].startswith("-") else None)
     try:
-        app()
+        code = app(standalone_mode=False)
     except InputError as exc:
         print_error(str(exc))
         sys.exit(2)
+    except click_errors.NoArgsIsHelpError:
+        sys.exit(2)  # `pianobot` alone: typer has shown the help
+    except click_errors.UsageError as exc:
+        where = f"{exc.ctx.command_path}: " if exc.ctx is not None else ""
+        print_error(f"{where}{exc.format_message()} (see --help)")
+        sys.exit(exc.exit_code)
+    except click_errors.ClickException as exc:
+        print_error(exc.format_message())
+        sys.exit(exc.exit_code)
+    except typer.Abort:
+        print_error("aborted")
+        sys.exit(130)
+    except OSError as exc:
+        if os.environ.get("PIANOBOT_TRACEBACK"):
+            raise
+        print_error(_os_error_text(exc))
+        sys.exit(2)
+    except MemoryError:
+        print_error("out of memory: the input is too large for this machine")
+        sys.exit(2)
+    sys.exit(code if isinstance(code, int) else 0)
+
+
+def _os_error_text(exc: OSError) -> str:
+    """`data/runs: Permission denied` from any OSError (the file and what the system said)."""
+    what = exc.strerror or str(exc) or type(exc).__name__
+    where = exc.filename if exc.filename is not None else None
+    return f"{where}: {what}" if where is not None else what

@@ -17,12 +17,21 @@ from rich.console import Console
 from rich.table import Table
 
 from pianobot.cli.common import DEFAULT_DATA, DataDir, JsonFlag, emit_json, print_error
-from pianobot.plan import format_duration
+from pianobot.plan import DEFAULT_MAX_TRIALS, format_duration
 from pianobot.run import RunOutcome, dry_run, run_sweep
-from pianobot.store import RunSummary, list_runs, load_run, summarize_run
+from pianobot.store import (
+    RunHealth,
+    RunSummary,
+    check_run,
+    list_runs,
+    load_run,
+    repair_run,
+    rig_summary,
+    summarize_run,
+)
 from pianobot.store.tables import trial_status_counts
 
-EXIT_CODES = {"completed": 0, "failed": 1, "stopped": 3, "interrupted": 130}
+EXIT_CODES = {"completed": 0, "failed": 1, "damaged": 1, "stopped": 3, "interrupted": 130}
 
 
 def _console() -> Console:
@@ -69,7 +78,12 @@ def _print_summaries(summaries: list[RunSummary]) -> None:
         planned = "?" if s.trials_planned is None else str(s.trials_planned)
         silent = "-" if math.isnan(s.silent_pct) else f"{s.silent_pct:.0f}%"
         table.add_row(s.run_id, s.name, s.kind, s.status, f"{s.trials_done}/{planned}", silent, format_duration(s.lab_time_s))
-    _console().print(table)
+    console = _console()
+    console.print(table)
+    for s in summaries:
+        if s.status == "damaged":
+            console.print(f"damaged: {s.run_id}: {s.reason} (`pianobot runs check {s.run_id}`)",
+                          highlight=False, markup=False, soft_wrap=True)
 
 
 def _run_details(run_id: str, data: Path) -> dict[str, Any]:
@@ -85,6 +99,7 @@ def _run_details(run_id: str, data: Path) -> dict[str, Any]:
         "spec_sha256": meta.get("spec_sha256"),
         "seed": meta.get("seed"),
         "rig_kind": _rig_kind(meta.get("rig")),
+        "rig": rig_summary(meta),
         "pianobot_version": meta.get("pianobot_version"),
         "git_commit": meta.get("git_commit"),
         "end_utc": meta.get("end_utc"),
@@ -121,7 +136,7 @@ def _print_details(details: dict[str, Any]) -> None:
         ("lab time", format_duration(details["lab_time_s"])),
         ("started / ended", f"{details['start_utc']} / {details['end_utc'] or '-'}"),
         ("spec", f"{details['spec_path']} (sha256 {str(details['spec_sha256'])[:12]})"),
-        ("rig / seed", f"{details['rig_kind']} / {details['seed']}"),
+        ("rig / seed", f"{details['rig']} / {details['seed']}"),
         ("pianobot / git", f"{details['pianobot_version']} / {details['git_commit'] or '-'}"),
         ("folder", details["path"]),
     ]
@@ -144,6 +159,12 @@ def register(app: typer.Typer) -> None:
         json_out: JsonFlag = False,
         seed: Annotated[int | None, typer.Option("--seed", help="Seed of the simulated world (overrides the rig file).")] = None,
         rig: Annotated[Path | None, typer.Option("--rig", help="Rig file to use instead of the spec's.")] = None,
+        rig_override: Annotated[bool, typer.Option(
+            "--rig-override", help="Resume on another rig than the run started with (recorded per session).",
+        )] = False,
+        max_trials: Annotated[int, typer.Option(
+            "--max-trials", min=1, help="Refuse plans with more trials than this (checked before the plan is built).",
+        )] = DEFAULT_MAX_TRIALS,
         no_progress: Annotated[bool, typer.Option("--no-progress", help="No progress bar.")] = False,
         batch_trials: Annotated[int, typer.Option(
             "--batch-trials", min=1,
@@ -154,7 +175,7 @@ def register(app: typer.Typer) -> None:
         if dry_run_flag:
             if spec is None:
                 raise typer.BadParameter("--dry-run needs a SPEC")
-            summary = dry_run(spec, rig_path=rig)
+            summary = dry_run(spec, rig_path=rig, max_trials=max_trials)
             if json_out:
                 emit_json(summary.to_dict())
             else:
@@ -169,6 +190,7 @@ def register(app: typer.Typer) -> None:
         outcome = run_sweep(
             spec, data_dir=data, resume=resume, seed=seed, rig_path=rig,
             progress=not no_progress and not json_out and sys.stderr.isatty(), batch_trials=batch_trials,
+            max_trials=max_trials, rig_override=rig_override,
         )
         if json_out:
             emit_json(outcome.to_dict())
@@ -176,7 +198,7 @@ def register(app: typer.Typer) -> None:
             _print_outcome(outcome, data, spec)
         raise typer.Exit(code=EXIT_CODES.get(outcome.status, 1))
 
-    runs_app = typer.Typer(help="List runs, or show one run.", no_args_is_help=False)
+    runs_app = typer.Typer(help="List runs; show, check or repair one run.", no_args_is_help=False)
 
     @runs_app.callback(invoke_without_command=True)
     def runs(ctx: typer.Context, data: DataDir = DEFAULT_DATA, json_out: JsonFlag = False) -> None:
@@ -204,4 +226,45 @@ def register(app: typer.Typer) -> None:
         else:
             _print_details(details)
 
+    @runs_app.command("check")
+    def check(
+        run_id: Annotated[str, typer.Argument(help="Run id or a unique prefix.")],
+        data: DataDir = DEFAULT_DATA,
+        json_out: JsonFlag = False,
+    ) -> None:
+        """Verify every file of a run against its journal (readable, rows, SHA-256). Exit 1 if damaged."""
+        health = check_run(load_run(run_id, data).paths, deep=True)
+        if json_out:
+            emit_json(health.to_dict())
+        else:
+            _print_health(health)
+        raise typer.Exit(code=0 if health.ok else 1)
+
+    @runs_app.command("repair")
+    def repair(
+        run_id: Annotated[str, typer.Argument(help="Run id or a unique prefix.")],
+        data: DataDir = DEFAULT_DATA,
+        json_out: JsonFlag = False,
+    ) -> None:
+        """Repair a damaged run: restore from the journal, quarantine the rest, mark lost trials to redo."""
+        report = repair_run(load_run(run_id, data).paths)
+        if json_out:
+            emit_json(report.to_dict())
+        else:
+            for line in report.lines():
+                print(line)
+        raise typer.Exit(code=0 if report.ok else 1)
+
     app.add_typer(runs_app, name="runs")
+
+
+def _print_health(health: RunHealth) -> None:
+    if health.ok:
+        print(f"run {health.run_id}: intact ({health.files_checked} files checked against the journal)")
+    else:
+        print(f"run {health.run_id}: DAMAGED ({len(health.damage)} of {health.files_checked} files)")
+        for damage in health.damage:
+            print(f"  {damage.text()}")
+        print(f"repair: pianobot runs repair {health.run_id}")
+    for note in health.notes:
+        print(f"  note: {note}")

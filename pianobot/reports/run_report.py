@@ -24,7 +24,7 @@ from pianobot.reports.html import (
     table_html,
     write_page,
 )
-from pianobot.store import load_run
+from pianobot.store import load_run, rig_summary
 
 
 def sound_by_level(trials: pd.DataFrame) -> pd.DataFrame:
@@ -61,7 +61,8 @@ def build_run_report(run_ids: Sequence[str], data_dir: Path, out: Path, *, model
     for run in runs:
         meta = run.meta
         keys = ("run_id", "name", "kind", "status", "pianobot_version", "git_commit", "start_utc", "end_utc", "seed")
-        prov.add(mapping_table_html([(k, meta.get(k)) for k in keys], caption=run.run_id))
+        provenance_rows = [(k, meta.get(k)) for k in keys] + [("rig", rig_summary(meta))]
+        prov.add(mapping_table_html(provenance_rows, caption=run.run_id))
     sections.append(prov)
 
     varying = [c for c in INPUT_COLUMNS if c in trials and trials[c].nunique() > 1]

@@ -12,6 +12,7 @@ from pianobot.spec.loader import (
     load_rig,
     load_rig_for,
     load_spec,
+    parse_spec_text,
     spec_sha256,
     write_rig_calibration,
 )
@@ -90,6 +91,7 @@ __all__ = [
     "load_rig",
     "load_rig_for",
     "load_spec",
+    "parse_spec_text",
     "resolved_spec_dict",
     "spec_problems",
     "spec_sha256",

@@ -123,6 +123,15 @@ def load_spec(path: str | Path, rig: str | Path | None = None) -> ExperimentSpec
     return spec
 
 
+def parse_spec_text(text: str, label: str) -> ExperimentSpec:
+    """A spec from its YAML text (as a run records it), validated but not envelope-checked.
+
+    For rebuilding what a run already accepted (its plan); new runs go through `load_spec`.
+    """
+    data, root = _parse_yaml(text, label)
+    return _validate(ExperimentSpec, data, label, root)
+
+
 def spec_sha256(path: str | Path) -> str:
     """SHA-256 (hex) of a spec file's bytes, as recorded with a run."""
     try:

@@ -35,6 +35,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from pianobot.errors import InputError
+
 LEASE_S = 30.0
 HEARTBEAT_S = 5.0
 # A claim (a takeover in progress) lives for microseconds; one this old belongs to a dead breaker.
@@ -45,11 +47,11 @@ _LOCK_VERSION = 1
 TEMP_SUFFIX = ".locktmp"
 
 
-class RunLocked(RuntimeError):
-    """Another live process holds the lock."""
+class RunLocked(InputError):
+    """Another live process holds the lock (the CLI prints the one line and exits 2)."""
 
 
-class LockLost(RuntimeError):
+class LockLost(InputError):
     """This process held the lock, but another one has taken it over since."""
 
 

@@ -187,3 +187,19 @@ def _damaged_summary(run: Run, reason: str) -> RunSummary:
         start_utc=meta.get("start_utc") if isinstance(meta.get("start_utc"), str) else None,
         reason=reason,
     )
+
+
+def rig_summary(meta: dict[str, Any]) -> str:
+    """The rig a run ran on, in words; says so loudly when a resume mixed rigs."""
+    rig = meta.get("rig")
+    if not isinstance(rig, dict):
+        return "-" if rig is None else str(rig)
+    spec = rig.get("spec")
+    kind = str((spec.get("kind") if isinstance(spec, dict) else None) or rig.get("kind") or "?")
+    text = f"{kind} ({rig.get('file')})" if rig.get("file") and rig.get("file") != kind else kind
+    sessions = meta.get("rig_sessions")
+    if rig.get("mixed") and isinstance(sessions, list):
+        parts = [f"{s.get('file')} from session {s.get('sessions_from')}" for s in sessions
+                 if isinstance(s, dict)]
+        return f"MIXED: {len(parts)} rigs over {meta.get('sessions', '?')} sessions: " + "; ".join(parts)
+    return text

@@ -140,8 +140,6 @@ def index_journal(path: Path) -> JournalIndex:
             index.meta_updates.append(dict(event["fields"]))
         elif kind == REPAIRED:
             index.lost_batches |= {int(b) for b in event.get("lost_batches") or [] if isinstance(b, int)}
-            for batch in event.get("restored_batches") or []:
-                index.lost_batches.discard(batch)
     return index
 
 
