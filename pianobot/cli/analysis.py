@@ -19,6 +19,7 @@ from pianobot.analysis.static_stiffness import (
 )
 from pianobot.cli.common import DEFAULT_DATA, DataDir, JsonFlag, emit_json
 from pianobot.errors import InputError
+from pianobot.output import check_output_path
 from pianobot.reports.run_report import build_run_report
 
 RunIds = Annotated[list[str], typer.Argument(help="Run ids (or unique prefixes).")]
@@ -44,6 +45,7 @@ def register(app: typer.Typer) -> None:
         """Identify the keystroke model from mocap trajectories; write a model file with intervals."""
         if coupling not in ("tied", "free", "auto"):
             raise InputError(f"expected tied, free or auto, got {coupling!r}", "--coupling")
+        check_output_path(out, "--out")  # before minutes of fitting, not after
         levels = force_log_levels(force_log or [])
         static = static_stiffness_from_logs(levels, compression_m=compression_m) if levels else None
         result = identify_runs(runs, data, out=out, coupling=coupling, bootstrap=bootstrap, seed=seed,
@@ -104,6 +106,7 @@ def register(app: typer.Typer) -> None:
         compare: Annotated[bool, typer.Option(help="Also run a quick grouped CV (poly, spline).")] = False,
     ) -> None:
         """Write one self-contained HTML report (figures embedded, no network)."""
+        check_output_path(out, "--out")
         cv = fit_runs(runs, data, kinds=["poly", "spline"], out_dir=None)[0] if compare else None
         path = build_run_report(runs, data, out, model_file=model, cv_table=cv)
         if json_out:

@@ -27,6 +27,10 @@ from pianobot.io.keystroke_layouts import LAYOUT_CHOICES, Layout, choose_layout
 from pianobot.io.source import read_input_bytes
 from pianobot.physics.trajectory import move_profile
 
+# A session of the study logged a few hundred keystrokes; a million lines is a week of
+# non-stop pressing. Checked before anything is parsed.
+MAX_LOG_LINES = 1_000_000
+
 TRIAL_COLUMNS = (
     "index", "source_line", "session", "status", "note", "finger",
     "vacuum_kpa", "finger_angle_deg", "acceleration_mps2", "up_acceleration_mps2",
@@ -139,8 +143,13 @@ def read_keystroke_log(path: Path | str, layout: str = "auto") -> KeystrokeLog:
 def _read_lines(path: Path) -> list[str]:
     where = str(path)
     data = read_input_bytes(path, "a text log")
+    lines = data.count(b"\n") + (not data.endswith(b"\n"))
+    if lines > MAX_LOG_LINES:
+        raise InputError(f"has {lines:,} lines; a keystroke log is read up to {MAX_LOG_LINES:,} "
+                         "lines (split it into sessions)", where)
     try:
-        text = data.decode("utf-8")
+        # utf-8-sig: a byte-order mark (Windows editors add one) is not part of the first record.
+        text = data.decode("utf-8-sig")
     except UnicodeDecodeError:
         raise InputError("not a text log (not UTF-8 text)", where) from None
     return text.splitlines()

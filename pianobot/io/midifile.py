@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from pianobot.errors import InputError
+from pianobot.output import write_output
 
 LOWEST_NOTE = 21  # A0
 HIGHEST_NOTE = 108  # C8
@@ -326,8 +327,4 @@ def _write(
     track.append(mido.MetaMessage("end_of_track", time=0))
     mid = mido.MidiFile(type=0, ticks_per_beat=ticks_per_beat)
     mid.tracks.append(track)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    mid.save(tmp)
-    tmp.replace(path)
-    return path
+    return write_output(path, lambda tmp: mid.save(tmp))

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from pianobot.errors import InputError
+from pianobot.output import write_output
 from pianobot.physics.effects import Effects
 from pianobot.physics.msd import MSDParams
 from pianobot.physics.piano import PianoParams
@@ -121,11 +122,8 @@ def save_model(
         "intervals": _finite(dict(intervals)) if intervals is not None else None,
         "provenance": _finite(dict(provenance)) if provenance is not None else None,
     }
-    target.parent.mkdir(parents=True, exist_ok=True)
-    tmp = target.with_name(target.name + ".tmp")
-    tmp.write_text(json.dumps(payload, indent=2, default=str) + "\n", encoding="utf-8")
-    tmp.replace(target)
-    return target
+    text = json.dumps(payload, indent=2, default=str) + "\n"
+    return write_output(target, lambda tmp: tmp.write_text(text, encoding="utf-8"))
 
 
 def read_model_file(path: str | Path) -> ModelFile:
