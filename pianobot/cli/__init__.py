@@ -7,6 +7,7 @@ owns the invoked command is imported, so `pianobot runs` does not pay for scikit
 from __future__ import annotations
 
 import importlib
+import math
 import os
 import pkgutil
 import sys
@@ -86,6 +87,7 @@ def main() -> None:
     args = sys.argv[1:]
     _register(args[0] if args and not args[0].startswith("-") else None)
     try:
+        _refuse_non_finite_options(args)
         code = app(standalone_mode=False)
     except InputError as exc:
         print_error(str(exc))
@@ -111,6 +113,29 @@ def main() -> None:
         print_error("out of memory: the input is too large for this machine")
         sys.exit(2)
     sys.exit(code if isinstance(code, int) else 0)
+
+
+def _refuse_non_finite_options(args: list[str]) -> None:
+    """No option value may be NaN or infinite (`--gain-n nan`, `--min-coverage inf`, `1e999`).
+
+    Every number a command takes is a physical quantity or a count; typer would accept "nan"
+    for any float option and the command would store nonsense. Checked for all commands here,
+    before any of them runs.
+    """
+    for i, arg in enumerate(args):
+        if not arg.startswith("--"):
+            continue
+        name, sep, value = arg.partition("=")
+        if not sep:
+            if i + 1 >= len(args) or args[i + 1].startswith("--"):
+                continue
+            value = args[i + 1]
+        try:
+            number = float(value)
+        except ValueError:
+            continue
+        if not math.isfinite(number):
+            raise InputError(f"must be a finite number, got {value!r}", name)
 
 
 def _os_error_text(exc: OSError) -> str:
