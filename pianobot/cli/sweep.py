@@ -20,6 +20,7 @@ from pianobot.cli.common import DEFAULT_DATA, DataDir, JsonFlag, emit_json, prin
 from pianobot.plan import DEFAULT_MAX_TRIALS, format_duration
 from pianobot.run import RunOutcome, dry_run, run_sweep
 from pianobot.store import (
+    RunDamaged,
     RunHealth,
     RunSummary,
     check_run,
@@ -87,7 +88,10 @@ def _print_summaries(summaries: list[RunSummary]) -> None:
 
 
 def _run_details(run_id: str, data: Path) -> dict[str, Any]:
-    run = load_run(run_id, data)
+    run = load_run(run_id, data, check=False)
+    health = check_run(run.paths, deep=False)
+    if not health.ok:
+        raise RunDamaged(health.reason, run.run_id)
     meta = run.meta
     summary = summarize_run(run)
     spec = meta.get("spec", {}) if isinstance(meta.get("spec"), dict) else {}
@@ -233,7 +237,7 @@ def register(app: typer.Typer) -> None:
         json_out: JsonFlag = False,
     ) -> None:
         """Verify every file of a run against its journal (readable, rows, SHA-256). Exit 1 if damaged."""
-        health = check_run(load_run(run_id, data).paths, deep=True)
+        health = check_run(load_run(run_id, data, check=False).paths, deep=True)
         if json_out:
             emit_json(health.to_dict())
         else:
@@ -247,7 +251,7 @@ def register(app: typer.Typer) -> None:
         json_out: JsonFlag = False,
     ) -> None:
         """Repair a damaged run: restore from the journal, quarantine the rest, mark lost trials to redo."""
-        report = repair_run(load_run(run_id, data).paths)
+        report = repair_run(load_run(run_id, data, check=False).paths)
         if json_out:
             emit_json(report.to_dict())
         else:

@@ -220,7 +220,7 @@ def _reopen(
     *, max_trials: int, rig_override: bool,
 ) -> tuple[RunWriter, PreparedSweep, set[str]]:
     """Open a run to resume: intact, same spec (by sha256), same plan and rig, the trials on disk."""
-    run = load_run(run_id, data_dir)
+    run = load_run(run_id, data_dir, check=False)
     refuse_damaged(run.paths)  # before anything else reads it, and long before the arm moves
     meta = run.meta
     if meta.get("kind") != "sweep":

@@ -185,6 +185,11 @@ def _check_file(
     check.files += 1
     try:
         rows = int(pq.read_metadata(path).num_rows)
+    except FileNotFoundError:
+        # Gone since it was listed: a live writer compacted it away. A file that should be
+        # there and is not is found from the journal's records instead.
+        check.notes.append(f"{check.paths.relative(path)} vanished while being checked (compaction?)")
+        return None
     except READ_ERRORS as exc:
         size = _size(path)
         check.add(path, f"is truncated or unreadable ({size:,} bytes: {_why(exc)})", table, batch)

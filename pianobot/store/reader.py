@@ -105,13 +105,22 @@ class RunSummary:
         return asdict(self)
 
 
-def load_run(run_id: str, data_dir: Path) -> Run:
+def load_run(run_id: str, data_dir: Path, *, check: bool = True) -> Run:
     """Open a run by id or unique id prefix.
+
+    With `check` (the default) the run's files are checked first (each readable: the quick
+    check of `check_run`), so an analysis never runs on half a table; `runs check`, `repair`
+    and `show` open damaged runs with `check=False`.
 
     Raises:
         InputError: no such run (the message says how to list runs) or an ambiguous prefix.
+        RunDamaged: a file of the run is damaged (one line: which, and how to repair).
     """
     paths = resolve_run(Path(data_dir), run_id)
+    if check:
+        health = check_run(paths, deep=False)
+        if not health.ok:
+            raise RunDamaged(health.reason, paths.run_id)
     return Run(run_id=paths.run_id, path=paths.root)
 
 
