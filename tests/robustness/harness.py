@@ -20,7 +20,6 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
-
 from cli_runner import invoke_cli
 
 REPO = Path(__file__).resolve().parents[2]

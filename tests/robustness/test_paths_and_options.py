@@ -14,7 +14,14 @@ from pathlib import Path
 
 import pytest
 
-from robustness.harness import QUICKSTART, as_unprivileged, assert_refused, only_run, refused, unchanged
+from robustness.harness import (
+    QUICKSTART,
+    as_unprivileged,
+    assert_refused,
+    only_run,
+    refused,
+    unchanged,
+)
 
 FIXTURES = Path(__file__).resolve().parents[3] / "shared" / "fixtures" / "zhang2022"
 LOG_LINE = "{'control': [60, 45, 0.5, 0.03, 0.04, 0.05, 0], 'midi': [[[144, 57, 1, 0], 468620]]}\n"
