@@ -148,11 +148,39 @@ def read_model_file(path: str | Path) -> ModelFile:
     kind = payload.get("kind", MODEL_KIND)
     if kind != MODEL_KIND:
         raise InputError(f"expected kind {MODEL_KIND!r}, got {kind!r}", where)
+    raw = payload.get("model") or {}
+    problem = _non_finite(raw, "model")
+    if problem is not None:
+        raise InputError(f"invalid model: {problem}", where)
     try:
-        model = KeystrokeModel.from_dict(payload.get("model") or {})
-    except (TypeError, ValueError) as exc:
-        raise InputError(f"invalid model: {exc}", where) from None
-    return ModelFile(model, payload.get("intervals"), payload.get("provenance"))
+        model = KeystrokeModel.from_dict(raw) if isinstance(raw, dict) else None
+    except (TypeError, ValueError, AttributeError, KeyError, IndexError, OverflowError) as exc:
+        # A hand-edited or damaged file: any shape the parameter classes do not expect.
+        raise InputError(f"invalid model: {' '.join(str(exc).split())[:200]}", where) from None
+    if model is None:
+        raise InputError(f"invalid model: expected an object, got {type(raw).__name__}", where)
+    intervals, provenance = payload.get("intervals"), payload.get("provenance")
+    return ModelFile(model, intervals if isinstance(intervals, dict) else None,
+                     provenance if isinstance(provenance, dict) else None)
+
+
+def _non_finite(value: Any, path: str) -> str | None:
+    """Where a model holds a number that is not one (NaN, ±inf, true/false), if anywhere."""
+    if isinstance(value, bool):
+        return f"{path} is {str(value).lower()}, not a number"
+    if isinstance(value, float) and not math.isfinite(value):
+        return f"{path} is {value}, not a finite number"
+    if isinstance(value, dict):
+        for key, item in value.items():
+            found = _non_finite(item, f"{path}.{key}")
+            if found:
+                return found
+    if isinstance(value, list):
+        for i, item in enumerate(value):
+            found = _non_finite(item, f"{path}[{i}]")
+            if found:
+                return found
+    return None
 
 
 def load_model(path: str | Path) -> KeystrokeModel:
