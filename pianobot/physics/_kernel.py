@@ -38,10 +38,13 @@ FloatArray = npt.NDArray[np.float64]
 
 # Columns of the per-keystroke parameter table `kp` (n, N_KP).
 M1, M2, K0, C0, K1, C1, K2, C2, DIST = 0, 1, 2, 3, 4, 5, 6, 7, 8
-# The commanded press: down move (start 0) and up move (start T_UP), each a trapezoid with
-# acceleration A (0 for a constant-speed ramp), accel time TA, cruise time TC and peak speed VP.
+# The commanded press: down move (start T_DN) and up move (start T_UP), each a trapezoid with
+# acceleration A (0 for a constant-speed ramp), accel time TA, cruise time TC and peak speed VP;
+# a two-segment press adds a fast approach (F_*, start 0) and a fast retract (R_*, start T_RE).
+# A plain press has empty fast moves (all zero) and T_DN = 0.
 D_A, D_TA, D_TC, D_VP, T_UP, U_A, U_TA, U_TC, U_VP = 9, 10, 11, 12, 13, 14, 15, 16, 17
-N_KP = 18
+F_A, F_TA, F_TC, F_VP, T_DN, R_A, R_TA, R_TC, R_VP, T_RE = range(18, 28)
+N_KP = 28
 
 # Entries of the effect vector `ep` (N_EP,): switches (0/1, or a form index) and values.
 (
@@ -115,14 +118,22 @@ def _arm_positions(
     b0: int, nb: int, t: float,
 ) -> None:
     """Commanded arm positions of keystrokes b0..b0+nb at time t into `w[row]`."""
-    if mode == 0:
-        # The press is the down move minus the later up move of the same length. A ramp is the
-        # same formula with a = 0 and no acceleration phase, so every lane takes one path and a
-        # keystroke's arm motion never depends on which presses share its block.
+    if mode != 1:
+        # The press is the down move minus the later up move. A ramp is the same formula with
+        # a = 0 and no acceleration phase, so every lane takes one path and a keystroke's arm
+        # motion never depends on which presses share its block.
         for jj in range(w.shape[1]):
-            w[row, jj] = _move(t, w[D_A, jj], w[D_TA, jj], w[D_TC, jj], w[D_VP, jj]) - _move(
+            w[row, jj] = _move(t - w[T_DN, jj], w[D_A, jj], w[D_TA, jj], w[D_TC, jj], w[D_VP, jj]) - _move(
                 t - w[T_UP, jj], w[U_A, jj], w[U_TA, jj], w[U_TC, jj], w[U_VP, jj]
             )
+        if mode == 2:
+            # Two-segment presses add a fast approach before the down move and a fast retract
+            # after the up move, in a loop of their own: a plain press in such a batch has empty
+            # fast moves and gets exactly 0 added, so its numbers are those of mode 0, bit for bit.
+            for jj in range(w.shape[1]):
+                w[row, jj] += _move(t, w[F_A, jj], w[F_TA, jj], w[F_TC, jj], w[F_VP, jj]) - _move(
+                    t - w[T_RE, jj], w[R_A, jj], w[R_TA, jj], w[R_TC, jj], w[R_VP, jj]
+                )
         return
     # A shared uniform grid: one interpolation index for the whole block.
     n_trace = trace_t.shape[0]
@@ -197,7 +208,8 @@ def _make_integrate(block: int) -> Any:
     ) -> None:
         """Integrate every keystroke (rows of `kp`) and write the outputs every `out_every` steps.
 
-        mode 0: the arm follows the analytic press in `kp`; mode 1: it follows the traces in
+        mode 0: the arm follows the analytic press in `kp` (mode 2: with fast moves, see
+        `_arm_positions`); mode 1: it follows the traces in
         `trace_x0` (shape (len(trace_t), n): keystroke index last), interpolated linearly on the
         uniform grid `trace_t` and held at its ends. Time runs from `t_start` in steps of `h`.
         """

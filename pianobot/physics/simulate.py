@@ -202,10 +202,13 @@ def press_columns(presses: Sequence[Press], profile: str) -> tuple[FloatArray, F
     ends = np.zeros(len(presses))
     for j, press in enumerate(presses):
         tm = press_timing(press, "trapezoid" if profile == "trapezoid" else "ramp")
-        for cols, mv in ((K.D_A, tm.down), (K.U_A, tm.up)):
+        moves = ((K.D_A, tm.down), (K.U_A, tm.up), (K.F_A, tm.approach), (K.R_A, tm.retract))
+        for cols, mv in moves:
             a = mv.acceleration_mps2 if math.isfinite(mv.acceleration_mps2) else 0.0
             kp[j, cols : cols + 4] = (a, mv.t_accel_s, mv.t_cruise_s, mv.peak_velocity_mps)
         kp[j, K.T_UP] = tm.t_hold_end_s
+        kp[j, K.T_DN] = tm.t_down_start_s
+        kp[j, K.T_RE] = tm.t_lifted_s
         kp[j, K.DIST] = press.distance_m
         ends[j] = tm.t_end_s
     return kp, ends
@@ -241,7 +244,9 @@ def simulate_presses(
     if duration_s is None:
         duration_s = (float(ends.max()) if n else 0.0) + SETTLE_S
     empty = np.zeros(1)
-    return _run(kp, effect_vector(model.effects), 0, empty, np.zeros((1, n)), 0.0,
+    # Fast moves cost two more profile evaluations per step: only batches with any pay them.
+    mode = 2 if any(p.two_segment for p in presses) else 0
+    return _run(kp, effect_vector(model.effects), mode, empty, np.zeros((1, n)), 0.0,
                 float(duration_s), out_dt_s, step_s)
 
 

@@ -5,6 +5,13 @@ decelerate at `a`. When the distance is too short to reach the cruise speed (d <
 profile is a triangle with peak √(a·d) and duration 2√(d/a). A press is two such moves (down by
 distance + depth, up by the same) with a hold between them.
 
+A two-segment press (`Press.approach_m`, `Press.retract_m` > 0) adds up to two fast moves at the
+travel speed: a first move down by `approach_m` that stops above the key, then the spec's move
+for the rest of the way; and after lift-off, the spec's up move stops `retract_m` short of the top
+and a fast move covers the rest. Four moves in all (fast down, down, up, fast up); with both
+lengths 0 (the default) the fast moves are empty and the press is exactly the two-move one.
+`physics.approach` plans the lengths so that the keystroke itself is unchanged.
+
 The study's Simulink model drove the arm with a constant-speed ramp instead (no acceleration).
 Here that is the limit a → ∞ of the same profile, selected with `profile="ramp"`; it is only
 right at high acceleration, because deceleration caps the arm speed near the end of a move.
@@ -16,7 +23,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
@@ -33,6 +40,10 @@ class Press:
 
     The fingertip starts `distance_m` above the key surface; the arm moves down by
     distance + depth at (down velocity, acceleration), holds, and moves back up by the same.
+
+    A two-segment press covers the first `approach_m` of the way down and the last `retract_m`
+    of the way up in separate moves at (travel velocity, travel acceleration); the spec's moves
+    cover the rest. Both 0 (the default): the spec's two moves, nothing else.
     """
 
     distance_m: float
@@ -41,6 +52,20 @@ class Press:
     up_velocity_mps: float
     acceleration_mps2: float
     hold_s: float = 0.0
+    approach_m: float = 0.0  # fast first move down (must stop above the key: < distance_m)
+    retract_m: float = 0.0  # fast last move up, after lift-off (<= distance_m)
+    travel_velocity_mps: float = 0.25  # speed of the fast moves (UR moveL default)
+    travel_acceleration_mps2: float = 1.0  # acceleration of the fast moves
+
+    @property
+    def two_segment(self) -> bool:
+        """Whether the press has a fast approach or a fast retract."""
+        return self.approach_m > 0.0 or self.retract_m > 0.0
+
+    def as_specified(self) -> Press:
+        """The same press with the spec's two moves only (no fast approach or retract)."""
+        return Press(self.distance_m, self.depth_m, self.down_velocity_mps, self.up_velocity_mps,
+                     self.acceleration_mps2, self.hold_s)
 
 
 @dataclass(frozen=True)
@@ -124,20 +149,39 @@ def move_profile(distance_m: float, velocity_mps: float, acceleration_mps2: floa
     return MoveProfile(d, v, a, t_accel, t_cruise, 2.0 * t_accel + t_cruise, v)
 
 
+NO_MOVE = MoveProfile(0.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0)
+
+
 @dataclass(frozen=True)
 class PressTiming:
-    """Phase times of one press, measured from the start of the downward move."""
+    """Phase times of one press, measured from the start of its first move.
+
+    `down` and `up` are the moves at the spec's speeds (the whole travel for a plain press);
+    `approach` and `retract` are the fast moves of a two-segment press (`NO_MOVE` otherwise).
+    """
 
     down: MoveProfile
     up: MoveProfile
     t_down_end_s: float  # arm at its lowest point
     t_hold_end_s: float  # upward move starts
     t_end_s: float  # arm back at its start height
+    approach: MoveProfile = field(default=NO_MOVE)
+    retract: MoveProfile = field(default=NO_MOVE)
 
     @property
     def travel_m(self) -> float:
-        """Total arm travel of each move: distance + depth."""
-        return self.down.distance_m
+        """Total arm travel down (and up): distance + depth."""
+        return self.approach.distance_m + self.down.distance_m
+
+    @property
+    def t_down_start_s(self) -> float:
+        """The spec-speed down move starts (0 without a fast approach)."""
+        return self.approach.duration_s
+
+    @property
+    def t_lifted_s(self) -> float:
+        """The spec-speed up move ends and the fast retract starts (`t_end_s` without one)."""
+        return self.t_hold_end_s + self.up.duration_s
 
 
 def _acceleration(press: Press, profile: ProfileKind) -> float:
@@ -146,21 +190,59 @@ def _acceleration(press: Press, profile: ProfileKind) -> float:
     return math.inf if profile == "ramp" else press.acceleration_mps2
 
 
-def press_timing(press: Press, profile: ProfileKind = "trapezoid") -> PressTiming:
-    """Exact phase times of a press: down by distance + depth, hold, up by the same."""
-    if press.depth_m < 0.0 or press.distance_m < 0.0:
+def check_press(press: Press) -> None:
+    """Raise ValueError unless the press can be executed as commanded.
+
+    Distance, depth and hold must be >= 0; a fast approach must stop before the fingertip
+    reaches the key (approach_m < distance_m) and a fast retract must start no lower than the
+    key surface (retract_m <= distance_m), both at a positive travel speed and acceleration.
+    """
+    if not (press.depth_m >= 0.0 and press.distance_m >= 0.0):
         raise ValueError(
             f"Press distance and depth should be >= 0 m, got {press.distance_m} and {press.depth_m}."
         )
     if not press.hold_s >= 0.0:
         raise ValueError(f"Hold should be >= 0 s, got {press.hold_s}.")
+    if not (press.approach_m >= 0.0 and press.retract_m >= 0.0):
+        raise ValueError(
+            f"Fast move lengths should be >= 0 m, got approach_m {press.approach_m} and "
+            f"retract_m {press.retract_m}."
+        )
+    if not press.two_segment:
+        return
+    if press.approach_m != 0.0 and not 0.0 < press.approach_m < press.distance_m:
+        raise ValueError(
+            f"A fast approach should stop above the key: approach_m in [0, {press.distance_m}) m, "
+            f"got {press.approach_m}."
+        )
+    if not 0.0 <= press.retract_m <= press.distance_m:
+        raise ValueError(
+            f"A fast retract should start at or above the key surface: retract_m in "
+            f"[0, {press.distance_m}] m, got {press.retract_m}."
+        )
+    for name in ("travel_velocity_mps", "travel_acceleration_mps2"):
+        value = getattr(press, name)
+        if not (value > 0.0 and math.isfinite(value)):
+            raise ValueError(f"{name} should be > 0 for a two-segment press, got {value}.")
+
+
+def press_timing(press: Press, profile: ProfileKind = "trapezoid") -> PressTiming:
+    """Exact phase times of a press: (fast approach,) down, hold, up (, fast retract)."""
+    check_press(press)
     travel = press.distance_m + press.depth_m
     a = _acceleration(press, profile)
-    down = move_profile(travel, press.down_velocity_mps, a)
-    up = move_profile(travel, press.up_velocity_mps, a)
-    t_down_end = down.duration_s
+    down = move_profile(travel - press.approach_m, press.down_velocity_mps, a)
+    up = move_profile(travel - press.retract_m, press.up_velocity_mps, a)
+    if not press.two_segment:
+        t_hold_end = down.duration_s + press.hold_s
+        return PressTiming(down, up, down.duration_s, t_hold_end, t_hold_end + up.duration_s)
+    a_fast = math.inf if profile == "ramp" else press.travel_acceleration_mps2
+    approach = move_profile(press.approach_m, press.travel_velocity_mps, a_fast)
+    retract = move_profile(press.retract_m, press.travel_velocity_mps, a_fast)
+    t_down_end = approach.duration_s + down.duration_s
     t_hold_end = t_down_end + press.hold_s
-    return PressTiming(down, up, t_down_end, t_hold_end, t_hold_end + up.duration_s)
+    t_end = t_hold_end + up.duration_s + retract.duration_s
+    return PressTiming(down, up, t_down_end, t_hold_end, t_end, approach, retract)
 
 
 def press_duration_s(press: Press, profile: ProfileKind = "trapezoid") -> float:
@@ -172,10 +254,17 @@ def contact_speed_mps(press: Press, profile: ProfileKind = "trapezoid") -> float
     """Arm speed when it has travelled `distance_m`, where the fingertip meets a rigid key.
 
     At low acceleration the arm may still be speeding up (√(2·a·s), s = distance) or already
-    braking for the end of the move (√(2·a·depth)); a constant-speed ramp ignores both.
+    braking for the end of the move (√(2·a·depth)); a constant-speed ramp ignores both. With a
+    fast approach, contact happens in the spec-speed move, `distance − approach_m` after its start.
     """
     down = press_timing(press, profile).down
-    return down.speed_at_m(press.distance_m)
+    return down.speed_at_m(press.distance_m - press.approach_m)
+
+
+def contact_time_s(press: Press, profile: ProfileKind = "trapezoid") -> float:
+    """Time from the start of the press until the arm has travelled `distance_m` (rigid key)."""
+    timing = press_timing(press, profile)
+    return timing.t_down_start_s + timing.down.time_at_m(press.distance_m - press.approach_m)
 
 
 def sample_presses(
@@ -203,26 +292,28 @@ def sample_presses(
     def column(values: list[float]) -> FloatArray:
         return np.asarray(values, dtype=np.float64)[:, None]
 
-    travel = column([tm.down.distance_m for tm in timings])
-    x_down, v_down = _profile_state(
-        t[None, :],
-        travel,
-        column([tm.down.acceleration_mps2 for tm in timings]),
-        column([tm.down.t_accel_s for tm in timings]),
-        column([tm.down.duration_s for tm in timings]),
-        column([tm.down.peak_velocity_mps for tm in timings]),
-    )
-    x_up, v_up = _profile_state(
-        t[None, :] - column([tm.t_hold_end_s for tm in timings]),
-        travel,
-        column([tm.up.acceleration_mps2 for tm in timings]),
-        column([tm.up.t_accel_s for tm in timings]),
-        column([tm.up.duration_s for tm in timings]),
-        column([tm.up.peak_velocity_mps for tm in timings]),
-    )
-    # The press is the down move minus the (later) up move of the same length: before the up
-    # move starts it contributes 0, after it ends it cancels the down move exactly.
-    return x_down - x_up, v_down - v_up
+    def move(moves: list[MoveProfile], start_s: list[float]) -> tuple[FloatArray, FloatArray]:
+        return _profile_state(
+            t[None, :] - column(start_s),
+            column([m.distance_m for m in moves]),
+            column([m.acceleration_mps2 for m in moves]),
+            column([m.t_accel_s for m in moves]),
+            column([m.duration_s for m in moves]),
+            column([m.peak_velocity_mps for m in moves]),
+        )
+
+    x_down, v_down = move([tm.down for tm in timings], [tm.t_down_start_s for tm in timings])
+    x_up, v_up = move([tm.up for tm in timings], [tm.t_hold_end_s for tm in timings])
+    # The press is the down move minus the (later) up move: before the up move starts it
+    # contributes 0, after it ends it cancels what the down move covered.
+    x, v = x_down - x_up, v_down - v_up
+    if any(p.two_segment for p in presses):
+        # The fast moves add the rest: the approach before the down move, the retract after
+        # the up move (empty moves of plain presses add exactly 0).
+        x_in, v_in = move([tm.approach for tm in timings], [0.0] * len(timings))
+        x_out, v_out = move([tm.retract for tm in timings], [tm.t_lifted_s for tm in timings])
+        x, v = x + x_in - x_out, v + v_in - v_out
+    return x, v
 
 
 def _profile_state(

@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from pianobot.plan.approach import as_specified, with_fast_approach
 from pianobot.plan.envelope import Violation
 from pianobot.plan.labtime import LabTime, lab_time
 from pianobot.plan.trial import Trial, trial_columns
@@ -60,6 +61,8 @@ class PlanSummary:
     coverage: dict[str, Coverage]
     lab_time: LabTime
     violations: tuple[Violation, ...]
+    approach: str = "as-specified"  # the spec's approach option (what `lab_time` is for)
+    lab_time_by_approach: dict[str, LabTime] | None = None  # both options, for comparison
 
     @property
     def errors(self) -> int:
@@ -93,6 +96,8 @@ class PlanSummary:
             "trials": self.trial_count,
             "coverage": {name: c.to_dict() for name, c in self.coverage.items()},
             "lab_time": self.lab_time.to_dict(),
+            "approach": self.approach,
+            "lab_time_by_approach": {k: v.to_dict() for k, v in (self.lab_time_by_approach or {}).items()},
             "errors": self.errors,
             "warnings": self.warnings,
             "violation_groups": [g.to_dict() for g in self.groups()],
@@ -109,8 +114,15 @@ class PlanSummary:
             f"pauses {format_duration(t.pauses_s)}, vacuum settling {format_duration(t.vacuum_s)} "
             f"({t.vacuum_changes} changes), key moves {format_duration(t.travel_s)} "
             f"({t.key_changes} changes)",
-            f"{'parameter':<20} {'min':>10} {'max':>10} {'levels':>7}",
         ]
+        both = self.lab_time_by_approach or {}
+        if "as-specified" in both and "fast" in both:
+            slow, fast = both["as-specified"].total_s, both["fast"].total_s
+            ratio = f" ({fast / slow:.2f}×)" if slow > 0 else ""
+            hint = "" if self.approach == "fast" else "; set `approach: fast` in the spec to use it"
+            lines.append(f"approach {self.approach}: as-specified {format_duration(slow)}, "
+                         f"fast approach {format_duration(fast)}{ratio}{hint}")
+        lines.append(f"{'parameter':<20} {'min':>10} {'max':>10} {'levels':>7}")
         for name, c in self.coverage.items():
             unit = PARAMETERS[name].unit
             lines.append(f"{name:<20} {c.minimum:>10.4g} {c.maximum:>10.4g} {c.levels:>7}  {unit}"
@@ -146,6 +158,11 @@ def summarize(
         coverage=coverage,
         lab_time=lab_time(trials, rig),
         violations=tuple(violations),
+        approach=spec.approach,
+        lab_time_by_approach={
+            "as-specified": lab_time(as_specified(trials), rig),
+            "fast": lab_time(with_fast_approach(trials, rig), rig),
+        },
     )
 
 

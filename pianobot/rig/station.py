@@ -17,6 +17,10 @@ Two ways to press:
 MIDI is assigned to a keystroke by time window (motion start → end of the arm's move or of the
 settle pause), never by counting messages, so a lost or extra message cannot shift every later
 keystroke. Events after the window (a late note-off) belong to whoever reads the next window.
+
+A two-segment press (`Press.approach_m`/`retract_m`) is checked before it is sent (the fast
+approach must stop above the key: SafetyViolation otherwise, nothing moves). Its fast retract
+starts after lift-off, while the key is already settling, so it counts toward the settle pause.
 """
 
 from __future__ import annotations
@@ -26,7 +30,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Protocol
 
-from pianobot.physics.trajectory import Press
+from pianobot.physics.trajectory import Press, check_press, press_timing
 from pianobot.rig.errors import SafetyViolation
 from pianobot.rig.protocols import Arm, Clock, Keyboard, KeystrokeResult, Mocap, Trace, Vacuum
 
@@ -169,16 +173,23 @@ class Station:
         when the arm is back up plus `settle_s`.
         """
         self._check_ready(trial)
+        press = trial.press()
+        try:
+            check_press(press)
+        except ValueError as exc:
+            raise SafetyViolation(f"press of trial {trial.index} refused: {exc}") from None
         if start_at_s is not None:
             self.clock.sleep(start_at_s - self.clock.now())
         if self.before_press is not None:
             self.before_press(trial, attempt)
         try:
-            record = self.arm.press(trial.press(), trial.note)
+            record = self.arm.press(press, trial.note)
         except BaseException:
             self._hover = None
             raise
-        self.clock.sleep(settle_s)
+        # The key has been free since lift-off: a fast retract is part of the pause.
+        retract_s = press_timing(press).retract.duration_s if press.retract_m > 0.0 else 0.0
+        self.clock.sleep(settle_s - retract_s)
         t_to_s = max(self.clock.now(), record.t_end_s)
         midi = self.keyboard.events_between(record.t_start_s, t_to_s)
         traces: list[Trace] = []

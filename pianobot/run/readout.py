@@ -23,6 +23,9 @@ from pianobot.store.schema import PARAMETER_COLUMNS
 
 # Trace sources each `record:` stream keeps; sim-truth rides along with any sampled stream.
 SAMPLE_STREAMS = {"arm": "arm", "mocap": "mocap"}
+# The commanded fast moves, kept as extra trials columns in a sweep with `approach: fast`: with
+# them the commanded arm motion (and so `t_on_s` etc., measured from motion start) is known.
+MOTION_COLUMNS = ("approach_m", "retract_m", "travel_velocity_mps", "travel_acceleration_mps2")
 
 
 @dataclass(frozen=True)
@@ -53,9 +56,13 @@ class TrialData:
         return str(self.row["status"])
 
 
-def parameters_of(trial: TrialLike) -> dict[str, Any]:
-    """The parameter columns of a trial, by attribute (NaN where a trial type lacks one)."""
-    return {name: getattr(trial, name, math.nan) for name in PARAMETER_COLUMNS}
+def parameters_of(trial: TrialLike, *, motion: bool = False) -> dict[str, Any]:
+    """The parameter columns of a trial, by attribute (NaN where a trial type lacks one).
+
+    `motion` adds the commanded fast moves (`MOTION_COLUMNS`).
+    """
+    names = PARAMETER_COLUMNS + MOTION_COLUMNS if motion else PARAMETER_COLUMNS
+    return {name: getattr(trial, name, math.nan) for name in names}
 
 
 def read_keystroke(
@@ -65,11 +72,12 @@ def read_keystroke(
     *,
     clock_offset_s: float = 0.0,
     record: Sequence[str] = ("midi", "arm", "mocap"),
+    motion: bool = False,
 ) -> TrialData:
     """Turn a KeystrokeResult into a trials row, sample chunks and MIDI events.
 
     `clock_offset_s` maps the rig clock to the run clock (non-zero after a resume, whose rig
-    clock starts again at zero).
+    clock starts again at zero); `motion` adds the commanded fast moves to the row.
     """
     t0_s = result.press.t_start_s
     note = int(trial.note)
@@ -89,7 +97,7 @@ def read_keystroke(
         "index": int(trial.index),
         "attempt": int(attempt),
         "status": "ok" if ons else "silent",
-        **parameters_of(trial),
+        **parameters_of(trial, motion=motion),
         "t_start_s": t0_s + clock_offset_s,
         "on_velocity": on_velocity,
         "off_velocity": off_velocity,
@@ -111,14 +119,16 @@ def read_keystroke(
     return TrialData(row=row, samples=samples, midi=midi)
 
 
-def failed_trial(trial: TrialLike, attempt: int, error: str, t_start_s: float) -> TrialData:
+def failed_trial(
+    trial: TrialLike, attempt: int, error: str, t_start_s: float, *, motion: bool = False
+) -> TrialData:
     """The row of a trial that could not be executed (retries exhausted, target refused)."""
     row: dict[str, Any] = {
         "trial_id": trial.trial_id,
         "index": int(trial.index),
         "attempt": int(attempt),
         "status": "failed",
-        **parameters_of(trial),
+        **parameters_of(trial, motion=motion),
         "t_start_s": t_start_s,
         "n_note_on": 0,
         "error": error,

@@ -16,6 +16,8 @@ import hashlib
 import json
 from typing import Any
 
+from pydantic import ValidationError
+
 from pianobot.errors import InputError
 from pianobot.spec import RigSpec
 from pianobot.store import RunDamaged, RunPaths, RunWriter, check_run
@@ -35,6 +37,12 @@ def rig_changes(recorded: Any, rig: RigSpec) -> list[str]:
     new = rig.model_dump(mode="json")
     if not isinstance(recorded, dict):
         return []  # a run from before rigs were recorded: nothing to compare with
+    try:
+        # Through today's model: a setting added since the run started takes its default on
+        # both sides, so only what the experimenter changed counts.
+        recorded = RigSpec.model_validate_json(json.dumps(recorded)).model_dump(mode="json")
+    except ValidationError:
+        pass  # a rig of an older layout: compared as recorded
     return [f"{path}: {_short(old)} → {_short(value)}" for path, old, value in _diff(recorded, new, "")]
 
 

@@ -67,8 +67,10 @@ class Runner:
         record: Sequence[str] = ("midi", "arm", "mocap"),
         control: StopControl | None = None,
         clock_offset_s: float = 0.0,
+        motion: bool = False,
     ) -> None:
         self.rig = rig
+        self.motion = motion  # keep the commanded fast moves in the trials rows
         self.subscribers = list(subscribers)
         self.retry = retry or RetryPolicy()
         self.record = tuple(record)
@@ -127,12 +129,12 @@ class Runner:
             except ConnectionLost as exc:
                 error = f"connection lost: {exc}"
                 if attempt >= self.retry.max_attempts:
-                    self._done(failed_trial(trial, attempt, f"{error} (after {attempt} attempts)", t_start_s), counts)
+                    self._done(failed_trial(trial, attempt, f"{error} (after {attempt} attempts)", t_start_s, motion=self.motion), counts)
                     return "failed", f"trial {trial.index} ({trial.trial_id}): {error} after {attempt} attempts"
                 next_attempt = self._retry(trial, attempt, error, counts)
                 if next_attempt < 0:
                     error = f"could not reconnect to the arm after {self.retry.max_attempts} attempts"
-                    self._done(failed_trial(trial, self.retry.max_attempts, error, t_start_s), counts)
+                    self._done(failed_trial(trial, self.retry.max_attempts, error, t_start_s, motion=self.motion), counts)
                     return "failed", f"trial {trial.index} ({trial.trial_id}): {error}"
                 attempt = next_attempt
                 continue
@@ -142,10 +144,11 @@ class Runner:
                 return "stopped", reason
             except SafetyViolation as exc:
                 # Refused before anything moved: record it and go on with the next trial.
-                self._done(failed_trial(trial, attempt, f"refused: {exc}", t_start_s), counts)
+                self._done(failed_trial(trial, attempt, f"refused: {exc}", t_start_s, motion=self.motion), counts)
                 return None
             data = read_keystroke(
-                trial, attempt, result, clock_offset_s=self.clock_offset_s, record=self.record
+                trial, attempt, result, clock_offset_s=self.clock_offset_s, record=self.record,
+                motion=self.motion,
             )
             self._done(data, counts)
             return None

@@ -25,6 +25,7 @@ from pianobot.plan import (
     plan_frame,
     summarize,
 )
+from pianobot.plan.approach import apply_approach
 from pianobot.rig import Rig, open_rig
 from pianobot.rig.errors import DeviceUnavailable
 from pianobot.run.progress import ProgressBar
@@ -106,7 +107,7 @@ def prepare_sweep(
     path = Path(spec_path)
     spec = load_spec(path, rig=rig_path)
     rig = load_rig_for(spec) if rig_path is None else load_rig(rig_path)
-    trials = expand(spec, rig, max_trials=max_trials)
+    trials = apply_approach(spec, expand(spec, rig, max_trials=max_trials), rig)
     if not trials:
         raise InputError("the sweep has no trials", f"{path}: sweep")
     text = path.read_text(encoding="utf-8")
@@ -297,6 +298,7 @@ def _session(
                 record=prepared.spec.record,
                 control=control,
                 clock_offset_s=float(meta.get("lab_time_s") or 0.0),
+                motion=prepared.spec.approach == "fast",
             )
             result = runner.run(
                 writer.run_id, todo, planned=len(prepared.trials), done=len(done_ids)
@@ -373,7 +375,7 @@ def dry_run(
     """
     spec = load_spec(Path(spec_path), rig=rig_path)
     rig = load_rig_for(spec) if rig_path is None else load_rig(rig_path)
-    trials = expand(spec, max_trials=max_trials)
+    trials = apply_approach(spec, expand(spec, max_trials=max_trials), rig)
     label = spec.rig if rig_path is None else str(rig_path)
     violations = check_envelope(trials, spec.finger, rig, rig_label=label)
     return summarize(spec, trials, violations, rig)

@@ -11,6 +11,7 @@ from pianobot.spec.parameters import PARAMETERS, Finger
 from pianobot.spec.sweep import GridSweep, Linspace, StrictModel, Sweep, clean_value
 
 Stream = Literal["midi", "arm", "mocap"]
+Approach = Literal["as-specified", "fast"]
 SLUG_PATTERN = r"^[a-z0-9][a-z0-9_-]*$"
 SIM_RIG = "sim"
 
@@ -36,6 +37,12 @@ class ExperimentSpec(StrictModel):
     finger: Finger = Field(description="soft (vacuum-stiffened) or rigid; selects the envelope.")
     note: int = Field(57, ge=21, le=108, description="MIDI note pressed unless the sweep sets it.")
     sweep: Sweep = Field(description="The parameters to vary and how.")
+    approach: Approach = Field(
+        "as-specified",
+        description="as-specified: each press is the spec's two moves (the run-up at the contact "
+        "speed). fast: the arm covers the run-up at travel speed and finishes the press in exactly "
+        "the spec's state at contact, and returns at travel speed after lift-off (rig `approach:`).",
+    )
     record: list[Stream] = Field(
         default_factory=lambda: list[Stream](["midi", "arm"]),
         min_length=1,
@@ -96,7 +103,9 @@ def resolved_spec_dict(spec: ExperimentSpec) -> dict[str, Any]:
     trial ids are hashed from, so `{start: 0.01, stop: 0.08, num: 15}` and the 15 listed levels
     give the same ids. The free-text `description` is left out: it does not change what runs.
     """
-    data = spec.model_dump(mode="json", exclude={"description"})
+    # The default approach is left out, so trial ids of specs written before it existed stay.
+    exclude = {"description"} | ({"approach"} if spec.approach == "as-specified" else set())
+    data = spec.model_dump(mode="json", exclude=exclude)
     sweep = spec.sweep
     resolved = data["sweep"]
     if isinstance(sweep, GridSweep):

@@ -78,6 +78,33 @@ class Travel(StrictModel):
     )
 
 
+class Approach(StrictModel):
+    """Two-segment presses (a spec with `approach: fast`): the fast moves and what they keep.
+
+    The arm covers the run-up at travel speed, stops, and finishes the press with the spec's own
+    move so that it meets the key in exactly the spec's kinematic state; after lift-off it goes
+    back up at travel speed. See `pianobot.physics.approach` for the conditions.
+    """
+
+    velocity_mps: float = Field(
+        0.25, gt=0.0, le=1.0, description="moveL speed of the fast approach and retract."
+    )
+    acceleration_mps2: float = Field(
+        1.0, gt=0.0, le=5.0, description="moveL acceleration of the fast approach and retract."
+    )
+    clearance_m: float = Field(
+        0.005, ge=0.001, le=0.05,
+        description="Fingertip height above the key where a fast move must end (approach) or "
+        "may begin (retract); it must exceed the finger's sway when the arm stops.",
+    )
+    settle_s: float = Field(
+        1.5, ge=0.0, le=10.0,
+        description="The arm moves exactly as the spec's single move for this long before "
+        "contact, so the finger's ringing from the stop has died out (the published soft "
+        "finger rings down with a 0.28 s time constant: 1.5 s leaves 0.5 %).",
+    )
+
+
 class FingerEnvelope(StrictModel):
     """Explicit per-parameter [low, high] ranges that replace a finger's built-in envelope."""
 
@@ -244,6 +271,9 @@ class RigSpec(StrictModel):
     )
     settle_s: Settle = Field(default_factory=Settle, description="Settle pauses.")
     travel: Travel = Field(default_factory=Travel, description="Moves between keys.")
+    approach: Approach = Field(
+        default_factory=Approach, description="Fast approach and retract (specs with approach: fast)."
+    )
     ur5: UR5Config | None = Field(None, description="The arm (kind ur5 only).")
     vacuum: VacuumConfig = Field(default_factory=VacuumConfig, description="Vacuum regulator.")
     midi: MidiConfig | None = Field(None, description="MIDI input (required for kind ur5).")

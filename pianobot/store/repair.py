@@ -22,6 +22,7 @@ marked `interrupted`, so `pianobot sweep --resume RUN` completes it with each tr
 from __future__ import annotations
 
 import hashlib
+import json
 import os
 import time
 from dataclasses import dataclass, field
@@ -335,13 +336,22 @@ def _plan_problem(meta: dict[str, Any]) -> str | None:
 
 
 def _plan_from_spec(meta: dict[str, Any]) -> pa.Table:
-    """plan.parquet of a sweep, from the spec text its run.json recorded."""
+    """plan.parquet of a sweep, from the spec text and the rig its run.json recorded."""
     # Imported here: the plan layer is only needed for this rare rebuild.
+    from pydantic import ValidationError
+
     from pianobot.plan import expand, plan_frame
-    from pianobot.spec import parse_spec_text
+    from pianobot.plan.approach import apply_approach
+    from pianobot.spec import RigSpec, parse_spec_text
 
     spec = parse_spec_text(str(meta["spec"]["text"]), "the recorded spec")
+    rig_record = (meta.get("rig") or {}).get("spec")
+    try:
+        # The rig the run started with (its fast-approach settings shape the commanded moves).
+        rig = RigSpec.model_validate_json(json.dumps(rig_record)) if isinstance(rig_record, dict) else RigSpec()
+    except ValidationError as exc:
+        raise InputError(f"the recorded rig no longer validates ({exc.error_count()} problems)", "rig") from None
     planned = meta.get("trials_planned")
-    trials = expand(spec, max_trials=max(int(planned or 0), 1))
+    trials = apply_approach(spec, expand(spec, max_trials=max(int(planned or 0), 1)), rig)
     table = pa.Table.from_pandas(plan_frame(trials), preserve_index=False)
     return with_metadata(table, "plan")
