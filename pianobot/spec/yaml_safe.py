@@ -80,18 +80,22 @@ class _BoundedLoader(yaml.SafeLoader):
         return mark
 
     def construct_yaml_int(self, node: yaml.ScalarNode) -> int:
-        if len(str(node.value)) > MAX_NUMBER_CHARS:
-            raise _Refused(f"a whole number of {len(str(node.value)):,} characters is too large "
-                           "to be a setting", node.start_mark)
+        _refuse_long_number(node)
         value: int = super().construct_yaml_int(node)
         return value
 
     def construct_yaml_float(self, node: yaml.ScalarNode) -> float:
-        if len(str(node.value)) > MAX_NUMBER_CHARS:
-            raise _Refused(f"a number of {len(str(node.value)):,} characters is too long to be "
-                           "a setting", node.start_mark)
+        _refuse_long_number(node)
         value: float = super().construct_yaml_float(node)
         return value
+
+
+def _refuse_long_number(node: yaml.ScalarNode) -> None:
+    """A number of thousands of digits is a typo or an attack, never a setting (and int() of
+    100,000 digits raises, or takes seconds)."""
+    length = len(str(node.value))
+    if length > MAX_NUMBER_CHARS:
+        raise _Refused(f"a number of {length:,} characters is too long to be a setting", node.start_mark)
 
 
 _BoundedLoader.add_constructor("tag:yaml.org,2002:int", _BoundedLoader.construct_yaml_int)

@@ -42,7 +42,7 @@ CASES: dict[str, tuple[str, tuple[str, ...]]] = {
     "text for a number": (SPEC + '  fixed: {acceleration_mps2: "1.0"}\n', ("must be a number", "got '1.0'")),
     "a bool for a whole number": (SPEC + "  repeats: true\n", ("sweep.repeats", "whole number")),
     "2.0 for a whole number": (SPEC + "  repeats: 2.0\n", ("sweep.repeats", "whole number")),
-    "100,000-digit integer": (SPEC + "  seed: " + "9" * 100_000 + "\n", ("100,000 characters", "too large")),
+    "100,000-digit integer": (SPEC + "  seed: " + "9" * 100_000 + "\n", ("100,000 characters", "too long")),
     "seed beyond 64 bits": (SPEC + "  seed: 99999999999999999999\n", ("sweep.seed",)),
     "duplicate key": (SPEC + "  repeats: 1\n  repeats: 2\n", ("duplicate key 'repeats'",)),
     "empty file": ("", ("empty",)),
