@@ -6,7 +6,7 @@ STAMP := $(VENV)/.installed
 DATA ?= data
 PYTEST_WORKERS ?= 2
 
-.PHONY: install test test-fast demo bench check lint types imports schema clean
+.PHONY: install test test-fast demo bench bench-large check lint types imports schema clean
 
 install: $(STAMP)
 
@@ -36,6 +36,12 @@ bench: $(STAMP)
 		echo "== $$script"; \
 		$(BIN)/python $$script || exit 1; \
 	done
+
+# 100,000 random trials and 1,000,000 for peak RSS, every stream stored (about an hour, ~10 GB
+# of scratch data on disk while it runs): results in benchmarks/results/sweep_large.json.
+bench-large: $(STAMP)
+	mkdir -p benchmarks/results
+	$(BIN)/python benchmarks/bench_sweep.py --large
 
 lint: $(STAMP)
 	$(BIN)/ruff check pianobot tests benchmarks

@@ -41,8 +41,14 @@ class Task(Protocol):
 class Progress(Protocol):
     """Where long work reports how far it is."""
 
-    def task(self, description: str, total: float | None = None) -> AbstractContextManager[Task]:
-        """Open a task: a context manager yielding the `Task` to advance."""
+    def task(
+        self, description: str, total: float | None = None, completed: float = 0,
+    ) -> AbstractContextManager[Task]:
+        """Open a task: a context manager yielding the `Task` to advance.
+
+        `completed` is work done before this session (a resumed sweep): it shows in the count
+        but not in the rate, so the ETA is not fooled by it.
+        """
 
 
 class _NullTask:
@@ -60,7 +66,9 @@ class NullProgress:
     """Reports nowhere: the default for library calls and for `--json` or non-terminal output."""
 
     @contextmanager
-    def task(self, description: str, total: float | None = None) -> Iterator[Task]:
+    def task(
+        self, description: str, total: float | None = None, completed: float = 0,
+    ) -> Iterator[Task]:
         yield _NullTask()
 
 
@@ -104,10 +112,12 @@ class RichProgress:
         self._open = 0
 
     @contextmanager
-    def task(self, description: str, total: float | None = None) -> Iterator[Task]:
+    def task(
+        self, description: str, total: float | None = None, completed: float = 0,
+    ) -> Iterator[Task]:
         display = self._start()
         nested = self._open > 0
-        task_id = display.add_task(description, total=total, note="")
+        task_id = display.add_task(description, total=total, completed=completed, note="")
         self._open += 1
         try:
             yield _RichTask(display, task_id)
@@ -123,34 +133,18 @@ class RichProgress:
                 self._display = None
 
     def _start(self) -> Any:
-        if self._display is not None:
-            return self._display
-        from rich.console import Console
-        from rich.progress import (
-            BarColumn,
-            MofNCompleteColumn,
-            Progress,
-            SpinnerColumn,
-            TextColumn,
-            TimeElapsedColumn,
-            TimeRemainingColumn,
-        )
+        if self._display is None:
+            from pianobot.progress_rich import rich_display  # rich only when something is drawn
 
-        console = self._console or Console(file=sys.stderr)
-        self._display = Progress(
-            SpinnerColumn(),
-            TextColumn("{task.description}"),
-            BarColumn(bar_width=20),
-            MofNCompleteColumn(),
-            TimeElapsedColumn(),
-            TextColumn("ETA"),
-            TimeRemainingColumn(),
-            TextColumn("[dim]{task.fields[note]}"),
-            console=console,
-            transient=False,
-        )
-        self._display.start()
+            self._display = rich_display(self._console or _stderr_console())
+            self._display.start()
         return self._display
+
+
+def _stderr_console() -> Console:
+    from rich.console import Console
+
+    return Console(file=sys.stderr)
 
 
 def progress_display(enabled: bool, console: Console | None = None) -> Progress:

@@ -64,6 +64,7 @@ SWEEP_ONLY = (
     "from pianobot.cli.sweep import register\n"
     "from pianobot.errors import InputError\n"
     "app = typer.Typer(pretty_exceptions_enable=False)\n"
+    "app.callback()(lambda: None)  # a group, so `sweep` is a command name, as in pianobot\n"
     "register(app)\n"
     "try:\n"
     "    app()\n"

@@ -348,7 +348,8 @@ def test_example_rig_files_load() -> None:
     assert faulty.faults.midi_loss_prob == 0.02 and faulty.faults.mocap_drop_prob > 0
     lab = load_rig(EXPERIMENTS / "rigs" / "ur5-lab.yaml")
     assert lab.kind == "ur5" and lab.ur5 is not None and lab.midi is not None
-    assert lab.ur5.frequency_hz == 500 and lab.ur5.reference_note == 59
+    assert lab.ur5.frequency_hz is None and lab.ur5.reference_note == 59  # rate: from the controller
+    assert lab.vacuum.regulator is not None and lab.vacuum.regulator.kpa_span == (0.0, -80.0)
     assert lab.mocap.markers is not None
     extended = load_rig(EXPERIMENTS / "rigs" / "sim-extended.yaml")
     assert extended.envelope_for("soft")["down_velocity_mps"].high == 0.08

@@ -36,6 +36,7 @@ from pianobot.analysis.predictors import (
     grid_velocity_range,
 )
 from pianobot.errors import InputError
+from pianobot.progress import NO_PROGRESS, Progress
 
 PREDICTOR_SCHEMA = "pianobot.predictor/1"
 REGRESSION_TARGETS = {"on_velocity": "on_velocity", "midi_hold_s": "midi_hold_s", "lead_s": "t_on_s"}
@@ -189,10 +190,12 @@ def cross_validate(data: TrainingSet, kinds: Sequence[str], *, folds: int = 5, s
 
 
 def cross_validate_models(data: TrainingSet, kinds: Sequence[str], *, folds: int = 5, seed: int = 0,
-                          physics: Any | None = None) -> tuple[pd.DataFrame, dict[str, LearnedPredictor]]:
+                          physics: Any | None = None, progress: Progress = NO_PROGRESS,
+                          ) -> tuple[pd.DataFrame, dict[str, LearnedPredictor]]:
     """`cross_validate` plus each learned kind fitted on all the data (ready to save).
 
-    The full-data model is fitted first; its hyperparameters warm-start every fold.
+    The full-data model is fitted first; its hyperparameters warm-start every fold. Progress
+    counts fits: per model kind one on all the data plus one per fold.
     """
     n_groups = int(np.unique(data.groups).size)
     k = max(2, min(folds, n_groups))
@@ -200,22 +203,29 @@ def cross_validate_models(data: TrainingSet, kinds: Sequence[str], *, folds: int
     frame = pd.DataFrame(data.X, columns=list(data.inputs))
     rows = []
     fitted: dict[str, LearnedPredictor] = {}
-    for kind in ["mean", *[kk for kk in kinds if kk not in ("physics", "mean")]]:
-        t0 = time.perf_counter()
-        full = LearnedPredictor(kind, seed).fit(data)
-        fit_s = time.perf_counter() - t0
-        pred_v = np.full(data.n, np.nan)
-        pred_h = np.full(data.n, np.nan)
-        pred_s = np.full(data.n, np.nan)
-        for train, test in splits:
-            try:
-                model = LearnedPredictor(kind, seed).fit(_subset(data, train), warm=full)
-            except InputError:
-                continue
-            out = model.predict(frame.iloc[test])
-            pred_v[test], pred_h[test], pred_s[test] = out["on_velocity"], out["midi_hold_s"], out["p_silent"]
-        rows.append(_row(kind, data, pred_v, pred_h, pred_s, _latency(full, frame), k) | {"fit_s": fit_s})
-        fitted[kind] = full
+    learned = ["mean", *[kk for kk in kinds if kk not in ("physics", "mean")]]
+    with progress.task("cross-validation", total=len(learned) * (k + 1)) as task:
+        for kind in learned:
+            task.update(note=f"{kind}: fit on all {data.n} keystrokes")
+            t0 = time.perf_counter()
+            full = LearnedPredictor(kind, seed).fit(data)
+            fit_s = time.perf_counter() - t0
+            task.advance()
+            pred_v = np.full(data.n, np.nan)
+            pred_h = np.full(data.n, np.nan)
+            pred_s = np.full(data.n, np.nan)
+            for fold, (train, test) in enumerate(splits):
+                task.update(note=f"{kind}: fold {fold + 1} of {k}")
+                try:
+                    model = LearnedPredictor(kind, seed).fit(_subset(data, train), warm=full)
+                except InputError:
+                    task.advance()
+                    continue
+                out = model.predict(frame.iloc[test])
+                pred_v[test], pred_h[test], pred_s[test] = out["on_velocity"], out["midi_hold_s"], out["p_silent"]
+                task.advance()
+            rows.append(_row(kind, data, pred_v, pred_h, pred_s, _latency(full, frame), k) | {"fit_s": fit_s})
+            fitted[kind] = full
     if "physics" in kinds and physics is not None:
         inputs = frame.assign(**data.defaults)
         out = physics.predict(inputs)
@@ -256,7 +266,7 @@ def _latency(model: Any, frame: pd.DataFrame, repeats: int = 5) -> float:
 
 
 def save_predictor(model: LearnedPredictor, path: Path, *, cv: pd.DataFrame | None = None,
-                   runs: Sequence[str] = ()) -> Path:
+                   runs: Sequence[str] = (), warnings: Sequence[dict[str, str]] = ()) -> Path:
     """Write `<path>.json` (sidecar, the file to load) and `<path stem>.joblib`; returns the JSON path."""
     path = Path(path)
     json_path = path if path.suffix == ".json" else path.with_suffix(".json")
@@ -275,6 +285,7 @@ def save_predictor(model: LearnedPredictor, path: Path, *, cv: pd.DataFrame | No
         "estimator_sha256": hashlib.sha256(blob.read_bytes()).hexdigest(),
         "runs": list(runs),
         "cv": [] if cv is None else json.loads(cv.to_json(orient="records")),
+        "warnings": list(warnings),  # plausibility findings of the fit (pianobot.analysis.plausibility)
         "pianobot_version": getattr(pianobot, "__version__", "unknown"),
     }
     json_path.write_text(json.dumps(sidecar, indent=2), encoding="utf-8")
@@ -291,10 +302,10 @@ def load_learned(path: Path, sidecar: dict[str, Any]) -> LearnedPredictor:
                          str(path))
     blob = Path(path).parent / name
     if not blob.is_file():
-        raise InputError(f"estimator file {blob.name} named by the predictor is missing", str(path))
+        raise InputError(f"estimator file {blob.name!r} named by the predictor is missing", str(path))
     digest = hashlib.sha256(blob.read_bytes()).hexdigest()
     if digest != sidecar.get("estimator_sha256"):
-        raise InputError(f"estimator file {blob.name} does not match its recorded sha256", str(path))
+        raise InputError(f"estimator file {blob.name!r} does not match its recorded sha256", str(path))
     model = joblib.load(blob)
     if not isinstance(model, LearnedPredictor):
         raise InputError("the estimator file does not hold a pianobot predictor", str(blob))

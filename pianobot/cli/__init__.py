@@ -6,6 +6,7 @@ owns the invoked command is imported, so `pianobot runs` does not pay for scikit
 
 from __future__ import annotations
 
+import difflib
 import importlib
 import math
 import os
@@ -18,7 +19,7 @@ import typer
 from typer._click import exceptions as click_errors
 
 from pianobot import __version__
-from pianobot.cli.common import print_error
+from pianobot.cli.common import install_help_conventions, print_error
 from pianobot.errors import InputError
 
 app = typer.Typer(
@@ -29,20 +30,25 @@ app = typer.Typer(
     add_completion=False,
 )
 
-# Which module holds each top-level command (the CLI's table of contents).
-COMMAND_MODULES: dict[str, str] = {
-    "sweep": "sweep",
-    "runs": "sweep",
-    "import": "imports",
-    "rig": "rig",
-    "model": "model",
-    "identify": "analysis",
-    "fit": "analysis",
-    "report": "analysis",
-    "discover": "discover",
-    "play": "play",
+# The CLI's table of contents: each top-level command, the module that owns it, and its
+# one-line help (kept equal to the command's own by tests/cli/test_startup.py). `--version`,
+# `--help` and a bare `pianobot` are answered from this table alone, without importing any
+# command module: those pull in pandas, scipy or scikit-learn and take seconds to load.
+COMMANDS: dict[str, tuple[str, str]] = {
+    "sweep": ("sweep", "Run an experiment spec on its rig into data/runs/<run_id>/ (or --dry-run it)."),
+    "runs": ("runs", "List runs; show, check or repair one run."),
+    "import": ("imports", "Import old data (keystroke logs, force logs, Motive mocap CSV) as runs."),
+    "rig": ("rig", "The lab rig: reach every device (`check`), teach the reference pose (`calibrate`)."),
+    "model": ("model", "Inspect the keystroke model: resonance, one simulated keystroke."),
+    "identify": ("analysis", "Identify the keystroke model from mocap trajectories; write a model file with intervals."),
+    "fit": ("analysis", "Cross-validate learned maps to on-velocity, hold and silence; save each as a predictor."),
+    "report": ("analysis", "Write one self-contained HTML report (figures embedded, no network)."),
+    "discover": ("discover", "Localise where the model and the measurements disagree, name the missing effect, refit."),
+    "play": ("play", "Play a MIDI song with feedforward control from the internal model, and score it."),
 }
+COMMAND_MODULES: dict[str, str] = {name: module for name, (module, _) in COMMANDS.items()}
 _registered: set[str] = set()
+install_help_conventions()  # flags read as flags in every help page
 
 
 def _version(value: bool) -> None:
@@ -51,13 +57,29 @@ def _version(value: bool) -> None:
         raise typer.Exit()
 
 
-@app.callback()
 def _root(
     version: bool = typer.Option(
         False, "--version", callback=_version, is_eager=True, help="Print the version and exit."
     ),
 ) -> None:
     """Robotic piano keystroke experiments on a simulated or real rig."""
+
+
+app.callback()(_root)
+
+
+def _table_of_contents() -> typer.Typer:
+    """The top-level app with every command listed from `COMMANDS` (nothing imported)."""
+    toc = typer.Typer(name=app.info.name, help=app.info.help, no_args_is_help=True,
+                      pretty_exceptions_enable=False, add_completion=False)
+    toc.callback()(_root)
+    for name, (_, text) in COMMANDS.items():
+        toc.command(name, help=text, context_settings={"ignore_unknown_options": True})(_unloaded)
+    return toc
+
+
+def _unloaded() -> None:  # pragma: no cover - never run: a real command replaces it
+    raise RuntimeError("command module not loaded")
 
 
 def _all_modules() -> set[str]:
@@ -85,7 +107,21 @@ def main() -> None:
     read-only folder, a full disk): each gets one line on stderr and exit code 2.
     """
     args = sys.argv[1:]
-    _register(args[0] if args and not args[0].startswith("-") else None)
+    command = args[0] if args and args[0] in COMMANDS else None
+    if command is None and args and not args[0].startswith("-"):
+        print_error(_unknown_command(args[0]))
+        sys.exit(2)
+    if command is None:
+        # --version, --help or no arguments: the table of contents answers.
+        try:
+            _table_of_contents()(standalone_mode=False)
+        except click_errors.NoArgsIsHelpError:
+            sys.exit(2)  # `pianobot` alone: the help has been shown
+        except click_errors.UsageError as exc:  # `pianobot --bogus`
+            print_error(f"pianobot: {exc.format_message()} (see --help)")
+            sys.exit(2)
+        return
+    _register(command)
     try:
         _refuse_non_finite_options(args)
         code = app(standalone_mode=False)
@@ -113,6 +149,13 @@ def main() -> None:
         print_error("out of memory: the input is too large for this machine")
         sys.exit(2)
     sys.exit(code if isinstance(code, int) else 0)
+
+
+def _unknown_command(name: str) -> str:
+    """`no command 'swep' (did you mean 'sweep'?); commands: sweep, runs, ...`"""
+    close = difflib.get_close_matches(name, list(COMMANDS), n=1)
+    hint = f" (did you mean {close[0]!r}?)" if close else ""
+    return f"pianobot: no command {name!r}{hint}; commands: {', '.join(COMMANDS)} (see --help)"
 
 
 def _refuse_non_finite_options(args: list[str]) -> None:

@@ -7,21 +7,37 @@ from typing import Annotated
 
 import pandas as pd
 import typer
-from rich.console import Console
-from rich.table import Table
 
-from pianobot.analysis.fit_run import fit_runs
+from pianobot.analysis.fit_run import fit_runs, load_trials
 from pianobot.analysis.identify_run import identify_runs
+from pianobot.analysis.plausibility import as_dicts
+from pianobot.analysis.predictors import PhysicsPredictor, load_predictor
 from pianobot.analysis.static_stiffness import (
     STUDY_COMPRESSION_M,
     force_log_levels,
     static_stiffness_from_logs,
 )
-from pianobot.cli.common import DEFAULT_DATA, DataDir, JsonFlag, emit_json
+from pianobot.cli.common import (
+    DEFAULT_DATA,
+    Column,
+    DataDir,
+    JsonFlag,
+    NoProgressFlag,
+    command_progress,
+    emit_json,
+    output_console,
+    print_table,
+    print_warning,
+    say,
+    say_written,
+    writable,
+)
 from pianobot.errors import InputError
 from pianobot.output import check_output_path
+from pianobot.reports.command_figures import learned_maps, save_png
 from pianobot.reports.run_report import build_run_report
 
+PlotOption = Annotated[Path | None, typer.Option("--plot", help="Also write a figure here (PNG).")]
 RunIds = Annotated[list[str], typer.Argument(help="Run ids (or unique prefixes).")]
 
 
@@ -53,12 +69,11 @@ def register(app: typer.Typer) -> None:
         if json_out:
             emit_json(result.to_dict())
             return
-        table = Table("parameter", "value", "unit", "95 % low", "95 % high", title=f"model → {result.model_path}")
-        for e in result.fit.estimates:
-            lo, hi = e.ci95
-            table.add_row(e.name, f"{e.value:.4g}", e.unit, f"{lo:.4g}", f"{hi:.4g}")
-        console = Console()
-        console.print(table)
+        print_table(ESTIMATE_COLUMNS, [[e.name, f"{e.value:.4g}", e.unit, f"{e.ci95[0]:.4g}", f"{e.ci95[1]:.4g}"]
+                                       for e in result.fit.estimates], title="identified parameters")
+        if result.model_path is not None:
+            say_written("model", result.model_path)
+        console = output_console()
         console.print(f"held-out RMS x2: identified {1e3 * result.holdout_rms_identified_m:.4f} mm, "
                       f"published {1e3 * result.holdout_rms_published_m:.4f} mm")
         peaks = ", ".join(f"{hz:.2f} Hz at {level} kPa" for level, hz in result.peak_hz.items())
@@ -87,14 +102,30 @@ def register(app: typer.Typer) -> None:
         out_dir: Annotated[Path, typer.Option("--out-dir", help="Folder for the saved predictors.")] = Path("models"),
         folds: Annotated[int, typer.Option(min=2, help="Grouped CV folds.")] = 5,
         physics_model: Annotated[Path | None, typer.Option(help="Model file for --model physics.")] = None,
+        plot: PlotOption = None,
+        no_progress: NoProgressFlag = False,
     ) -> None:
         """Cross-validate learned maps to on-velocity, hold and silence; save each as a predictor."""
-        table, saved = fit_runs(runs, data, kinds=model or ["gp"], out_dir=out_dir, folds=folds,
-                                physics_model=physics_model)
+        kinds = model or ["gp"]
+        writable(plot, "--plot")
+        result = fit_runs(runs, data, kinds=kinds, out_dir=out_dir, folds=folds,
+                          physics_model=physics_model, progress=command_progress(json_out, no_progress))
+        table, saved = result.cv, result.saved
+        for finding in result.findings:
+            print_warning(finding.text())
+        if plot is not None:
+            predictors = {kind: load_predictor(path) for kind, path in saved.items()}
+            if "physics" in kinds:
+                predictors["physics"] = (load_predictor(physics_model) if physics_model
+                                         else PhysicsPredictor.published())
+            save_png(learned_maps(load_trials(runs, data), predictors), plot)
         if json_out:
-            emit_json({"cv": table.to_dict(orient="records"), "saved": {k: str(v) for k, v in saved.items()}})
+            emit_json({"cv": table.to_dict(orient="records"), "saved": {k: str(v) for k, v in saved.items()},
+                       "warnings": as_dicts(result.findings), "plot": None if plot is None else str(plot)})
             return
-        _print_frame(table, "grouped cross-validation (on-velocity of sounded keystrokes)")
+        print_cv(table, saved)
+        if plot is not None:
+            say_written("figure", plot)
 
     @app.command()
     def report(
@@ -104,19 +135,55 @@ def register(app: typer.Typer) -> None:
         model: Annotated[Path | None, typer.Option("--model", help="Model file (identify output).")] = None,
         out: Annotated[Path, typer.Option("--out", help="HTML file to write.")] = Path("report.html"),
         compare: Annotated[bool, typer.Option(help="Also run a quick grouped CV (poly, spline).")] = False,
+        no_progress: NoProgressFlag = False,
     ) -> None:
         """Write one self-contained HTML report (figures embedded, no network)."""
         check_output_path(out, "--out")
-        cv = fit_runs(runs, data, kinds=["poly", "spline"], out_dir=None)[0] if compare else None
-        path = build_run_report(runs, data, out, model_file=model, cv_table=cv)
+        progress = command_progress(json_out, no_progress)
+        cv = fit_runs(runs, data, kinds=["poly", "spline"], out_dir=None, progress=progress).cv if compare else None
+        path = build_run_report(runs, data, out, model_file=model, cv_table=cv, progress=progress)
         if json_out:
             emit_json({"report": str(path)})
         else:
-            print(f"report written to {path}")
+            say_written("report", path)
 
 
-def _print_frame(frame: pd.DataFrame, title: str) -> None:
-    table = Table(*[str(c) for c in frame.columns], title=title)
-    for row in frame.itertuples(index=False):
-        table.add_row(*[f"{v:.4g}" if isinstance(v, float) else str(v) for v in row])
-    Console().print(table)
+ESTIMATE_COLUMNS = (
+    Column("parameter"), Column("value", justify="right"), Column("unit"),
+    Column("95 % low", justify="right"), Column("95 % high", justify="right"),
+)
+CV_COLUMNS = (
+    Column("model"),
+    Column("velocity RMSE (MIDI)", justify="right"),
+    Column("R²", justify="right"),
+    Column("hold RMSE (ms)", 1, "right"),
+    Column("silence right (%)", 1, "right"),
+    Column("velocity MAE (MIDI)", 2, "right"),
+    Column("predict (ms)", 3, "right"),
+    Column("fit (s)", 3, "right"),
+)
+
+
+def _number(value: object, fmt: str, scale: float = 1.0) -> str:
+    if not isinstance(value, int | float) or value != value:
+        return "-"
+    return format(float(value) * scale, fmt)
+
+
+def print_cv(table: pd.DataFrame, saved: dict[str, Path]) -> None:
+    """The CV table (units in the headings, the `mean` row named a baseline) and where files went."""
+    first = table.iloc[0] if len(table) else None
+    title = "grouped cross-validation of on-velocity (sounded keystrokes)"
+    if first is not None:
+        title += f": {int(first['n_trials'])} keystrokes, {int(table['folds'].max())} folds by setting"
+    rows = []
+    for r in table.to_dict(orient="records"):
+        name = "mean (baseline)" if r["model"] == "mean" else str(r["model"])
+        rows.append([name, _number(r["rmse"], ".2f"), _number(r["r2"], ".3f"),
+                     _number(r["hold_rmse_s"], ".0f", 1e3), _number(r["silent_accuracy"], ".0f", 100.0),
+                     _number(r["mae"], ".2f"), _number(r["latency_ms"], ".2f"), _number(r["fit_s"], ".2f")])
+    print_table(CV_COLUMNS, rows, title=title)
+    for kind, path in saved.items():
+        say_written(f"predictor {kind}", f"{path} (+ {path.with_suffix('.joblib').name})")
+    if not saved:
+        say("no predictor saved (only the baseline and --model physics were evaluated)")

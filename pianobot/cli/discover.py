@@ -7,11 +7,18 @@ from typing import Annotated
 
 import typer
 from rich.console import Console
-from rich.table import Table
 
 from pianobot.analysis.discover import discover_runs
 from pianobot.analysis.discover_result import DiscoveryResult
-from pianobot.cli.common import DEFAULT_DATA, DataDir, JsonFlag, emit_json
+from pianobot.cli.common import (
+    DEFAULT_DATA,
+    Column,
+    DataDir,
+    JsonFlag,
+    emit_json,
+    print_table,
+    say_written,
+)
 from pianobot.reports.discover_report import build_discover_report
 
 RunIds = Annotated[
@@ -27,22 +34,20 @@ def _print(result: DiscoveryResult, report: Path | None, model_out: Path | None)
     for note in result.notes:
         console.print(f"[dim]Assumed: {note}[/dim]")
     for it in result.iterations:
-        table = Table(title=f"Iteration {it.index + 1} (ΔBIC threshold {it.threshold:.1f})")
-        for column in ("effect", "ΔBIC", "gap before", "gap after", "status"):
-            table.add_column(column)
-        for c in it.candidates:
-            table.add_row(
-                c.effect,
-                f"{c.delta_bic:.1f}",
-                f"{c.gap_before:.3g}",
-                f"{c.gap_after:.3g}",
-                c.status,
-            )
-        console.print(table)
+        rows = [[c.effect, f"{c.delta_bic:.1f}", f"{c.gap_before:.3g}", f"{c.gap_after:.3g}", c.status]
+                for c in it.candidates]
+        print_table(CANDIDATE_COLUMNS, rows,
+                    title=f"Iteration {it.index + 1} (ΔBIC threshold {it.threshold:.1f})")
     if model_out is not None:
-        console.print(f"Model: {model_out}")
+        say_written("model", model_out)
     if report is not None:
-        console.print(f"Report: {report}")
+        say_written("report", report)
+
+
+CANDIDATE_COLUMNS = (
+    Column("effect"), Column("ΔBIC", justify="right"), Column("gap before", justify="right"),
+    Column("gap after", justify="right"), Column("status"),
+)
 
 
 def register(app: typer.Typer) -> None:

@@ -6,19 +6,29 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.console import Console
-from rich.table import Table
 
-from pianobot.cli.common import DEFAULT_DATA, DataDir, JsonFlag, emit_json
+from pianobot.cli.common import (
+    DEFAULT_DATA,
+    DataDir,
+    JsonFlag,
+    emit_json,
+    print_fields,
+    say,
+    say_written,
+    writable,
+)
 from pianobot.errors import InputError
 from pianobot.io.force_log import DEFAULT_GAIN_N, DEFAULT_OFFSET_N, DEFAULT_RATE_HZ, Calibration
 from pianobot.io.importers import ImportResult, import_force_log, import_keystroke_log, import_mocap
 from pianobot.io.keystroke_layouts import LAYOUT_CHOICES
+from pianobot.io.named_keys import DEFAULT_NOTE_OCTAVE
+from pianobot.progress import progress_display
 
 imports = typer.Typer(
     help="Import old data (keystroke logs, force logs, Motive mocap CSV) as runs.",
     no_args_is_help=True,
 )
+SHOWN_SKIPPED = 20  # skipped lines listed on screen; all of them are in the run's meta
 SourceFile = Annotated[Path, typer.Argument(help="The file to import.", show_default=False)]
 
 
@@ -30,13 +40,36 @@ def register(app: typer.Typer) -> None:
 def keystroke_log(
     file: SourceFile,
     layout: Annotated[
-        str, typer.Option(help=f"Control-list layout: {', '.join(LAYOUT_CHOICES)}.")
+        str, typer.Option(help=f"Control-list layout of positional logs: {', '.join(LAYOUT_CHOICES)}.")
     ] = "auto",
+    columns: Annotated[
+        str | None,
+        typer.Option("--columns", help="Declare the control-list columns, e.g. "
+                     "vacuum_kpa,finger_angle_deg,acceleration_mps2,velocity_mps,depth_m,distance_m,hold_s "
+                     "(skip ignores a value; a unit-less name keeps it as an extra column)."),
+    ] = None,
+    layout_file: Annotated[
+        Path | None, typer.Option("--layout-file", help="A YAML file declaring the columns (name, finger, columns).")
+    ] = None,
+    finger: Annotated[
+        str | None, typer.Option("--finger", help="soft or rigid, when the log does not say.")
+    ] = None,
+    note_octave: Annotated[
+        int, typer.Option("--note-octave", help="Octave of note letters without one (4: C = MIDI 60, middle C).")
+    ] = DEFAULT_NOTE_OCTAVE,
     data: DataDir = DEFAULT_DATA,
     json: JsonFlag = False,
 ) -> None:
-    """Import a dict-per-line keystroke log; MIDI events are re-assigned to keystrokes by time."""
-    _show(import_keystroke_log(file, data, layout=layout), json)
+    """Import a dict-per-line keystroke log (control lists or named keys).
+
+    MIDI events stay on the line that printed them unless the read backlog and the predicted
+    stroke timing show they belong to an earlier keystroke; each moved event's evidence is kept.
+    """
+    declared = columns.split(",") if columns is not None else None
+    result = import_keystroke_log(file, data, layout=layout, columns=declared, layout_file=layout_file,
+                                  finger=finger, note_octave=note_octave,
+                                  progress=progress_display(not json))  # fmt: skip
+    _show(result, json, data)
 
 
 @imports.command("force-log")
@@ -59,7 +92,7 @@ def force_log(
 ) -> None:
     """Import an `Analog reading = N` force capture; one trial per press (burst)."""
     calibration = Calibration(gain_n=gain_n, offset_n=offset_n, rate_hz=rate_hz)
-    _show(import_force_log(file, data, calibration=calibration, align_run=align_run), json)
+    _show(import_force_log(file, data, calibration=calibration, align_run=align_run), json, data)
 
 
 @imports.command("mocap")
@@ -70,7 +103,8 @@ def mocap(
     ] = None,
     marker: Annotated[
         list[str] | None,
-        typer.Option("--marker", help="ROLE=NAME (arm, fingertip, key); repeatable."),
+        typer.Option("--marker", help="ROLE=NAME (arm, fingertip, key): NAME may be any piece of a "
+                     "split track, or none (not in view); repeatable."),
     ] = None,
     rig: Annotated[
         Path | None, typer.Option("--rig", help="Rig file whose mocap.markers name the roles.")
@@ -85,10 +119,18 @@ def mocap(
         float | None,
         typer.Option("--vacuum-kpa", help="Finger vacuum during the take (gauge kPa, <= 0)."),
     ] = None,
+    plot: Annotated[
+        Path | None, typer.Option("--plot", help="Also write a figure of the take (PNG).")
+    ] = None,
     data: DataDir = DEFAULT_DATA,
     json: JsonFlag = False,
 ) -> None:
-    """Import a Motive CSV take: keystrokes segmented from the arm marker, or aligned to a run."""
+    """Import a Motive CSV take: keystrokes segmented from the arm marker, or aligned to a run.
+
+    Marker tracks Motive split after an occlusion are joined first; roles are inferred only when
+    the evidence is clear, otherwise the candidates are named.
+    """
+    writable(plot, "--plot")
     markers = _rig_markers(rig) if rig is not None else {}
     markers.update(_marker_options(marker or []))
     result = import_mocap(
@@ -100,7 +142,13 @@ def mocap(
         up_axis=up_axis,
         vacuum_kpa=vacuum_kpa,
     )
-    _show(result, json)
+    if plot is not None:
+        from pianobot.reports.command_figures import plot_mocap_run
+
+        plot_mocap_run(result.run_id, data, plot)
+    _show(result, json, data)
+    if plot is not None and not json:
+        say_written("figure", plot)
 
 
 def _marker_options(items: list[str]) -> dict[str, str]:
@@ -123,19 +171,16 @@ def _rig_markers(path: Path) -> dict[str, str]:
     return {"arm": names.arm, "fingertip": names.fingertip, "key": names.key}
 
 
-def _show(result: ImportResult, json: bool) -> None:
+def _show(result: ImportResult, json: bool, data: Path) -> None:
     if json:
         emit_json(result.to_dict())
         return
-    table = Table(title=f"imported {result.kind}", show_header=False)
-    table.add_column(no_wrap=True)
-    table.add_column(overflow="fold")  # run ids are copied by hand: never cut them with "…"
-    for key, value in result.to_dict().items():
-        if key == "skipped_lines":
-            continue
-        table.add_row(key, f"{value:.6g}" if isinstance(value, float) else str(value))
-    table.add_row("skipped lines", str(len(result.skipped_lines)))
-    console = Console()
-    console.print(table)
-    for line, reason in result.skipped_lines:
-        console.print(f"  line {line}: {reason}", markup=False, highlight=False)
+    fields = [(key, f"{value:.6g}" if isinstance(value, float) else str(value))
+              for key, value in result.to_dict().items() if key not in ("skipped_lines", "run_dir")]
+    fields.append(("skipped lines", str(len(result.skipped_lines))))
+    print_fields(fields, title=f"imported {result.kind}")
+    for line, reason in result.skipped_lines[:SHOWN_SKIPPED]:
+        say(f"  line {line}: {reason}")
+    if len(result.skipped_lines) > SHOWN_SKIPPED:
+        say(f"  ... {len(result.skipped_lines) - SHOWN_SKIPPED} more in the run's meta (skipped_lines)")
+    say_written("run", data / "runs" / result.run_id)

@@ -7,10 +7,16 @@ from typing import Annotated, Any
 
 import numpy as np
 import typer
-from rich.console import Console
-from rich.table import Table
 
-from pianobot.cli.common import DEFAULT_DATA, DataDir, JsonFlag, emit_json
+from pianobot.cli.common import (
+    DEFAULT_DATA,
+    DataDir,
+    JsonFlag,
+    emit_json,
+    print_fields,
+    say,
+    say_written,
+)
 from pianobot.errors import InputError
 from pianobot.physics.model import KeystrokeModel, load_model
 from pianobot.physics.msd import frequency_response, peak_response
@@ -53,7 +59,9 @@ def bode(
     if json:
         emit_json(payload)
         return
-    Console().print(f"|X2/X0| at {vacuum_kpa:g} kPa: peak {peak_hz:.2f} Hz, gain {gain:.3f}")
+    say(f"|X2/X0| at {vacuum_kpa:g} kPa: peak {peak_hz:.2f} Hz, gain {gain:.3f}")
+    if plot is not None:
+        say_written("figure", plot)
 
 
 @model_app.command("simulate")
@@ -90,14 +98,31 @@ def simulate(
     if json:
         emit_json(payload)
         return
-    table = Table(title=f"{world} world, {vacuum_kpa:g} kPa, {down_velocity_mps:g} m/s, depth {depth_m:g} m")
-    table.add_column("quantity")
-    table.add_column("value", justify="right")
-    for name in ("silent", "on_velocity", "t_on_s", "t_off_s", "key_speed_at_trigger_mps",
-                 "max_key_travel_m", "duration_s"):
-        value = payload[name]
-        table.add_row(name, f"{value:.4g}" if isinstance(value, float) else str(value))
-    Console().print(table)
+    fields = [(label, _quantity(payload[name], scale, fmt)) for name, label, scale, fmt in SIMULATE_FIELDS]
+    print_fields(fields, title=f"{world} world, {vacuum_kpa:g} kPa, {1e3 * down_velocity_mps:g} mm/s, "
+                               f"depth {1e3 * depth_m:g} mm")
+    if plot is not None:
+        say_written("figure", plot)
+
+
+# (payload key, label with unit, scale, format): lengths in mm, times in ms.
+SIMULATE_FIELDS = (
+    ("silent", "silent", 1.0, ""),
+    ("on_velocity", "note-on velocity (MIDI)", 1.0, "d"),
+    ("t_on_s", "note-on after motion start (ms)", 1e3, ".1f"),
+    ("t_off_s", "note-off after motion start (ms)", 1e3, ".1f"),
+    ("key_speed_at_trigger_mps", "key speed at trigger (mm/s)", 1e3, ".1f"),
+    ("max_key_travel_m", "max key travel (mm)", 1e3, ".2f"),
+    ("duration_s", "keystroke duration (ms)", 1e3, ".0f"),
+)
+
+
+def _quantity(value: Any, scale: float, fmt: str) -> str:
+    if value is None:
+        return "-"
+    if isinstance(value, bool) or not fmt:
+        return str(value)
+    return str(int(value)) if fmt == "d" else format(float(value) * scale, fmt)
 
 
 def _summary(k: WorldKeystroke, world: str, vacuum_kpa: float, press: Press) -> dict[str, Any]:

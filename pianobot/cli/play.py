@@ -12,54 +12,78 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import typer
-from rich.console import Console
-from rich.table import Table
 
-from pianobot.cli.common import DEFAULT_DATA, DataDir, JsonFlag, emit_json
+from pianobot.cli.common import (
+    DEFAULT_DATA,
+    Column,
+    DataDir,
+    JsonFlag,
+    emit_json,
+    print_fields,
+    print_table,
+    say,
+    say_written,
+)
 from pianobot.play import PlayResult, play_song
 
-PLAN_SHOWN = ("note_index", "pitch", "onset_s", "song_velocity", "target_velocity", "vacuum_kpa",
-              "down_velocity_mps", "hold_s", "predicted_velocity", "predicted_lead_s", "start_s",
-              "move_s", "status", "reason")
+# (column, heading with unit, scale, format, priority): priority 0 always shows, the highest
+# number is dropped first on a narrow terminal (`--json` keeps every column).
+PLAN_COLUMNS: tuple[tuple[str, str, float, str, int], ...] = (
+    ("note_index", "#", 1.0, "d", 0),
+    ("pitch", "pitch", 1.0, "d", 0),
+    ("onset_s", "onset (s)", 1.0, ".2f", 0),
+    ("song_velocity", "song vel.", 1.0, ".0f", 3),
+    ("target_velocity", "target vel.", 1.0, ".0f", 0),
+    ("vacuum_kpa", "vacuum (kPa)", 1.0, ".0f", 0),
+    ("down_velocity_mps", "down (mm/s)", 1e3, ".1f", 0),
+    ("hold_s", "hold (ms)", 1e3, ".0f", 2),
+    ("predicted_velocity", "predicted vel.", 1.0, ".1f", 1),
+    ("predicted_lead_s", "lead (ms)", 1e3, ".0f", 3),
+    ("start_s", "motion start (s)", 1.0, ".3f", 2),
+    ("move_s", "move (ms)", 1e3, ".0f", 4),
+    ("status", "status", 1.0, "", 0),
+    ("reason", "reason", 1.0, "", 0),
+)
 
 
-def _fmt(value: Any) -> str:
-    if isinstance(value, float):
-        return "-" if math.isnan(value) else f"{value:.3g}"
+def _fmt(value: Any, scale: float = 1.0, spec: str = ".3g") -> str:
+    if isinstance(value, bool) or value is None:
+        return "-" if value is None else str(value)
+    if isinstance(value, int | float):
+        if isinstance(value, float) and math.isnan(value):
+            return "-"
+        if spec == "d":
+            return str(int(value))
+        return format(float(value) * scale, spec or ".3g")
     return str(value)
 
 
 def _print_plan(result: PlayResult) -> None:
-    table = Table(title=f"{result.plan.planner} plan of {result.song.source}")
-    for column in PLAN_SHOWN:
-        table.add_column(column)
-    for _, row in result.plan.notes.iterrows():
-        table.add_row(*(_fmt(row[c]) for c in PLAN_SHOWN))
-    console = Console()
-    console.print(table)
+    notes = result.plan.notes
+    specs = [c for c in PLAN_COLUMNS if c[0] in notes.columns]
+    columns = [Column(head, prio, "left" if name in ("status", "reason") else "right",
+                      wrap=name == "reason") for name, head, _, _, prio in specs]
+    rows = [[_fmt(row[name], scale, spec) for name, _, scale, spec, _ in specs]
+            for _, row in notes.iterrows()]
+    print_table(columns, rows, title=f"{result.plan.planner} plan of {result.song.source}")
     summary = result.plan.summary()
     geometry = summary["geometry"] or {}
-    console.print(f"mapping: {summary['dynamics']['text'] if summary['dynamics'] else 'none'}; "
-                  f"{summary['planned']} of {summary['notes']} notes planned, {summary['skipped']} skipped; "
-                  f"stroke: hover {geometry.get('distance_m', float('nan')) * 1e3:.0f} mm, "
-                  f"{geometry.get('acceleration_mps2', float('nan')):g} m/s², up {geometry.get('up_velocity_mps', float('nan')):g} m/s",
-                  highlight=False, markup=False)
+    say(f"mapping: {summary['dynamics']['text'] if summary['dynamics'] else 'none'}; "
+        f"{summary['planned']} of {summary['notes']} notes planned, {summary['skipped']} skipped; "
+        f"stroke: hover {geometry.get('distance_m', float('nan')) * 1e3:.0f} mm, "
+        f"{geometry.get('acceleration_mps2', float('nan')):g} m/s², "
+        f"up {geometry.get('up_velocity_mps', float('nan')) * 1e3:.0f} mm/s")
 
 
 def _print_score(result: PlayResult) -> None:
     assert result.score is not None and result.performance is not None
-    score = result.score.to_dict()
-    table = Table(title=f"{result.plan.planner} planner on {result.song.source}")
-    table.add_column("measure")
-    table.add_column("value", justify="right")
-    for key, value in score.items():
-        table.add_row(key, _fmt(value))
+    fields: list[tuple[str, Any]] = [(key, _fmt(value)) for key, value in result.score.to_dict().items()]
     mapping = result.plan.summary()["dynamics"]
-    table.add_row("mapping", mapping["text"] if mapping else "none (velocity → speed)")
-    console = Console()
-    console.print(table)
-    console.print(f"run {result.performance.run_id}: {result.performance.status}; "
-                  f"files: {', '.join(result.files.values())}", highlight=False, markup=False, soft_wrap=True)
+    fields.append(("mapping", mapping["text"] if mapping else "none (velocity → speed)"))
+    print_fields(fields, title=f"{result.plan.planner} planner on {result.song.source}")
+    say(f"run {result.performance.run_id}: {result.performance.status}")
+    for what, path in result.files.items():
+        say_written(what, path)
 
 
 def play(

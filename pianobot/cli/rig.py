@@ -6,10 +6,18 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.console import Console
-from rich.table import Table
+from rich.text import Text
 
-from pianobot.cli.common import DEFAULT_DATA, DataDir, JsonFlag, emit_json, fail, print_error
+from pianobot.cli.common import (
+    DEFAULT_DATA,
+    Column,
+    DataDir,
+    JsonFlag,
+    emit_json,
+    fail,
+    print_error,
+    print_table,
+)
 from pianobot.errors import InputError
 from pianobot.rig.calibrate import calibrate_reference_pose
 from pianobot.rig.check import check_rig
@@ -44,14 +52,12 @@ def check(rigfile: RigFile, data: DataDir = DEFAULT_DATA, json: JsonFlag = False
     if json:
         emit_json(report.to_dict())
     else:
-        table = Table(title=f"rig {rigfile} ({report.host})")
-        table.add_column("device")
-        table.add_column("status")
-        table.add_column("details", overflow="fold")
-        for device in report.devices:
-            status = "[green]ok[/green]" if device.ok else "[red]FAIL[/red]"
-            table.add_row(device.device, status, device.summary)
-        Console().print(table)
+        rows: list[list[str | Text]] = [
+            [d.device, Text("ok", "green") if d.ok else Text("FAIL", "red"), d.summary]
+            for d in report.devices
+        ]
+        print_table([Column("device"), Column("status"), Column("details", wrap=True)], rows,
+                    title=f"rig {rigfile} ({report.host})")
     if not report.ok:
         for device in report.failures:
             print_error(f"{device.device}: {device.summary}")

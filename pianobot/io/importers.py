@@ -9,9 +9,7 @@ when the input is rejected (InputError is raised before the run folder is create
 
 from __future__ import annotations
 
-import hashlib
 import math
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -20,102 +18,15 @@ import pandas as pd
 
 from pianobot.errors import InputError
 from pianobot.io.force_log import BurstRule, Calibration, align_to_note_ons, read_force_log
-from pianobot.io.keystroke_log import read_keystroke_log
+from pianobot.io.keystroke_import import import_keystroke_log
 from pianobot.io.mocap import MocapTake, read_mocap
 from pianobot.io.mocap_align import ClockAlignment, run_arm_trace, starts_offset, xcorr_offset
 from pianobot.io.mocap_segment import rest_level, segment_take
-from pianobot.store import RunWriter, load_run
+from pianobot.io.run_output import ImportResult, file_sha256, run_dir, trial_ids, write_run
+from pianobot.store import load_run
 
 SAMPLE_PRE_S = 0.2  # mocap samples kept before each keystroke's motion start
 SAMPLE_POST_S = 0.5  # ... and after its end (the key rings after release)
-
-
-@dataclass(frozen=True)
-class ImportResult:
-    """What an import stored; `to_dict()` is the CLI's JSON."""
-
-    run_id: str
-    kind: str  # "keystroke-log" | "force-log" | "mocap"
-    trials: int
-    silent: int
-    skipped_lines: tuple[tuple[int, str], ...] = ()
-    extra: dict[str, Any] = field(default_factory=dict)
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "run_id": self.run_id,
-            "trials": self.trials,
-            "silent": self.silent,
-            "skipped_lines": [{"line": n, "reason": r} for n, r in self.skipped_lines],
-            **self.extra,
-        }
-
-
-def file_sha256(path: Path) -> str:
-    digest = hashlib.sha256()
-    with path.open("rb") as handle:
-        for block in iter(lambda: handle.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
-
-
-def _trial_ids(sha: str, n: int) -> list[str]:
-    """Stable ids: the same file always gives the same trial ids."""
-    return [f"{sha[:10]}-{i:05d}" for i in range(n)]
-
-
-def import_keystroke_log(
-    path: Path | str, data_dir: Path | str, layout: str = "auto"
-) -> ImportResult:
-    """Import a dict-per-line keystroke log as a new run (one trial per keystroke line)."""
-    path, data_dir = Path(path), Path(data_dir)
-    log = read_keystroke_log(path, layout)
-    sha = file_sha256(path)
-    ids = _trial_ids(sha, len(log.trials))
-    trials = log.trials.copy()
-    trials.insert(0, "trial_id", ids)
-    trials["attempt"] = 1
-    # Session clocks restart; stack them on one run clock, 1 s apart, so MIDI times stay ordered.
-    offsets = _session_offsets(log.midi)
-    trials["t_start_s"] = math.nan  # the logs never recorded when motion started
-    trials["session_offset_s"] = trials["session"].map(offsets).fillna(0.0)
-    trials["t_on_log_s"], trials["t_off_log_s"] = trials["t_on_s"], trials["t_off_s"]
-    trials["t_on_s"], trials["t_off_s"] = math.nan, math.nan  # relative to motion start: unknown
-    midi = pd.DataFrame(
-        {
-            "trial_id": [ids[i] for i in log.midi["index"]],
-            "t_s": log.midi["t_s"] + log.midi["session"].map(offsets).fillna(0.0),
-            "type": log.midi["type"],
-            "note": log.midi["note"],
-            "velocity": log.midi["velocity"],
-        }
-    )
-    skipped = tuple((s.line, s.reason) for s in log.skipped)
-    meta = {
-        "source": {"file": path.name, "sha256": sha, "format": "keystroke-log"},
-        "layout": log.layout,
-        "finger": log.finger,
-        "header": _jsonable(log.header),
-        "sessions": log.n_sessions,
-        "skipped_lines": [{"line": n, "reason": r} for n, r in skipped],
-        "event_assignment": "by timestamp (pianobot.io.keystroke_events)",
-    }
-    run_id = _write_run(data_dir, f"import-{path.stem}", meta, trials, None, midi)
-    counts = trials["status"].value_counts()
-    return ImportResult(
-        run_id, "keystroke-log", len(trials), int(counts.get("silent", 0)), skipped,
-        {"layout": log.layout, "finger": log.finger, "sounded": int(counts.get("ok", 0)),
-         "unknown": int(counts.get("failed", 0)), "sessions": log.n_sessions},
-    )  # fmt: skip
-
-
-def _session_offsets(midi: pd.DataFrame) -> dict[int, float]:
-    offsets: dict[int, float] = {}
-    running = 0.0
-    for session in sorted(int(s) for s in midi["session"].unique()):
-        offsets[session] = running
-        running += float(midi.loc[midi["session"] == session, "t_s"].max()) + 1.0
-    return offsets
 
 
 def import_force_log(
@@ -166,7 +77,7 @@ def import_force_log(
     sha = file_sha256(path)
     trials = pd.DataFrame(
         {
-            "trial_id": _trial_ids(sha, len(bursts)),
+            "trial_id": trial_ids(sha, len(bursts)),
             "index": np.arange(len(bursts)),
             "attempt": 1,
             "status": "ok",
@@ -190,8 +101,8 @@ def import_force_log(
         "skipped_lines": [{"line": n, "reason": r} for n, r in skipped],
         "aligned_to": meta_align,
     }
-    run_id = _write_run(data_dir, f"import-{path.stem}", meta, trials, None, None)
-    return ImportResult(run_id, "force-log", len(trials), 0, skipped, extra)
+    run_id = write_run(data_dir, f"import-{path.stem}", meta, trials, None, None)
+    return ImportResult(run_id, "force-log", len(trials), 0, skipped, extra, run_dir(data_dir, run_id))
 
 
 def import_mocap(
@@ -224,19 +135,22 @@ def import_mocap(
         "frame_rate_hz": take.frame_rate_hz,
         "roles": take.roles,
         "coverage_dropped": sorted(n for n, c in take.coverage.items() if c < min_coverage),
+        "stitched": take.stitched,
+        "joins": [j.to_dict() for j in take.joins if take.stitched.get(j.chain)],
+        "stitch_doubts": list(take.stitch_doubts),
         "up_axis": up_axis,
         "vacuum_kpa": vacuum_kpa,
         "skipped_lines": [],
     }
-    extra: dict[str, Any] = {"keystrokes": len(strokes), "roles": take.roles}
+    extra: dict[str, Any] = {"keystrokes": len(strokes), "roles": take.roles, "stitched": take.stitched}
     if run_id is None:
         trials = _stroke_trials(strokes, sha)
         trials["vacuum_kpa"] = math.nan if vacuum_kpa is None else float(vacuum_kpa)
         samples = _stroke_samples(
             take, strokes, trials["trial_id"].tolist(), strokes["t_start_s"].to_numpy(), 0.0
         )
-        new_id = _write_run(data_dir, f"import-{path.stem}", meta, trials, samples, None)
-        return ImportResult(new_id, "mocap", len(trials), 0, (), extra)
+        new_id = write_run(data_dir, f"import-{path.stem}", meta, trials, samples, None)
+        return ImportResult(new_id, "mocap", len(trials), 0, (), extra, run_dir(data_dir, new_id))
     run = load_run(run_id, data_dir)
     trials = run.trials
     if trials.empty:
@@ -256,7 +170,7 @@ def import_mocap(
         known = base["vacuum_kpa"] if "vacuum_kpa" in base else pd.Series(math.nan, index=base.index)
         base = base.assign(vacuum_kpa=known.fillna(float(vacuum_kpa)))
     midi = run.midi.drop(columns=["run_id"], errors="ignore")
-    new_id = _write_run(
+    new_id = write_run(
         data_dir,
         f"{run.run_id}-mocap",
         meta,
@@ -268,7 +182,7 @@ def import_mocap(
         clock_offset_s=alignment.clock_offset_s, derived_from=run.run_id, method=alignment.method
     )
     return ImportResult(
-        new_id, "mocap", len(base), int((base["status"] == "silent").sum()), (), extra
+        new_id, "mocap", len(base), int((base["status"] == "silent").sum()), (), extra, run_dir(data_dir, new_id)
     )
 
 
@@ -296,7 +210,7 @@ def _stroke_trials(strokes: pd.DataFrame, sha: str) -> pd.DataFrame:
     """One trial per segmented keystroke; the arm speed estimate stands for the down velocity."""
     trials = pd.DataFrame(
         {
-            "trial_id": _trial_ids(sha, len(strokes)),
+            "trial_id": trial_ids(sha, len(strokes)),
             "index": np.arange(len(strokes)),
             "attempt": 1,
             "status": "ok",
@@ -365,30 +279,4 @@ def _trial_ends(starts_s: np.ndarray) -> np.ndarray:
     return ends
 
 
-def _write_run(
-    data_dir: Path, name: str, meta: dict[str, Any], trials: pd.DataFrame,
-    samples: pd.DataFrame | None, midi: pd.DataFrame | None,
-) -> str:  # fmt: skip
-    """Create the run, write one batch and finish it; a failure marks the run failed."""
-    writer = RunWriter.create(data_dir, name=name, kind="import", meta=meta, plan=None)
-    try:
-        writer.journal("import started", source=meta["source"]["file"])
-        writer.append(trials, samples=samples, midi=midi)
-        writer.journal("import done", trials=len(trials))
-        writer.finish("completed")
-    except BaseException:
-        writer.finish("failed", reason="import aborted")
-        raise
-    finally:
-        writer.close()
-    return writer.run_id
-
-
-def _jsonable(value: Any) -> Any:
-    if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value if isinstance(value, str | int | float | bool) or value is None else repr(value)
+__all__ = ["ImportResult", "file_sha256", "import_force_log", "import_keystroke_log", "import_mocap"]

@@ -1,6 +1,6 @@
-"""The control-list layouts of the study's keystroke logs, and how to tell them apart.
+"""The control-list layouts of positional keystroke logs, and how to tell them apart.
 
-Each log line holds `{'control': [...], 'midi': [...]}`; the meaning of `control` depends on the
+Each line holds `{'control': [...], 'midi': [...]}`; the meaning of `control` depends on the
 script that wrote it. Known layouts (slot names carry pianobot's units):
 
 - `soft-2022` (the paper's sweep): [vacuum magnitude kPa, finger angle, acc, vel, depth,
@@ -12,7 +12,11 @@ script that wrote it. Known layouts (slot names carry pianobot's units):
 - `sweep-2021` [angle, down vel, up vel, distance, hold] with the acceleration in the header
   dict (`'acc': ...`) that starts each session.
 
-Layouts the logs do not record (depth in the 5/6-value layouts) are NaN, not guessed.
+Any other layout is declared by the user (`declared_layout`: a column list, from `--columns`
+or a YAML layout file, `layout_file`). Slot names are pianobot's column names (`SLOT_NAMES`) or
+the old scripts' names for them (`COLUMN_ALIASES`: vel, acc, depth, hold_time, ...); `skip`
+ignores a value, and any other name without a unit suffix keeps the value as an extra column. Layouts the logs do not record (depth in the 5/6-value layouts) are NaN, not guessed.
+
 `auto` and the family name `rigid-2022` choose, among the candidates whose length matches, the
 layout under which the largest share of lines has physically plausible values (speeds ≤ 3.2 m/s,
 distances ≤ 0.6 m, holds ≤ 10 s, ...); ties go to the earlier layout in `LAYOUTS`.
@@ -20,67 +24,147 @@ distances ≤ 0.6 m, holds ≤ 10 s, ...); ties go to the earlier layout in `LAY
 
 from __future__ import annotations
 
+import difflib
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import numpy as np
+import numpy.typing as npt
+import pandas as pd
+
+from pianobot.errors import InputError
+
+FloatArray = npt.NDArray[np.float64]
 RIGID_STIFFNESS_CODE = 10000.0  # the value the study wrote in the vacuum slot for the rigid finger
+UP_TRAVELS = ("distance+depth", "depth")
+SKIP = "skip"
+# Columns a layout's slot may fill (the spec's parameter names plus what old scripts also logged).
+PARAMETER_SLOTS = (
+    "vacuum_kpa",
+    "finger_angle_deg",
+    "acceleration_mps2",
+    "up_acceleration_mps2",
+    "down_velocity_mps",
+    "up_velocity_mps",
+    "depth_m",
+    "distance_m",
+    "hold_s",
+    "move_velocity_mps",
+    "move_acceleration_mps2",
+)
+SLOT_NAMES = (*PARAMETER_SLOTS, "velocity_mps", "note", SKIP)
+# The names old scripts used for the same values (named-key logs, and accepted in --columns).
+COLUMN_ALIASES: dict[str, str] = {
+    "group": "sequence_id",
+    "order": "sequence_order",
+    "note": "note",
+    "down_vel": "down_velocity_mps",
+    "up_vel": "up_velocity_mps",
+    "vel": "velocity_mps",
+    "down_acc": "acceleration_mps2",
+    "acc": "acceleration_mps2",
+    "up_acc": "up_acceleration_mps2",
+    "move_vel": "move_velocity_mps",
+    "move_acc": "move_acceleration_mps2",
+    "distance": "distance_m",
+    "press_depth": "depth_m",
+    "depth": "depth_m",
+    "hold_time": "hold_s",
+    "hold": "hold_s",
+    "angle": "finger_angle_deg",
+    "finger_angle": "finger_angle_deg",
+    "vacuum": "vacuum_kpa",
+    "pressure": "vacuum_kpa",
+}
+
+_UNIT_SUFFIXES = ("_m", "_s", "_mps", "_mps2", "_kpa", "_deg", "_hz", "_n")
 
 
 @dataclass(frozen=True)
 class Layout:
-    """The meaning of each slot of a `control` list."""
+    """The meaning of each slot of a `control` list.
+
+    `velocity_mps` fills both speeds (the study used one speed down and up); `vacuum_kpa` takes
+    the study's convention (a positive magnitude, 60 = -60 kPa gauge; RIGID_STIFFNESS_CODE = rigid
+    finger); `up_travel` says how far the arm rose after the hold (for the timing prediction).
+    """
 
     name: str
     slots: tuple[str, ...]
-    finger: str  # "soft" | "rigid": the finger the layout's scripts drove
+    finger: str  # "soft" | "rigid" | "unknown": the finger the layout's scripts drove
     rigid_code: bool = False  # True: the vacuum slot must hold RIGID_STIFFNESS_CODE
+    up_travel: str = "distance+depth"
+    declared: bool = False  # declared by the user (not one of the study's layouts)
 
-    def params(self, control: Sequence[float], header_acc: float | None) -> dict[str, float]:
-        """pianobot parameters of one control list (units in the names, NaN where not logged)."""
-        raw = dict(zip(self.slots, control, strict=True))
-        out = {
-            "vacuum_kpa": math.nan,
-            "finger_angle_deg": raw.get("finger_angle_deg", math.nan),
-            "acceleration_mps2": raw.get("acceleration_mps2", math.nan),
-            "up_acceleration_mps2": math.nan,
-            "down_velocity_mps": raw.get("down_velocity_mps", raw.get("velocity_mps", math.nan)),
-            "up_velocity_mps": raw.get("up_velocity_mps", raw.get("velocity_mps", math.nan)),
-            "depth_m": raw.get("depth_m", math.nan),
-            "distance_m": raw.get("distance_m", math.nan),
-            "hold_s": raw.get("hold_s", math.nan),
-        }
-        if math.isnan(out["acceleration_mps2"]) and header_acc is not None:
-            out["acceleration_mps2"] = header_acc
-        out["up_acceleration_mps2"] = raw.get("up_acceleration_mps2", out["acceleration_mps2"])
-        stiffness = raw.get("vacuum_kpa")
-        if stiffness is not None and stiffness != RIGID_STIFFNESS_CODE:
-            out["vacuum_kpa"] = -abs(stiffness)  # stored as a positive magnitude; gauge is <= 0
-        return {k: round_grid(v) for k, v in out.items()}
+    @property
+    def extra_slots(self) -> tuple[str, ...]:
+        return tuple(s for s in self.slots if s not in SLOT_NAMES)
 
-    def finger_of(self, control: Sequence[float]) -> str:
-        """The finger: rigid when the stiffness slot holds the rigid code, else the layout's."""
-        if (
-            "vacuum_kpa" in self.slots
-            and control[self.slots.index("vacuum_kpa")] == RIGID_STIFFNESS_CODE
-        ):
-            return "rigid"
-        return self.finger
+    def table(self, control: FloatArray, header_acc: FloatArray) -> pd.DataFrame:
+        """pianobot parameter columns of control lists (one row each; NaN where not logged).
 
-    def plausible(self, control: Sequence[float]) -> bool:
-        """Whether every slot holds a physically possible value for its meaning."""
-        if len(control) != len(self.slots):
-            return False
-        for slot, value in zip(self.slots, control, strict=True):
+        Args:
+            control: (lines, len(slots)) values.
+            header_acc: per line, the acceleration of the session's header (NaN: none).
+        """
+        n = control.shape[0]
+        raw = {slot: control[:, i] for i, slot in enumerate(self.slots) if slot != SKIP}
+        nan = np.full(n, np.nan)
+        out = {name: raw.get(name, nan) for name in PARAMETER_SLOTS}
+        for side in ("down_velocity_mps", "up_velocity_mps"):
+            if side not in raw and "velocity_mps" in raw:
+                out[side] = raw["velocity_mps"]
+        acc = out["acceleration_mps2"]
+        out["acceleration_mps2"] = np.where(np.isfinite(acc), acc, header_acc)
+        if "up_acceleration_mps2" not in raw:
+            out["up_acceleration_mps2"] = out["acceleration_mps2"]
+        if "vacuum_kpa" in raw:  # stored as a positive magnitude; gauge is <= 0
+            stiffness = raw["vacuum_kpa"]
+            out["vacuum_kpa"] = np.where(
+                stiffness == RIGID_STIFFNESS_CODE, np.nan, -np.abs(stiffness)
+            )
+        frame = pd.DataFrame(
+            {k: round_grid_array(np.asarray(v, dtype=np.float64)) for k, v in out.items()}
+        )
+        if "note" in raw:
+            notes = raw["note"]
+            whole = np.isfinite(notes) & (notes == np.round(notes)) & (notes >= 0) & (notes <= 127)
+            frame["note"] = pd.array(
+                [int(v) if w else None for v, w in zip(notes, whole, strict=True)], dtype="Int64"
+            )
+        for name in self.extra_slots:
+            frame[name] = raw[name]
+        return frame
+
+    def fingers(self, control: FloatArray) -> npt.NDArray[np.object_]:
+        """Per line: rigid when the stiffness slot holds the rigid code, else the layout's finger."""
+        out = np.full(control.shape[0], self.finger, dtype=object)
+        if "vacuum_kpa" in self.slots:
+            column = control[:, self.slots.index("vacuum_kpa")]
+            out[column == RIGID_STIFFNESS_CODE] = "rigid"
+            if self.finger == "unknown":
+                out[column != RIGID_STIFFNESS_CODE] = "soft"
+        return out
+
+    def plausible(self, control: FloatArray) -> npt.NDArray[np.bool_]:
+        """Per line: whether every slot holds a physically possible value for its meaning."""
+        ok = np.ones(control.shape[0], dtype=bool)
+        for i, slot in enumerate(self.slots):
+            if slot not in _RANGES:
+                continue
+            value = control[:, i]
             low, high = _RANGES[slot]
             if slot == "vacuum_kpa":
-                if self.rigid_code != (value == RIGID_STIFFNESS_CODE):
-                    return False
+                rigid = value == RIGID_STIFFNESS_CODE
+                ok &= rigid if self.rigid_code else ~rigid
                 if self.rigid_code:
                     continue
-            if not (low <= value <= high) or (slot in _POSITIVE and value <= 0):
-                return False
-        return True
+            inside = (value >= low) & (value <= high)
+            if slot in _POSITIVE:
+                inside &= value > 0
+            ok &= inside
+        return ok
 
 
 _PAPER = (
@@ -140,19 +224,24 @@ _RANGES: dict[str, tuple[float, float]] = {
     "finger_angle_deg": (-180.0, 180.0),
     "acceleration_mps2": (0.0, 15.0),
     "up_acceleration_mps2": (0.0, 15.0),
+    "move_acceleration_mps2": (0.0, 15.0),
     "velocity_mps": (0.0, 3.2),  # UR5 tool speed limit
     "down_velocity_mps": (0.0, 3.2),
     "up_velocity_mps": (0.0, 3.2),
+    "move_velocity_mps": (0.0, 3.2),
     "depth_m": (0.0, 0.1),
     "distance_m": (0.0, 0.6),
     "hold_s": (0.0, 10.0),
+    "note": (0.0, 127.0),
 }
 _POSITIVE = {
     "acceleration_mps2",
     "up_acceleration_mps2",
+    "move_acceleration_mps2",
     "velocity_mps",
     "down_velocity_mps",
     "up_velocity_mps",
+    "move_velocity_mps",
 }
 
 
@@ -163,8 +252,73 @@ def round_grid(value: float) -> float:
     return float(f"{value:.12g}")
 
 
-def choose_layout(choice: str, controls: Sequence[Sequence[float]]) -> Layout | None:
+def round_grid_array(values: FloatArray) -> FloatArray:
+    """`round_grid` of every value (12 significant digits)."""
+    magnitude = np.floor(
+        np.log10(np.abs(np.where((values == 0) | ~np.isfinite(values), 1.0, values)))
+    )
+    k = 11 - magnitude
+    with np.errstate(over="ignore", invalid="ignore"):
+        scaled = np.where(
+            k >= 0,
+            np.round(values * 10.0**k) / 10.0**k,
+            np.round(values / 10.0 ** (-k)) * 10.0 ** (-k),
+        )
+    return np.where(np.isfinite(values), scaled, values)
+
+
+def declared_layout(
+    columns: Sequence[str],
+    finger: str = "unknown",
+    name: str = "declared",
+    up_travel: str = "distance+depth",
+    where: str = "--columns",
+) -> Layout:
+    """A user's layout from its column names (validated: known names, no duplicates).
+
+    Raises InputError naming the bad column and, for a near miss, the name that was meant.
+    """
+    names = [COLUMN_ALIASES.get(c.strip(), c.strip()) for c in columns]
+    if not names or any(not c for c in names):
+        raise InputError(
+            "expected a comma-separated list of column names, e.g. "
+            "vacuum_kpa,finger_angle_deg,acceleration_mps2,velocity_mps,depth_m,distance_m,hold_s",
+            where,
+        )
+    for i, column in enumerate(names):
+        if column in SLOT_NAMES:
+            continue
+        close = difflib.get_close_matches(column, [*SLOT_NAMES, *COLUMN_ALIASES], n=1, cutoff=0.75)
+        if close or column.endswith(_UNIT_SUFFIXES) or not column.isidentifier():
+            hint = f"; did you mean {close[0]!r}?" if close else ""
+            raise InputError(
+                f"column {i + 1} {column!r} is not a known column{hint} Known: {', '.join(SLOT_NAMES)}; "
+                "a name without a unit suffix keeps the values as an extra column",
+                where,
+            )
+    taken = [c for c in names if c != SKIP]
+    duplicate = next((c for c in taken if taken.count(c) > 1), None)
+    if duplicate is not None:
+        raise InputError(f"column {duplicate!r} is named twice", where)
+    both = {"velocity_mps"} & set(taken) and {"down_velocity_mps", "up_velocity_mps"} & set(taken)
+    if both:
+        raise InputError(
+            "velocity_mps (both speeds) cannot be combined with down/up_velocity_mps", where
+        )
+    if finger not in ("soft", "rigid", "unknown"):
+        raise InputError(f"finger should be soft or rigid, got {finger!r}", where)
+    if up_travel not in UP_TRAVELS:
+        raise InputError(f"up_travel should be one of {UP_TRAVELS}, got {up_travel!r}", where)
+    return Layout(name, tuple(names), finger, up_travel=up_travel, declared=True)
+
+
+def choose_layout(choice: str, lengths: dict[int, int], plausible: dict[str, int]) -> Layout | None:
     """The candidate layout of `choice` that fits the most control lists plausibly.
+
+    Args:
+        choice: a key of LAYOUT_CHOICES.
+        lengths: number of control lists of each length.
+        plausible: per layout name, how many lines it reads as physically plausible.
 
     Returns None when no candidate has the length of any control list. A single concrete layout is
     returned as asked (lines of another length are skipped later).
@@ -172,15 +326,20 @@ def choose_layout(choice: str, controls: Sequence[Sequence[float]]) -> Layout | 
     names = LAYOUT_CHOICES[choice]
     if len(names) == 1:
         return LAYOUTS[names[0]]
+    total = max(sum(lengths.values()), 1)
     best: tuple[float, float] | None = None
     chosen: Layout | None = None
     for name in names:
         layout = LAYOUTS[name]
-        same_length = [c for c in controls if len(c) == len(layout.slots)]
+        same_length = lengths.get(len(layout.slots), 0)
         if not same_length:
             continue
-        plausible = sum(layout.plausible(c) for c in same_length)
-        score = (plausible / len(controls), len(same_length) / len(controls))
+        score = (plausible.get(name, 0) / total, same_length / total)
         if best is None or score > best:
             best, chosen = score, layout
     return chosen
+
+
+def layouts_tried(choice: str) -> str:
+    """`soft-2022 (7 values), rigid-2022-acc (6 values), ...` for a refusal message."""
+    return ", ".join(f"{n} ({len(LAYOUTS[n].slots)} values)" for n in LAYOUT_CHOICES[choice])

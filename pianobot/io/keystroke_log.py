@@ -1,19 +1,22 @@
 """Reader of the study's old keystroke logs: one Python-literal dict per line.
 
     {'control': [60, 45, 0.5, 0.03, 0.04, 0.05, 0], 'midi': [[[144, 57, 1, 0], 468620], ...]}
+    {'group': 0, 'order': 0, 'note': 'F', 'move_vel': 0.24, ..., 'midi': [...]}
 
-Lines are parsed with `ast.literal_eval` (never `eval`; bare `nan`/`inf` are accepted). Dicts
-without `control`/`midi` (e.g. `start_position_l`) are headers: metadata that also starts a new
-session. Malformed lines are reported (line number, reason) and the rest is imported. Control
-lists are decoded by a layout (see `keystroke_layouts`); MIDI events are re-assigned to keystrokes
-by timestamp (see `keystroke_events`). `read_keystroke_log(path)` returns a `KeystrokeLog`.
+Lines are read as a stream (`log_lines`); dicts without `control`/`midi` are headers (metadata
+that also starts a new MIDI clock session); malformed lines are reported (line number, reason)
+and the rest is imported. Positional `control` lists are decoded by a layout (the study's, chosen
+automatically, or one the user declares: `keystroke_layouts`, `layout_file`); named keys by
+`named_keys`. MIDI events are grouped into presses and each press is given to the keystroke line
+the evidence says it belongs to (`keystroke_sessions`, `keystroke_assign`).
+`read_keystroke_log(path)` returns a `KeystrokeLog`.
 """
 
 from __future__ import annotations
 
-import ast
-import math
+from array import array
 from collections import Counter
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -22,34 +25,28 @@ import numpy as np
 import pandas as pd
 
 from pianobot.errors import InputError
-from pianobot.io.keystroke_events import LogEvent, Press, assign_presses, group_presses
-from pianobot.io.keystroke_layouts import LAYOUT_CHOICES, Layout, choose_layout
-from pianobot.io.source import read_input_bytes
-from pianobot.physics.trajectory import move_profile
+from pianobot.io.keystroke_layouts import (
+    LAYOUT_CHOICES,
+    LAYOUTS,
+    Layout,
+    choose_layout,
+    declared_layout,
+    layouts_tried,
+)
+from pianobot.io.keystroke_records import LogRecords
+from pianobot.io.keystroke_sessions import assign_events
+from pianobot.io.layout_file import load_layout_file
+from pianobot.io.log_lines import LogLines, SkippedLine, parse_lines
+from pianobot.io.named_keys import DEFAULT_NOTE_OCTAVE, named_records
+from pianobot.io.source import text_lines
+from pianobot.progress import NO_PROGRESS, Progress
+from pianobot.spec.parameters import FINGER_ENVELOPES
+
+__all__ = ["KeystrokeLog", "SkippedLine", "read_keystroke_log"]
 
 # A session of the study logged a few hundred keystrokes; a million lines is a week of
-# non-stop pressing. Checked before anything is parsed.
+# non-stop pressing. Checked as the lines stream in, so memory stays bounded either way.
 MAX_LOG_LINES = 1_000_000
-
-TRIAL_COLUMNS = (
-    "index", "source_line", "session", "status", "note", "finger",
-    "vacuum_kpa", "finger_angle_deg", "acceleration_mps2", "up_acceleration_mps2",
-    "down_velocity_mps", "up_velocity_mps", "depth_m", "distance_m", "hold_s",
-    "on_velocity", "off_velocity", "t_on_s", "t_off_s", "midi_hold_s", "n_note_on", "error",
-)  # fmt: skip
-UNREAD_ERROR = "MIDI outcome unknown: the log ends with events still unread (read backlog)"
-MIDI_COLUMNS = ("index", "source_line", "session", "t_s", "type", "note", "velocity", "status")
-
-
-@dataclass(frozen=True)
-class SkippedLine:
-    """A line that was not imported, and why."""
-
-    line: int
-    reason: str
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"line": self.line, "reason": self.reason}
 
 
 @dataclass(frozen=True)
@@ -57,9 +54,12 @@ class KeystrokeLog:
     """A parsed log.
 
     `trials`: one row per keystroke line (pianobot column names; `t_on_s`/`t_off_s` are seconds
-    on the session's MIDI clock, i.e. since the MIDI init of that script run). `midi`: every note
-    event with the keystroke `index` it was assigned to (by timestamp) and the `source_line` that
-    printed it. `header`: the first header dict; `headers`: all of them with their line numbers.
+    on the session's MIDI clock, i.e. since the MIDI init of that script run), with the
+    assignment of its MIDI events (`read_line`, `moved_from_line`, `assignment`,
+    `assignment_evidence`). `midi`: every note event with the keystroke `index` it was assigned
+    to (-1: none) and the `source_line` that printed it. `header`: the first header dict;
+    `headers`: all of them with their line numbers. `assignment`: how events were assigned
+    (read size, per-session constants, counts, presses that belong to no line).
     """
 
     path: Path
@@ -71,285 +71,255 @@ class KeystrokeLog:
     header: dict[str, Any]
     headers: tuple[tuple[int, dict[str, Any]], ...] = field(default=())
     n_sessions: int = 1
+    assignment: dict[str, Any] = field(default_factory=dict)
+    columns: dict[str, str] = field(default_factory=dict)  # named-key logs: key -> column
+    notes: str = ""  # how notes and the finger were read (stated conventions)
 
 
-@dataclass(frozen=True)
-class _Record:
-    line: int
-    control: tuple[float, ...]
-    events: tuple[tuple[int, int, int, int], ...]  # (status, note, velocity, t_ms)
-    header_acc: float | None
-    after_header: bool
-
-
-def read_keystroke_log(path: Path | str, layout: str = "auto") -> KeystrokeLog:
+def read_keystroke_log(
+    path: Path | str,
+    layout: str = "auto",
+    *,
+    columns: list[str] | None = None,
+    layout_file: Path | str | None = None,
+    finger: str | None = None,
+    note_octave: int = DEFAULT_NOTE_OCTAVE,
+    progress: Progress = NO_PROGRESS,
+) -> KeystrokeLog:
     """Parse a dict-per-line keystroke log.
 
     Args:
         path: the log file.
         layout: "auto", "soft-2022", "rigid-2022", or a concrete layout name (see
-            `keystroke_layouts.LAYOUT_CHOICES`).
+            `keystroke_layouts.LAYOUT_CHOICES`), for positional logs.
+        columns: the positional layout declared as column names (instead of `layout`).
+        layout_file: a YAML layout file (instead of `layout`).
+        finger: "soft" or "rigid" when the log does not say (overrides the inference).
+        note_octave: the octave of note letters without one (4: C–B = MIDI 60–71).
+        progress: where to report reading and assignment.
 
     Raises:
-        InputError: unknown layout; the file is missing, empty, binary or holds no keystroke line.
+        InputError: unknown layout; the file is missing, empty, binary or holds no keystroke line;
+            no layout fits its control lists.
     """
     path = Path(path)
     where = str(path)
+    declared = _declared(layout, columns, layout_file, finger)
+    if finger is not None and finger not in ("soft", "rigid"):
+        raise InputError(f"finger should be soft or rigid, got {finger!r}", "--finger")
+    size = path.stat().st_size if path.is_file() else None
+    parsed = parse_lines(_bounded(text_lines(path, "a text log"), where), progress, size)
+    if not len(parsed):
+        reasons = "; ".join(f"line {s.line}: {s.reason}" for s in parsed.skipped[:3])
+        raise InputError(
+            "no keystroke line ({'control': [...], 'midi': [...]} or named keys with 'midi') found"
+            + (f": {reasons}" if reasons else ""),
+            where,
+        )
+    if parsed.n_named > parsed.n_positional:
+        records, layout_name, notes_text = _named(parsed, note_octave, finger)
+    else:
+        records, layout_name = _positional(parsed, layout, declared, finger, where)
+        notes_text = ""
+    trials, midi, summary = assign_events(records, progress)
+    skipped = sorted(parsed.skipped + records.skipped, key=lambda s: s.line)
+    fingers = Counter(trials["finger"])
+    return KeystrokeLog(
+        path=path,
+        layout=layout_name,
+        finger=fingers.most_common(1)[0][0] if fingers else "unknown",
+        trials=trials,
+        midi=midi,
+        skipped=tuple(skipped),
+        header=parsed.headers[0][1] if parsed.headers else {},
+        headers=tuple(parsed.headers),
+        n_sessions=int(summary["sessions"]),
+        assignment=summary,
+        columns=records.columns,
+        notes=notes_text,
+    )
+
+
+def _bounded(lines: Iterator[tuple[int, str]], where: str) -> Iterator[tuple[int, str]]:
+    """The lines, refused (InputError) once there are more than MAX_LOG_LINES."""
+    for number, text in lines:
+        if number > MAX_LOG_LINES:
+            raise InputError(f"has more than {MAX_LOG_LINES:,} lines; a keystroke log is read up "
+                             "to that many (split it into sessions)", where)
+        yield number, text
+
+
+def _declared(
+    layout: str, columns: list[str] | None, layout_file: Path | str | None, finger: str | None
+) -> Layout | None:
+    if columns is not None and layout_file is not None:
+        raise InputError("give either --columns or --layout-file, not both", "--columns")
+    if (columns is not None or layout_file is not None) and layout != "auto":
+        raise InputError(
+            "--layout names a known layout; a declared one (--columns, --layout-file) replaces it",
+            "--layout",
+        )
+    if columns is not None:
+        return declared_layout(columns, finger or "unknown")
+    if layout_file is not None:
+        return load_layout_file(layout_file)
     if layout not in LAYOUT_CHOICES:
         raise InputError(
             f"layout should be one of {sorted(LAYOUT_CHOICES)}, got {layout!r}", "--layout"
         )
-    lines = _read_lines(path)
-    records, headers, skipped = _parse_lines(lines)
-    if not records:
-        reasons = "; ".join(f"line {s.line}: {s.reason}" for s in skipped[:3])
+    return None
+
+
+def _positional(
+    parsed: LogLines, choice: str, declared: Layout | None, finger: str | None, where: str
+) -> tuple[LogRecords, str]:
+    counts = (
+        np.frombuffer(parsed.n_control, dtype=np.int32).astype(np.int64)
+        if len(parsed.n_control)
+        else np.zeros(0, np.int64)
+    )
+    is_positional = _kinds(parsed)
+    offsets = np.concatenate([[0], np.cumsum(counts)])
+    values = np.frombuffer(parsed.control, dtype=np.float64) if len(parsed.control) else np.zeros(0)
+    lengths = Counter(counts.tolist())
+    lines = np.frombuffer(parsed.line, dtype=np.int64)[is_positional]
+    chosen = declared
+    if chosen is None:
+        plausible = {}
+        for name in LAYOUT_CHOICES[choice]:
+            n = len(LAYOUTS[name].slots)
+            rows = _rows(values, offsets, counts, n)
+            plausible[name] = int(LAYOUTS[name].plausible(rows).sum()) if rows.size else 0
+        chosen = choose_layout(choice, dict(lengths), plausible)
+    if chosen is None:
+        n, count = lengths.most_common(1)[0]
+        first = int(lines[np.flatnonzero(counts == n)[0]])
         raise InputError(
-            f"no keystroke line ({{'control': [...], 'midi': [...]}}) found{': ' + reasons if reasons else ''}",
+            f"line {first}: {n} control values ({count} such lines); no known layout has {n} "
+            f"(tried {layouts_tried(choice)}); declare the columns with --columns a,b,... "
+            "or --layout-file FILE",
             where,
         )
-    chosen = choose_layout(layout, [r.control for r in records])
-    lengths = sorted({len(r.control) for r in records})
-    if chosen is None:
-        raise InputError(f"no known layout has {lengths} control values (layout {layout!r})", where)
-    kept = []
-    for record in records:
-        if len(record.control) != len(chosen.slots):
-            skipped.append(
-                SkippedLine(
-                    record.line,
-                    f"control has {len(record.control)} values, layout {chosen.name} expects {len(chosen.slots)}",
-                )
+    n = len(chosen.slots)
+    fits = counts == n
+    if not fits.any():
+        m, count = lengths.most_common(1)[0]
+        raise InputError(
+            f"line {int(lines[0])}: {m} control values ({count} such lines), but layout "
+            f"{chosen.name} has {n} columns ({', '.join(chosen.slots)})",
+            where,
+        )
+    skipped = [
+        SkippedLine(
+            int(lines[i]), f"control has {int(counts[i])} values, layout {chosen.name} expects {n}"
+        )
+        for i in np.flatnonzero(~fits)
+    ]
+    skipped += _other_kind(parsed, is_positional, "a named-key line in a log of control lists")
+    control = _rows(values, offsets, counts, n)
+    parsed.control = array("d")  # the flat values are rows now: free them before the assignment
+    header_acc = np.frombuffer(parsed.header_acc, dtype=np.float64)[is_positional][fits]
+    params = chosen.table(control, header_acc)
+    fingers = chosen.fingers(control)
+    if finger is not None:
+        fingers[fingers == chosen.finger] = finger
+    notes = params.pop("note").fillna(-1).to_numpy(dtype=np.int64) if "note" in params else None
+    extra = params[list(chosen.extra_slots)]
+    params = params.drop(columns=list(chosen.extra_slots))
+    records = LogRecords.build(
+        parsed,
+        np.flatnonzero(is_positional)[fits],
+        params,
+        fingers,
+        notes,
+        extra,
+        pd.DataFrame(index=range(len(params))),
+        chosen.up_travel,
+        skipped,
+    )
+    return records, chosen.name
+
+
+def _named(parsed: LogLines, note_octave: int, finger: str | None) -> tuple[LogRecords, str, str]:
+    is_named = ~_kinds(parsed)
+    index = np.flatnonzero(is_named)
+    if index.size == len(parsed):  # the usual case: no control-list lines mixed in
+        named = parsed.named
+    else:
+        named = {key: [values[i] for i in index] for key, values in parsed.named.items()}
+    found = named_records(named, note_octave)
+    parsed.named = {}  # the raw values are columns now: free them before the assignment
+    lines = np.frombuffer(parsed.line, dtype=np.int64)[index]
+    skipped = [SkippedLine(int(lines[i]), reason) for i, reason in sorted(found.bad_lines.items())]
+    skipped += _other_kind(parsed, is_named, "a control-list line in a log of named keys")
+    keep = np.ones(index.size, dtype=bool)
+    keep[list(found.bad_lines)] = False
+    chosen_finger, finger_text = _named_finger(found.params[keep], finger)
+    fingers = np.full(int(keep.sum()), chosen_finger, dtype=object)
+    params = found.params[keep].reset_index(drop=True)
+    records = LogRecords.build(
+        parsed,
+        index[keep],
+        params,
+        fingers,
+        found.note[keep],
+        found.extra[keep].reset_index(drop=True),
+        found.sequence[keep].reset_index(drop=True),
+        "depth" if found.is_sequence_script else "distance+depth",
+        skipped,
+        columns=found.columns,
+    )
+    octave_text = (
+        f"note letters without an octave are octave {note_octave} "
+        f"(C{note_octave} = MIDI {12 * (note_octave + 1)}; middle C is C4 = 60)"
+    )
+    return records, "named-keys", f"{octave_text}; {finger_text}"
+
+
+def _named_finger(params: pd.DataFrame, finger: str | None) -> tuple[str, str]:
+    """The finger of a named-key log: given, or inferred from its vacuum or its press depths."""
+    if finger is not None:
+        return finger, f"finger {finger} (given)"
+    if params["vacuum_kpa"].notna().any():
+        return "soft", "finger soft (the log records a vacuum)"
+    depth = params["depth_m"].dropna()
+    if depth.empty:
+        return "unknown", "finger unknown (no vacuum, no depth logged; give --finger)"
+    median = float(depth.median())
+    for name, limits in FINGER_ENVELOPES.items():
+        if limits["depth_m"].contains(median):
+            return name, (
+                f"finger {name} (inferred: median press depth {median * 1000:.1f} mm lies in the "
+                f"{name} finger's depth range; give --finger to override)"
             )
-        else:
-            kept.append(record)
-    if not kept:
-        raise InputError(f"no line fits layout {chosen.name}", where)
-    trials, midi, n_sessions = _build_tables(kept, chosen)
-    skipped.sort(key=lambda s: s.line)
-    fingers = Counter(chosen.finger_of(r.control) for r in kept)
-    return KeystrokeLog(
-        path=path,
-        layout=chosen.name,
-        finger=fingers.most_common(1)[0][0],
-        trials=trials,
-        midi=midi,
-        skipped=tuple(skipped),
-        header=headers[0][1] if headers else {},
-        headers=tuple(headers),
-        n_sessions=n_sessions,
+    return (
+        "unknown",
+        f"finger unknown (median depth {median * 1000:.1f} mm fits no finger; give --finger)",
     )
 
 
-def _read_lines(path: Path) -> list[str]:
-    where = str(path)
-    data = read_input_bytes(path, "a text log")
-    lines = data.count(b"\n") + (not data.endswith(b"\n"))
-    if lines > MAX_LOG_LINES:
-        raise InputError(f"has {lines:,} lines; a keystroke log is read up to {MAX_LOG_LINES:,} "
-                         "lines (split it into sessions)", where)
-    try:
-        # utf-8-sig: a byte-order mark (Windows editors add one) is not part of the first record.
-        text = data.decode("utf-8-sig")
-    except UnicodeDecodeError:
-        raise InputError("not a text log (not UTF-8 text)", where) from None
-    return text.splitlines()
+def _kinds(parsed: LogLines) -> np.ndarray:
+    """Per record: True for a control-list record, False for a named-key one."""
+    out = np.zeros(len(parsed), dtype=bool)
+    if parsed.n_positional and not parsed.n_named:
+        out[:] = True
+    elif parsed.n_positional:
+        named_any = np.zeros(len(parsed), dtype=bool)
+        for column in parsed.named.values():
+            named_any |= np.array([v is not None for v in column])
+        out = ~named_any
+    return out
 
 
-def _parse_lines(
-    lines: list[str],
-) -> tuple[list[_Record], list[tuple[int, dict[str, Any]]], list[SkippedLine]]:
-    records: list[_Record] = []
-    headers: list[tuple[int, dict[str, Any]]] = []
-    skipped: list[SkippedLine] = []
-    header_acc: float | None = None
-    after_header = False
-    for number, raw in enumerate(lines, start=1):
-        text = raw.strip()
-        if not text:
-            continue
-        try:
-            value = _literal(text)
-        except ValueError as exc:
-            skipped.append(SkippedLine(number, f"not a Python literal ({exc})"))
-            continue
-        if not isinstance(value, dict):
-            skipped.append(SkippedLine(number, f"not a dict but a {type(value).__name__}"))
-            continue
-        if "control" not in value and "midi" not in value:
-            headers.append((number, value))
-            acc: Any = value.get("acc")
-            header_acc = float(acc) if _is_number(acc) else None
-            after_header = True
-            continue
-        try:
-            control = _control(value.get("control"))
-            events = _events(value.get("midi"))
-        except ValueError as exc:
-            skipped.append(SkippedLine(number, str(exc)))
-            continue
-        records.append(_Record(number, control, events, header_acc, after_header))
-        after_header = False
-    return records, headers, skipped
+def _rows(values: np.ndarray, offsets: np.ndarray, counts: np.ndarray, n: int) -> np.ndarray:
+    """Control lists of length n as a (lines, n) array."""
+    starts = offsets[:-1][counts == n]
+    if not starts.size:
+        return np.zeros((0, n))
+    rows: np.ndarray = values[starts[:, None] + np.arange(n)[None, :]]
+    return rows
 
 
-def _literal(text: str) -> Any:
-    """`ast.literal_eval`, also accepting the bare `nan`/`inf` that Python prints for floats."""
-    try:
-        tree = ast.parse(text, mode="eval")
-    except (SyntaxError, ValueError, MemoryError, RecursionError) as exc:
-        raise ValueError(getattr(exc, "msg", None) or type(exc).__name__) from None
-    try:
-        return ast.literal_eval(_Floats().visit(tree))
-    except (ValueError, TypeError, SyntaxError, MemoryError, RecursionError) as exc:
-        raise ValueError(str(exc).split("\n")[0] or type(exc).__name__) from None
-
-
-class _Floats(ast.NodeTransformer):
-    """Turns the names `nan` and `inf` into float constants (nothing else is evaluated)."""
-
-    def visit_Name(self, node: ast.Name) -> ast.AST:
-        if node.id in ("nan", "inf"):
-            return ast.copy_location(ast.Constant(float(node.id)), node)
-        return node
-
-
-def _is_number(value: Any) -> bool:
-    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
-
-
-def _control(value: Any) -> tuple[float, ...]:
-    if not isinstance(value, list | tuple) or not value:
-        raise ValueError("'control' is not a non-empty list")
-    if not all(_is_number(v) for v in value):
-        raise ValueError(f"'control' holds a non-number: {value!r:.80}")
-    return tuple(float(v) for v in value)
-
-
-def _events(value: Any) -> tuple[tuple[int, int, int, int], ...]:
-    if not isinstance(value, list | tuple):
-        raise ValueError("'midi' is not a list")
-    events = []
-    for i, item in enumerate(value):
-        try:
-            message, timestamp = item
-            status, note, velocity = message[0], message[1], message[2]
-        except (TypeError, ValueError, IndexError, KeyError):
-            raise ValueError(
-                f"MIDI event {i} is not [[status, note, velocity, 0], timestamp_ms]"
-            ) from None
-        numbers = (status, note, velocity, timestamp)
-        if not all(isinstance(v, int) and not isinstance(v, bool) for v in numbers):
-            raise ValueError(f"MIDI event {i} holds a non-integer: {item!r:.80}")
-        if not (
-            0 <= status <= 255 and 0 <= note <= 127 and 0 <= velocity <= 127 and timestamp >= 0
-        ):
-            raise ValueError(f"MIDI event {i} is out of range: {item!r:.80}")
-        events.append((status, note, velocity, timestamp))
-    return tuple(events)
-
-
-def _sessions(records: list[_Record]) -> list[list[int]]:
-    """Record indices per MIDI clock session: a header line or a timestamp going back starts one."""
-    sessions: list[list[int]] = []
-    latest = -1
-    for i, record in enumerate(records):
-        times = [e[3] for e in record.events]
-        restart = bool(times) and min(times) < latest
-        if not sessions or record.after_header or restart:
-            sessions.append([])
-            latest = -1
-        sessions[-1].append(i)
-        if times:
-            latest = max(latest, max(times))
-    return sessions
-
-
-def _motion_times(params: list[dict[str, float]]) -> tuple[np.ndarray, np.ndarray]:
-    """Predicted moveL down + hold + up time and down time per line (0 where not computable)."""
-    cycle = np.zeros(len(params))
-    down = np.zeros(len(params))
-    for i, p in enumerate(params):
-        travel = p["distance_m"] + (0.0 if math.isnan(p["depth_m"]) else p["depth_m"])
-        try:
-            t_down = move_profile(travel, p["down_velocity_mps"], p["acceleration_mps2"]).duration_s
-            t_up = move_profile(travel, p["up_velocity_mps"], p["up_acceleration_mps2"]).duration_s
-        except (ValueError, TypeError):
-            continue  # NaN or non-physical values: no prediction for this line
-        hold = 0.0 if math.isnan(p["hold_s"]) else p["hold_s"]
-        if math.isfinite(t_down + t_up + hold):
-            cycle[i], down[i] = t_down + hold + t_up, t_down
-    return cycle, down
-
-
-def _build_tables(records: list[_Record], layout: Layout) -> tuple[pd.DataFrame, pd.DataFrame, int]:
-    params = [layout.params(r.control, r.header_acc) for r in records]
-    read_size = max(1, max(len(r.events) for r in records))  # an empty line always drained
-    cycle, down = _motion_times(params)
-    press_of: dict[int, Press] = {}
-    unread: set[int] = set()  # lines whose silence is not proven (no drain line after them)
-    order = 0
-    sessions = _sessions(records)
-    session_of = {}
-    for s, members in enumerate(sessions):
-        events = []
-        for local, i in enumerate(members):
-            session_of[i] = s
-            for status, note, velocity, t_ms in records[i].events:
-                events.append(LogEvent(t_ms, status, note, velocity, local, order))
-                order += 1
-        presses = group_presses(events)
-        drains = [len(records[i].events) < read_size for i in members]
-        idx = np.array(members)
-        presses, keys = assign_presses(presses, len(members), drains, cycle[idx], down[idx])
-        for found, key in zip(presses, keys, strict=True):
-            press_of[members[key]] = found
-        last_drain = max((k for k, drained in enumerate(drains) if drained), default=-1)
-        unread.update(members[k] for k in range(last_drain + 1, len(members)))
-    notes = Counter(e.note for p in press_of.values() for e in p.events)
-    usual_note = notes.most_common(1)[0][0] if notes else None
-    rows = []
-    midi_rows = []
-    for i, record in enumerate(records):
-        press = press_of.get(i)
-        row: dict[str, Any] = {"index": i, "source_line": record.line, "session": session_of[i]}
-        row.update(_outcome(press, usual_note))
-        row["error"] = None
-        if press is None and i in unread:
-            row["status"], row["error"] = "failed", UNREAD_ERROR
-        row["finger"] = layout.finger_of(record.control)
-        row.update(params[i])
-        rows.append(row)
-        if press is not None:
-            members = sessions[session_of[i]]
-            for e in press.events:
-                midi_rows.append({
-                    "index": i, "source_line": records[members[e.record]].line, "session": session_of[i],
-                    "t_s": e.t_ms / 1000.0, "type": e.kind, "note": e.note, "velocity": e.velocity, "status": e.status,
-                })  # fmt: skip
-    trials = pd.DataFrame(rows, columns=list(TRIAL_COLUMNS))
-    trials["note"] = trials["note"].astype("Int64")
-    trials["n_note_on"] = trials["n_note_on"].astype("int64")
-    midi = pd.DataFrame(midi_rows, columns=list(MIDI_COLUMNS))
-    return trials, midi, len(sessions)
-
-
-def _outcome(press: Press | None, usual_note: int | None) -> dict[str, Any]:
-    """MIDI outcome of one keystroke: silent when no note-on was assigned to it."""
-    ons = [e for e in press.events if e.kind == "note_on"] if press else []
-    if not ons:
-        offs = [e for e in press.events if e.kind == "note_off"] if press else []
-        return {
-            "status": "silent", "note": offs[0].note if offs else usual_note, "on_velocity": math.nan,
-            "off_velocity": float(offs[-1].velocity) if offs else math.nan, "t_on_s": math.nan,
-            "t_off_s": offs[-1].t_ms / 1000.0 if offs else math.nan, "midi_hold_s": math.nan, "n_note_on": 0,
-        }  # fmt: skip
-    assert press is not None
-    first = ons[0]
-    offs = [e for e in press.events if e.kind == "note_off" and e.t_ms >= first.t_ms]
-    t_on = first.t_ms / 1000.0
-    t_off = offs[-1].t_ms / 1000.0 if offs else math.nan
-    return {
-        "status": "ok", "note": first.note, "on_velocity": float(first.velocity),
-        "off_velocity": float(offs[-1].velocity) if offs else math.nan, "t_on_s": t_on, "t_off_s": t_off,
-        "midi_hold_s": t_off - t_on, "n_note_on": len(ons),
-    }  # fmt: skip
+def _other_kind(parsed: LogLines, kept: np.ndarray, reason: str) -> list[SkippedLine]:
+    lines = np.frombuffer(parsed.line, dtype=np.int64)
+    return [SkippedLine(int(lines[i]), reason) for i in np.flatnonzero(~kept)]

@@ -10,17 +10,21 @@ leave it empty). Empty cells are occlusions (NaN). Positions are converted to me
 Vertical axis: Motive is Y-up by default, so the downward displacement of a marker is
 −(Y − Y_rest); `up_axis` selects another axis for a Z-up export.
 
-Marker roles (arm, fingertip, key) come from a mapping (a rig file's `mocap.markers`) or are
-inferred from the persistent markers (coverage ≥ `min_coverage`; shorter tracks are ghosts):
-the arm marker sits on the end effector above the finger, so it is the highest; of the rest the
-key moves least (its travel is limited by the key bed, and it stays still between presses);
-the fingertip is then the lowest remaining marker (markers higher up the finger are ignored).
-With only two persistent markers they are arm and fingertip (no piano in view).
+Motive gives a marker a new ID after an occlusion; the pieces of such a split track are joined
+first (`mocap_tracks`), so a marker seen in three pieces of 40/30/30 % of the frames is one
+persistent marker, not three ghosts. Markers present on fewer than `min_coverage` of the frames
+after joining are ghosts and dropped.
+
+Marker roles (arm, fingertip, key) come from a mapping (a rig file's `mocap.markers`, `--marker`)
+or are inferred from the persistent markers only where the evidence is clear (`mocap_roles`):
+the arm is the highest marker, the key the least moving of the rest, the fingertip the lowest
+remaining one; when two markers fit a role about equally, the import stops and names them.
 """
 
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io
 import math
 from dataclasses import dataclass, field
@@ -31,10 +35,11 @@ import numpy.typing as npt
 import pandas as pd
 
 from pianobot.errors import InputError
+from pianobot.io.mocap_roles import assign_roles
+from pianobot.io.mocap_tracks import Join, Stitched, Track, stitch
 from pianobot.io.source import read_input_bytes
 
 FloatArray = npt.NDArray[np.float64]
-ROLES = ("arm", "fingertip", "key")
 _UNITS_M = {
     "meters": 1.0,
     "metres": 1.0,
@@ -65,6 +70,15 @@ class MocapTake:
     roles: dict[str, str]
     up_axis: str = "y"
     keystrokes: pd.DataFrame = field(default_factory=pd.DataFrame)
+    pieces: dict[str, list[str]] = field(default_factory=dict)  # marker -> the track pieces joined into it
+    joins: tuple[Join, ...] = ()
+    stitch_doubts: tuple[str, ...] = ()  # pieces left unjoined because two tracks fit them equally
+
+    @property
+    def stitched(self) -> dict[str, list[str]]:
+        """Persistent markers whose track came in several pieces, with the pieces' names."""
+        kept = set(self.markers["marker"].unique()) if not self.markers.empty else set()
+        return {name: pieces for name, pieces in self.pieces.items() if len(pieces) > 1 and name in kept}
 
     def up_m(self, marker: str) -> FloatArray:
         """The marker's coordinate along the up axis on every frame (NaN when missing)."""
@@ -132,41 +146,45 @@ def _read_mocap(
     t = data[:, 1] if data.shape[1] > 1 else np.arange(data.shape[0]) / frame_rate
     _refuse_time_going_back(t, where)
     t = np.where(np.isfinite(t), t, np.arange(data.shape[0]) / frame_rate)
-    frames = np.arange(data.shape[0])
-    coverage: dict[str, float] = {}
-    pieces = []
+    stitched = stitch(_tracks(data, columns, scale), t)
+    coverage = {track.name: track.frames.size / data.shape[0] for track in stitched.chains}
+    kept = [track for track in stitched.chains if coverage[track.name] >= min_coverage]
+    if not kept:
+        best = max(coverage.values(), default=0.0)
+        raise InputError(
+            f"no marker is present on at least {min_coverage:.0%} of frames, even with split tracks "
+            f"joined (best {best:.0%})",
+            where,
+        )
+    long = pd.concat(
+        [pd.DataFrame({"t_s": t[tr.frames], "frame_index": tr.frames, "marker": tr.name,
+                       "x": tr.xyz[:, 0], "y": tr.xyz[:, 1], "z": tr.xyz[:, 2]}) for tr in kept],
+        ignore_index=True,
+    )  # fmt: skip
+    take = MocapTake(path, meta, frame_rate, t, long, coverage, {}, up_axis, pieces=stitched.pieces,
+                     joins=tuple(stitched.joins), stitch_doubts=_doubts(stitched, kept))  # fmt: skip
+    roles = assign_roles([tr.name for tr in kept], take.up_m, markers or {}, stitched.chain_of, where)
+    return dataclasses.replace(take, roles=roles)
+
+
+def _doubts(stitched: Stitched, kept: list[Track]) -> tuple[str, ...]:
+    """Pieces left unjoined because two persistent markers continue them about equally well."""
+    names = {track.name for track in kept}
+    return tuple(f"{piece} continues {a} and {b} about equally well; left unjoined"
+                 for piece, a, b in stitched.ambiguous if a in names or b in names)  # fmt: skip
+
+
+def _tracks(data: npt.NDArray[np.float64], columns: dict[str, dict[str, int]], scale: float) -> list[Track]:
+    """Every named marker's positions on the frames where all its axes are present."""
+    tracks = []
     for name, axes in columns.items():
         xyz = np.full((data.shape[0], 3), np.nan)
         for axis, col in axes.items():
             if col < data.shape[1]:
                 xyz[:, _AXES[axis]] = data[:, col] * scale
-        present = np.isfinite(xyz).all(axis=1)
-        coverage[name] = float(present.mean())
-        if coverage[name] < min_coverage:
-            continue
-        keep = present
-        pieces.append(
-            pd.DataFrame(
-                {
-                    "t_s": t[keep],
-                    "frame_index": frames[keep],
-                    "marker": name,
-                    "x": xyz[keep, 0],
-                    "y": xyz[keep, 1],
-                    "z": xyz[keep, 2],
-                }
-            )
-        )
-    if not pieces:
-        best = max(coverage.values(), default=0.0)
-        raise InputError(
-            f"no marker is present on at least {min_coverage:.0%} of frames (best {best:.0%})",
-            where,
-        )
-    long = pd.concat(pieces, ignore_index=True)
-    take = MocapTake(path, meta, frame_rate, t, long, coverage, {}, up_axis)
-    roles = assign_roles(take, markers or {}, where)
-    return MocapTake(path, meta, frame_rate, t, long, coverage, roles, up_axis)
+        present = np.flatnonzero(np.isfinite(xyz).all(axis=1))
+        tracks.append(Track(name, present.astype(np.int64), xyz[present]))
+    return tracks
 
 
 def _refuse_time_going_back(t: FloatArray, where: str) -> None:
@@ -248,29 +266,3 @@ def _data(lines: list[str], n_columns: int, where: str) -> npt.NDArray[np.float6
         if not pd.api.types.is_numeric_dtype(frame[column]):
             frame[column] = pd.to_numeric(frame[column].astype(object), errors="coerce")
     return frame.to_numpy(dtype=np.float64, na_value=np.nan)
-
-
-def assign_roles(take: MocapTake, given: dict[str, str], where: str) -> dict[str, str]:
-    """Roles from `given` (validated) plus inferred ones for the missing roles (module docstring)."""
-    names = list(dict.fromkeys(take.markers["marker"]))
-    for role, name in given.items():
-        if role not in ROLES:
-            raise InputError(f"marker role should be one of {ROLES}, got {role!r}", "--marker")
-        if name not in names:
-            known = ", ".join(names[:8])
-            raise InputError(
-                f"marker {name!r} is not a persistent marker of the take ({known})", "--marker"
-            )
-    roles = dict(given)
-    free = [n for n in names if n not in roles.values()]
-    height = {n: float(np.nanmedian(take.up_m(n))) for n in free}
-    motion = {n: float(np.subtract(*np.nanpercentile(take.up_m(n), [99, 1]))) for n in free}
-    if "arm" not in roles and free:
-        roles["arm"] = max(free, key=lambda n: (height[n], motion[n]))
-        free.remove(roles["arm"])
-    if "key" not in roles and len(free) >= 2:
-        roles["key"] = min(free, key=lambda n: motion[n])
-        free.remove(roles["key"])
-    if "fingertip" not in roles and free:
-        roles["fingertip"] = min(free, key=lambda n: height[n])
-    return {role: roles[role] for role in ROLES if role in roles}

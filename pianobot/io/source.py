@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import stat
+from collections.abc import Iterator
 from pathlib import Path
 
 from pianobot.errors import InputError
@@ -13,11 +14,8 @@ from pianobot.errors import InputError
 MAX_INPUT_BYTES = 1 << 30
 
 
-def read_input_bytes(path: Path, kind: str) -> bytes:
-    """The bytes of a text file the user named; `kind` says what it should be ("a force capture").
-
-    Raises InputError naming the file when it is missing, unreadable, empty or binary.
-    """
+def check_input_file(path: Path, kind: str) -> None:
+    """InputError unless `path` is a regular file of at most MAX_INPUT_BYTES (checked before reading)."""
     where = str(path)
     try:
         info = os.stat(path)
@@ -32,6 +30,15 @@ def read_input_bytes(path: Path, kind: str) -> bytes:
     if info.st_size > MAX_INPUT_BYTES:
         raise InputError(f"is {info.st_size / 2**30:.1f} GiB; {kind} is read up to "
                          f"{MAX_INPUT_BYTES / 2**30:.0f} GiB", where)
+
+
+def read_input_bytes(path: Path, kind: str) -> bytes:
+    """The bytes of a text file the user named; `kind` says what it should be ("a force capture").
+
+    Raises InputError naming the file when it is missing, unreadable, empty or binary.
+    """
+    where = str(path)
+    check_input_file(path, kind)
     try:
         data = path.read_bytes()
     except FileNotFoundError:
@@ -43,3 +50,36 @@ def read_input_bytes(path: Path, kind: str) -> bytes:
     if b"\x00" in data:
         raise InputError(f"not {kind} (binary data)", where)
     return data
+
+
+def text_lines(path: Path, kind: str) -> Iterator[tuple[int, str]]:
+    """The numbered lines (1-based, line ends removed) of a UTF-8 text file, read as a stream.
+
+    Memory stays bounded however long the file is. A UTF-8 byte-order mark is dropped. Raises
+    InputError naming the file (and line) when it is missing, unreadable, binary, not UTF-8
+    text, or holds nothing but blank lines.
+    """
+    where = str(path)
+    check_input_file(path, kind)
+    try:
+        handle = path.open("rb")
+    except FileNotFoundError:
+        raise InputError("no such file", where) from None
+    except OSError as exc:
+        raise InputError(f"cannot read the file ({exc.strerror or exc})", where) from None
+    blank = True
+    with handle:
+        for number, raw in enumerate(handle, start=1):
+            if b"\x00" in raw:
+                raise InputError(f"not {kind} (binary data on line {number})", where)
+            if number == 1 and raw.startswith(b"\xef\xbb\xbf"):
+                raw = raw[3:]
+            try:
+                text = raw.decode("utf-8")
+            except UnicodeDecodeError:
+                raise InputError(f"not {kind} (line {number} is not UTF-8 text)", where) from None
+            text = text.rstrip("\r\n")
+            blank = blank and not text.strip()
+            yield number, text
+    if blank:
+        raise InputError("the file is empty", where)

@@ -24,6 +24,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import lru_cache
 from typing import Literal
 
 import numpy as np
@@ -226,8 +227,13 @@ def check_press(press: Press) -> None:
             raise ValueError(f"{name} should be > 0 for a two-segment press, got {value}.")
 
 
+@lru_cache(maxsize=4096)
 def press_timing(press: Press, profile: ProfileKind = "trapezoid") -> PressTiming:
-    """Exact phase times of a press: (fast approach,) down, hold, up (, fast retract)."""
+    """Exact phase times of a press: (fast approach,) down, hold, up (, fast retract).
+
+    Cached: a sweep asks for the same press's timing several times per keystroke (the result
+    is immutable).
+    """
     check_press(press)
     travel = press.distance_m + press.depth_m
     a = _acceleration(press, profile)

@@ -8,6 +8,11 @@ motion capture with µm noise, dropped frames and a clock offset, and the digita
 Every keystroke is a pure function of (config, seed, press, vacuum, note, key): its noise comes
 from an RNG seeded by (seed, key), and stiffness drift is a hash of (seed, block), so a resumed
 run reproduces an uninterrupted one exactly.
+
+A sweep knows its next keystrokes in advance: `prefetch` simulates their true trajectories in
+one vectorised batch (sorted by length, so short keystrokes do not run to the longest one's
+horizon), and `keystroke` then only observes. The simulator gives a keystroke the same samples
+alone and in any batch, so prefetching never changes a result.
 """
 
 from __future__ import annotations
@@ -96,6 +101,7 @@ class WorldKeystroke:
     midi: tuple[PianoEvent, ...]
     key_speed_at_trigger_mps: float
     max_key_travel_m: float
+    rel_t_s: FloatArray | None = None  # the truth samples' times from motion start (exact grid)
 
     @property
     def silent(self) -> bool:
@@ -123,6 +129,8 @@ class World:
         self.model = self.config.build_model()
         self._readout = self.model.readout_params()
         self._mocap_offset_s = self.config.mocap.clock_offset_s + self.model.mocap_delay_s
+        self._truth: dict[tuple[Press, float, str], _Truth] = {}  # prefetched keystrokes
+        self._uses: dict[tuple[Press, float, str], int] = {}  # how often each will be asked for
 
     @classmethod
     def default(cls, seed: int = 0) -> World:
@@ -168,6 +176,38 @@ class World:
         """
         return press_duration_s(press, "trapezoid") + self.config.settle_s
 
+    def prefetch(
+        self, presses: Sequence[Press], vacuum_kpa: npt.ArrayLike,
+        blocks: Sequence[str | None] | None = None, *, lanes: int = 64,
+    ) -> None:
+        """Simulate the true trajectories of keystrokes about to be asked for, in batches.
+
+        The next `keystroke` of each (press, vacuum, block) takes its truth from here instead
+        of simulating it alone (bit for bit the same samples). Earlier prefetched keystrokes
+        that were never asked for are dropped, so memory holds one block at most.
+        """
+        p = np.broadcast_to(np.asarray(vacuum_kpa, dtype=np.float64), (len(presses),))
+        bl = list(blocks) if blocks is not None else [None] * len(presses)
+        wanted: dict[tuple[Press, float, str], str | None] = {}
+        uses: dict[tuple[Press, float, str], int] = {}
+        for press, vacuum, block in zip(presses, p.tolist(), bl, strict=True):
+            k = (press, vacuum, self._block_key(vacuum, block))
+            wanted[k] = block
+            uses[k] = uses.get(k, 0) + 1  # the same keystroke twice (e.g. repeats): same truth
+        self._uses = uses
+        truth = {k: v for k, v in self._truth.items() if k in wanted}
+        todo = sorted((k for k in wanted if k not in truth), key=lambda k: self._horizon_s(k[0]))
+        for start in range(0, len(todo), lanes):  # similar lengths share a batch
+            chunk = todo[start : start + lanes]
+            batch = self.simulate([k[0] for k in chunk], [k[1] for k in chunk],
+                                  [wanted[k] for k in chunk])
+            for j, k in enumerate(chunk):
+                own = output_count(self._horizon_s(k[0]), self.config.out_dt_s)
+                truth[k] = _Truth(batch.t_s[:own].copy(), batch.x0_m[j, :own].copy(),
+                                  batch.x1_m[j, :own].copy(), batch.x2_m[j, :own].copy(),
+                                  batch.v2_mps[j, :own].copy())
+        self._truth = truth
+
     def keystroke(
         self,
         press: Press,
@@ -183,8 +223,32 @@ class World:
         `key` seeds the observation noise (use the trial id); `block` labels the stiffness-drift
         block (default: the vacuum level, i.e. one drift per level and world).
         """
+        return self._observe(self._take(press, vacuum_kpa, block), press, note, t0_s, key)
+
+    def settled_truth(
+        self, press: Press, vacuum_kpa: float, *, block: str | None = None
+    ) -> SettledTruth:
+        """The true trajectory `keystroke` would observe (from motion start until the arm is
+        back and the key at rest), without the observation: no noise, no MIDI."""
+        truth = self._take(press, vacuum_kpa, block)
+        duration = _rest_time(truth.t_s, truth.x1_m, truth.x2_m,
+                              press_duration_s(press, self.model.arm_profile))
+        keep = truth.t_s <= duration + 1e-9
+        return SettledTruth(float(duration), truth.t_s[keep], truth.x0_m[keep], truth.x2_m[keep])
+
+    def _take(self, press: Press, vacuum_kpa: float, block: str | None) -> _Truth:
+        """A keystroke's truth: prefetched (once per time it was prefetched for) or simulated."""
+        k = (press, float(vacuum_kpa), self._block_key(vacuum_kpa, block))
+        cached = self._truth.get(k)
+        if cached is not None:
+            self._uses[k] = left = self._uses.get(k, 1) - 1
+            if left <= 0:
+                del self._truth[k]
+            return cached
         batch = self.simulate([press], vacuum_kpa, [block])
-        return self._observe(batch, 0, press, note, t0_s, key)
+        own = output_count(self._horizon_s(press), self.config.out_dt_s)
+        return _Truth(batch.t_s[:own], batch.x0_m[0, :own], batch.x1_m[0, :own],
+                      batch.x2_m[0, :own], batch.v2_mps[0, :own])
 
     def keystrokes(
         self,
@@ -201,20 +265,25 @@ class World:
         batch = self.simulate(presses, vacuum_kpa, blocks)
         t0 = np.broadcast_to(np.asarray(t0_s, dtype=np.float64), (n,))
         ks = list(keys) if keys is not None else [""] * n
-        return [self._observe(batch, j, presses[j], note, float(t0[j]), ks[j]) for j in range(n)]
+        out = []
+        for j in range(n):
+            own = output_count(self._horizon_s(presses[j]), self.config.out_dt_s)
+            truth = _Truth(batch.t_s[:own], batch.x0_m[j, :own], batch.x1_m[j, :own],
+                           batch.x2_m[j, :own], batch.v2_mps[j, :own])
+            out.append(self._observe(truth, presses[j], note, float(t0[j]), ks[j]))
+        return out
 
     def _observe(
-        self, batch: SimBatch, j: int, press: Press, note: int, t0_s: float, key: str
+        self, truth: _Truth, press: Press, note: int, t0_s: float, key: str
     ) -> WorldKeystroke:
         cfg = self.config
         rng = np.random.default_rng([self.seed, _seed_of(key)])
         t_end = press_duration_s(press, self.model.arm_profile)
-        own = output_count(self._horizon_s(press), cfg.out_dt_s)
-        duration = _rest_time(batch.t_s[:own], batch.x1_m[j, :own], batch.x2_m[j, :own], t_end)
-        keep = batch.t_s <= duration + 1e-9
-        t = batch.t_s[keep]
-        x0, x1, x2 = batch.x0_m[j, keep], batch.x1_m[j, keep], batch.x2_m[j, keep]
-        v2 = batch.v2_mps[j, keep]
+        duration = _rest_time(truth.t_s, truth.x1_m, truth.x2_m, t_end)
+        keep = truth.t_s <= duration + 1e-9
+        t = truth.t_s[keep]
+        x0, x1, x2 = truth.x0_m[keep], truth.x1_m[keep], truth.x2_m[keep]
+        v2 = truth.v2_mps[keep]
 
         # Read on the run clock, so timestamps fall on its 1 ms MIDI ticks.
         midi, _ = key_events(t0_s + t, x2, self._readout, note=note, rng=rng)
@@ -255,7 +324,29 @@ class World:
             midi=tuple(midi),
             key_speed_at_trigger_mps=speed,
             max_key_travel_m=float(np.max(x2)),
+            rel_t_s=t,
         )
+
+
+@dataclass(frozen=True)
+class SettledTruth:
+    """A keystroke's true arm and key positions until it is at rest (times from motion start)."""
+
+    duration_s: float
+    rel_t_s: FloatArray
+    truth_x0_m: FloatArray
+    truth_x2_m: FloatArray
+
+
+@dataclass(frozen=True)
+class _Truth:
+    """One keystroke's true samples up to its own horizon (time from motion start)."""
+
+    t_s: FloatArray
+    x0_m: FloatArray
+    x1_m: FloatArray
+    x2_m: FloatArray
+    v2_mps: FloatArray
 
 
 def _rest_time(

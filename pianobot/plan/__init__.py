@@ -7,6 +7,7 @@
 
 from __future__ import annotations
 
+from pianobot.durations import format_duration
 from pianobot.plan.envelope import Violation, check_envelope, contact_speeds_mps, raise_for_errors
 from pianobot.plan.expand import expand
 from pianobot.plan.labtime import (
@@ -17,7 +18,7 @@ from pianobot.plan.labtime import (
     move_durations_s,
 )
 from pianobot.plan.size import DEFAULT_MAX_TRIALS, check_size, count_trials, estimated_lab_time_s
-from pianobot.plan.summary import Coverage, PlanSummary, ViolationGroup, format_duration, summarize
+from pianobot.plan.summary import Coverage, PlanSummary, ViolationGroup, summarize
 from pianobot.plan.trial import PLAN_COLUMNS, Trial, plan_frame, trial_columns
 from pianobot.spec import resolved_spec_dict, spec_sha256
 

@@ -16,7 +16,6 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from scipy.stats import qmc
 
 from pianobot.errors import InputError
 from pianobot.plan.envelope import check_envelope, raise_for_errors
@@ -146,6 +145,9 @@ def _samples(spec: ExperimentSpec) -> Columns:
     rng = np.random.default_rng(sampling_seed)
     n = sweep.samples
     if isinstance(sweep, LhsSweep) and items:
+        # scipy.stats takes a second to import: only Latin-hypercube plans pay for it.
+        from scipy.stats import qmc
+
         # One stratum per sample along every axis: the hypercube's unit coordinates.
         unit = qmc.LatinHypercube(d=len(items), seed=rng).random(n)
     else:

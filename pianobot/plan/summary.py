@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from pianobot.durations import format_duration
 from pianobot.plan.approach import as_specified, with_fast_approach
 from pianobot.plan.envelope import Violation
 from pianobot.plan.labtime import LabTime, lab_time
@@ -164,15 +164,3 @@ def summarize(
             "fast": lab_time(with_fast_approach(trials, rig), rig),
         },
     )
-
-
-def format_duration(seconds: float) -> str:
-    """`42 s`, `3 min 05 s`, `1 h 23 min`; `-` when unknown (NaN)."""
-    if not math.isfinite(seconds):
-        return "-"
-    s = int(round(seconds))
-    if s < 60:
-        return f"{seconds:.1f} s" if seconds < 10 else f"{s} s"
-    if s < 3600:
-        return f"{s // 60} min {s % 60:02d} s"
-    return f"{s // 3600} h {s % 3600 // 60:02d} min"

@@ -1,4 +1,7 @@
-"""The run report's figures (matplotlib, Agg): each function takes data and returns a Figure."""
+"""The run report's figures (matplotlib, Agg): each function takes data and returns a Figure.
+
+Every axis carries its quantity and unit (`reports.style`), lengths and speeds in mm.
+"""
 
 from __future__ import annotations
 
@@ -10,8 +13,17 @@ import pandas as pd
 from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 
-from pianobot.analysis.segment import STAGE_NAMES, segment_keystroke
+from pianobot.analysis.segment import STAGE_NAMES
 from pianobot.physics.msd import MSDParams, frequency_response
+from pianobot.reports.stage_residuals import StageResiduals, stage_edges
+from pianobot.reports.style import (
+    FULL_WIDTH_IN,
+    label_axes,
+    new_figure,
+    quantity,
+    resonance_label,
+    style_axes,
+)
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -21,19 +33,24 @@ STAGE_MARGIN = 0.05
 STAGE_COLOURS = ("#fdf1c7", "#d9f0d3", "#e5d8f0", "#fcdcc5", "#d5ecf2")
 #: Above this many settings per panel the silent map stops printing counts (they would collide).
 MAX_LABELLED_SETTINGS = 40
+#: Up to this many distinct values a parameter is a grid: its coverage plot has a bar per level.
+MAX_LEVEL_BARS = 12
 
 
 def velocity_vs_speed(trials: pd.DataFrame) -> Figure:
     """On-velocity against arm down speed, one series per vacuum level."""
-    fig = Figure(figsize=(6, 4))
-    ax = fig.add_subplot()
+    fig = new_figure(6, 4)
+    ax = style_axes(fig.add_subplot())
+    speed = quantity("down_velocity_mps")
     sounded = trials.dropna(subset=["on_velocity"])
     for vacuum, group in sounded.groupby("vacuum_kpa"):
-        ax.plot(group["down_velocity_mps"], group["on_velocity"], "o", ms=3, label=f"{vacuum:g} kPa")
-    ax.set_xlabel("arm down velocity (m/s)")
-    ax.set_ylabel("MIDI on-velocity")
+        ax.plot(speed.shown(group["down_velocity_mps"]), group["on_velocity"], "o", ms=3,
+                label=f"{vacuum:g} kPa")
+    label_axes(ax, speed, quantity("on_velocity"))
     if not sounded.empty:
-        ax.legend(fontsize=7)
+        ax.legend(fontsize=7, title="vacuum", title_fontsize=7)
+    else:
+        ax.text(0.5, 0.5, "no sounded keystroke", transform=ax.transAxes, ha="center", va="center")
     return fig
 
 
@@ -65,25 +82,27 @@ def silent_map(trials: pd.DataFrame) -> Figure:
     depths = sorted(table["depth_m"].unique()) if "depth_m" in table and not table.empty else [math.nan]
     if len(depths) > 6:  # a continuous depth sweep: one panel, depth not separated
         table, depths = table.assign(depth_m=math.nan), [math.nan]
-    fig = Figure(figsize=(min(3.2 * len(depths), 12) + 1.0, 3.6))
+    fig = new_figure(min(3.2 * len(depths), FULL_WIDTH_IN + 2.0) + 1.0, 3.6)
     axes = fig.subplots(1, len(depths), sharex=True, sharey=True, squeeze=False)[0]
+    speed = quantity("down_velocity_mps")
     scatter = None
     for ax, depth in zip(axes, depths, strict=True):
         rows = table if math.isnan(depth) else table[table["depth_m"] == depth]
         most = max(float(table["keystrokes"].max()), 1.0) if not table.empty else 1.0
         size = (30.0 + 170.0 * rows["keystrokes"].to_numpy(float) / most) if not rows.empty else np.zeros(0)
-        scatter = ax.scatter(rows["down_velocity_mps"], rows["vacuum_kpa"], c=rows["silent_fraction"], s=size,
+        style_axes(ax)
+        scatter = ax.scatter(speed.shown(rows["down_velocity_mps"]), rows["vacuum_kpa"], c=rows["silent_fraction"], s=size,
                              cmap="coolwarm", vmin=0.0, vmax=1.0, edgecolors="k", linewidths=0.5)
         if 0 < len(rows) <= MAX_LABELLED_SETTINGS:
             for v, p, k, n in rows[["down_velocity_mps", "vacuum_kpa", "silent", "keystrokes"]].to_numpy(float):
-                ax.annotate(f"{k:.0f}/{n:.0f}", (v, p), xytext=(0, 9), textcoords="offset points",
+                ax.annotate(f"{k:.0f}/{n:.0f}", (speed.shown(v), p), xytext=(0, 9), textcoords="offset points",
                             ha="center", fontsize=7)
         title = "" if table.empty else "all depths" if math.isnan(depth) else (
             "depth not recorded" if depth < 0 else f"depth {1e3 * depth:g} mm")
         ax.set_title(title, fontsize=9)
-        ax.set_xlabel("arm down velocity (m/s)")
+        ax.set_xlabel(speed.heading)
         ax.margins(0.15)
-    axes[0].set_ylabel("vacuum (kPa)")
+    axes[0].set_ylabel(quantity("vacuum_kpa").heading)
     if table.empty:
         axes[0].set_axis_off()
         axes[0].text(0.5, 0.5, "no MIDI outcome recorded", transform=axes[0].transAxes, ha="center", va="center")
@@ -93,12 +112,22 @@ def silent_map(trials: pd.DataFrame) -> Figure:
 
 
 def coverage(trials: pd.DataFrame, columns: list[str]) -> Figure:
-    """Histogram of each varying parameter (what the run covered)."""
-    fig = Figure(figsize=(3 * max(len(columns), 1), 2.6))
+    """Histogram of each varied parameter (what the run covered), three panels to a row."""
+    per_row = min(max(len(columns), 1), 3)
+    n_rows = max(1, math.ceil(len(columns) / per_row))
+    fig = new_figure(FULL_WIDTH_IN, 2.3 * n_rows)
     for i, name in enumerate(columns):
-        ax = fig.add_subplot(1, max(len(columns), 1), i + 1)
-        ax.hist(trials[name].dropna(), bins=15)
-        ax.set_xlabel(name, fontsize=8)
+        ax = style_axes(fig.add_subplot(n_rows, per_row, i + 1))
+        q = quantity(name)
+        values = q.shown(trials[name].dropna().astype(float))
+        counts = values.round(9).value_counts().sort_index()
+        if len(counts) <= MAX_LEVEL_BARS:  # a grid: one bar per level, not bins between levels
+            gaps = np.diff(counts.index.to_numpy(float))
+            width = 0.6 * float(gaps.min()) if gaps.size else 1.0
+            ax.bar(counts.index.to_numpy(float), counts.to_numpy(), width=width, color="C0")
+        else:
+            ax.hist(values, bins=20, color="C0", edgecolor="white", lw=0.5)
+        label_axes(ax, q, "keystrokes")
     return fig
 
 
@@ -115,23 +144,6 @@ def _window(t_s: FloatArray, edges: FloatArray, x0: FloatArray, x2: FloatArray) 
     return max(lo - pad, float(t_s[0])), min(hi + pad, float(t_s[-1]))
 
 
-def _stage_edges(t: FloatArray, x0: FloatArray, x1: FloatArray, x2: FloatArray, distance_m: float) -> FloatArray:
-    """The five stages' boundaries of traces that are relative to rest.
-
-    `segment_keystroke` takes each trace's rest level from its first 5 % of samples, but a sweep's
-    traces start at motion start (the arm is already moving), which would move the rest level
-    into the approach. The traces here are relative to rest already, so that rest is shown to
-    it explicitly: zeros for the length of 5 % of the trace before the first sample.
-    """
-    pad = t.size // 19 + 3
-    dt = float(np.median(np.diff(t))) if t.size > 1 else 1.0
-    tt = np.r_[t[0] - dt * np.arange(pad, 0, -1), t]
-    rest = np.zeros(pad)
-    found = segment_keystroke(tt, np.r_[rest, x2], x0_m=np.r_[rest, x0], x1_m=np.r_[rest, x1],
-                              distance_m=distance_m if distance_m > 0 else None)
-    return np.asarray(np.maximum(found.boundaries_s, t[0]), dtype=np.float64)
-
-
 def stages(t_s: FloatArray, x0: FloatArray, x1: FloatArray, x2: FloatArray,
            x1_model: FloatArray | None, x2_model: FloatArray | None, *, distance_m: float = 0.0) -> Figure:
     """One keystroke, measured (solid) and model (dashed), with the study's five stages shaded.
@@ -142,11 +154,13 @@ def stages(t_s: FloatArray, x0: FloatArray, x1: FloatArray, x2: FloatArray,
     model traces end where the model does (lift-off: NaN from there, see `model_window`).
     """
     t = np.asarray(t_s, dtype=np.float64)
-    edges = _stage_edges(t, x0, x1, x2, distance_m)
+    edges = stage_edges(t, x0, x1, x2, distance_m)
     lo, hi = _window(t, edges, x0, x2)
     show = (t >= lo) & (t <= hi)
-    fig = Figure(figsize=(8, 6.2))
+    fig = Figure(figsize=(FULL_WIDTH_IN, 6.2))
     top, bottom = fig.subplots(2, 1, sharex=True, gridspec_kw={"height_ratios": [3, 2]})
+    style_axes(top)
+    style_axes(bottom)
     d_mm = 1e3 * distance_m
     top.plot(t[show], 1e3 * x0[show] - d_mm, color="0.3", lw=1.2, label="arm x0")
     top.plot(t[show], 1e3 * x1[show] - d_mm, color="C0", lw=1.2, label="fingertip x1")
@@ -183,30 +197,44 @@ def stages(t_s: FloatArray, x0: FloatArray, x1: FloatArray, x2: FloatArray,
 
 
 def bode(params: MSDParams, levels_kpa: list[float]) -> Figure:
-    """|X2/X0| and phase of the model at the given vacuum levels."""
-    fig = Figure(figsize=(6, 5))
-    mag, ph = fig.add_subplot(2, 1, 1), fig.add_subplot(2, 1, 2)
+    """|X2/X0| and phase of the model at the given vacuum levels, each resonance peak marked."""
+    fig = new_figure(FULL_WIDTH_IN * 0.8, 5.0)
+    mag, ph = fig.subplots(2, 1, sharex=True)
+    style_axes(mag)
+    style_axes(ph)
     f = np.geomspace(0.5, 200, 400)
-    for p in levels_kpa:
-        gain, phase = frequency_response(params.at(p), f)
-        mag.loglog(f, gain, label=f"{p:g} kPa")
-        ph.semilogx(f, np.degrees(phase))
-    mag.set_ylabel("|X2/X0|")
-    ph.set_ylabel("phase (deg)")
-    ph.set_xlabel("f (Hz)")
+    for i, p in enumerate(levels_kpa):
+        lp = params.at(p)
+        gain, phase = frequency_response(lp, f)
+        label, peak_hz, peak_gain = resonance_label(lp, f"{p:g} kPa")
+        mag.loglog(f, gain, color=f"C{i % 10}", label=label)
+        if math.isfinite(peak_hz):
+            mag.plot([peak_hz], [peak_gain], "o", ms=4, color=f"C{i % 10}")
+        ph.semilogx(f, np.degrees(phase), color=f"C{i % 10}")
+    mag.set_ylabel("key/arm amplitude |X2/X0| (mm/mm)")
+    label_axes(ph, "frequency (Hz)", "phase (°)")
     mag.legend(fontsize=7)
     return fig
 
 
-def residuals(t_s: FloatArray, residual_m: FloatArray) -> Figure:
-    """Key-trajectory residuals (measured − model) of every keystroke."""
-    fig = Figure(figsize=(6, 3))
-    ax = fig.add_subplot()
-    for row in residual_m:
-        ax.plot(t_s, 1e3 * row, lw=0.6, alpha=0.6)
-    measured = np.flatnonzero(np.isfinite(residual_m).any(axis=0))
-    if measured.size:
-        ax.set_xlim(float(t_s[measured[0]]), float(t_s[measured[-1]]))
-    ax.set_xlabel("time since motion start (s)")
-    ax.set_ylabel("x2 residual (mm)")
+def residual_band(found: StageResiduals) -> Figure:
+    """Median key residual and the 10–90 % band over keystrokes, stage by stage."""
+    fig = new_figure(FULL_WIDTH_IN, 3.4)
+    ax = style_axes(fig.add_subplot())
+    for i in range(len(STAGE_NAMES)):
+        ax.axvspan(i, i + 1, color=STAGE_COLOURS[i], alpha=0.5, lw=0)
+    ax.axhline(0.0, color="0.4", lw=0.8)
+    if found.empty:
+        ax.text(2.5, 0.0, "no keystroke with both a measured and a modelled key trace", ha="center")
+    else:
+        ax.fill_between(found.phase, 1e3 * found.low_m, 1e3 * found.high_m, color="C3", alpha=0.25, lw=0,
+                        label="10–90 % of keystrokes")
+        ax.plot(found.phase, 1e3 * found.median_m, color="C3", lw=1.6, label="median")
+        ax.legend(fontsize=7, loc="best")
+    ax.set_xlim(0, len(STAGE_NAMES))
+    ax.set_xticks([i + 0.5 for i in range(len(STAGE_NAMES))],
+                  [f"{i + 1} {name}" for i, name in enumerate(STAGE_NAMES)])
+    ax.tick_params(axis="x", length=0)
+    label_axes(ax, "keystroke stage (time scaled to each stage's length)",
+               "key x2 residual, measured − model (mm)")
     return fig

@@ -11,6 +11,7 @@ from __future__ import annotations
 import base64
 import html
 import io
+import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,16 +28,26 @@ from matplotlib.figure import Figure  # noqa: E402
 from pianobot.output import write_output  # noqa: E402
 
 _STYLE = """
-body { font-family: sans-serif; margin: 2em auto; max-width: 1100px; color: #222; }
-h1 { border-bottom: 2px solid #444; padding-bottom: .2em; }
+body { font-family: -apple-system, "Segoe UI", Helvetica, Arial, sans-serif; margin: 2em auto;
+       max-width: 1000px; padding: 0 1em; color: #222; line-height: 1.45; counter-reset: figure; }
+h1 { margin-bottom: .1em; }
+p.lead { color: #444; margin-top: .2em; }
+nav { font-size: .9em; margin: 1em 0 2em; padding: .5em 1em; background: #f6f6f6; }
+nav a { margin-right: 1.2em; color: #234; }
 h2 { margin-top: 2em; border-bottom: 1px solid #aaa; }
 table.data { border-collapse: collapse; margin: 1em 0; font-size: 0.9em; }
-table.data th, table.data td { border: 1px solid #bbb; padding: .25em .6em; text-align: right; }
+table.data caption { text-align: left; font-weight: bold; padding-bottom: .3em; }
+table.data th, table.data td { border: 1px solid #ccc; padding: .25em .6em; text-align: right; }
 table.data th { background: #eee; }
-table.data td.text { text-align: left; }
-figure { margin: 1em 0; }
-figcaption { font-size: 0.9em; color: #555; }
+table.data td.text { text-align: left; overflow-wrap: anywhere; min-width: 6em; }
+div.table { max-width: 100%; overflow-x: auto; }
+figure { margin: 1.5em 0; counter-increment: figure; }
+figure img { max-width: 100%; height: auto; }
+figcaption { font-size: 0.9em; color: #333; max-width: 48em; }
+figcaption::before { content: "Figure " counter(figure) ". "; font-weight: bold; }
+figcaption .shows { display: block; color: #555; margin-top: .2em; }
 p.note { color: #555; font-style: italic; }
+p.warning { color: #8a4b00; }
 """
 
 
@@ -49,11 +60,17 @@ def figure_to_data_uri(fig: Figure, *, dpi: int = 100) -> str:
     return f"data:image/png;base64,{encoded}"
 
 
-def figure_html(fig: Figure, caption: str = "", *, dpi: int = 100) -> str:
-    """An `<figure>` element with the figure embedded as a PNG."""
+def figure_html(fig: Figure, caption: str = "", *, shows: str = "", dpi: int = 100) -> str:
+    """A numbered `<figure>` with the figure embedded as a PNG.
+
+    Args:
+        caption: what the figure is ("On-velocity against arm speed, per vacuum level").
+        shows: one sentence on what it shows and how to read it, printed under the caption.
+    """
     uri = figure_to_data_uri(fig, dpi=dpi)
     alt = html.escape(caption or "figure", quote=True)
-    cap = f"<figcaption>{html.escape(caption)}</figcaption>" if caption else ""
+    what = f'<span class="shows">What this shows: {html.escape(shows)}</span>' if shows else ""
+    cap = f"<figcaption>{html.escape(caption)}{what}</figcaption>" if caption or shows else ""
     return f'<figure><img src="{uri}" alt="{alt}">{cap}</figure>'
 
 
@@ -97,9 +114,10 @@ def table_html(
     ident = f' id="{html.escape(table_id, quote=True)}"' if table_id else ""
     cap = f"<caption>{html.escape(caption)}</caption>" if caption else ""
     head = "<tr>" + "".join(f"<th>{c}</th>" for c in head_cells) + "</tr>"
+    # The wrapper scrolls a table too wide for the page on its own, never the whole page.
     return (
-        f'<table class="data"{ident}>{cap}<thead>{head}</thead>'
-        f"<tbody>{''.join(rows)}</tbody></table>"
+        f'<div class="table"><table class="data"{ident}>{cap}<thead>{head}</thead>'
+        f"<tbody>{''.join(rows)}</tbody></table></div>"
     )
 
 
@@ -109,9 +127,9 @@ def mapping_table_html(items: Iterable[tuple[str, Any]], *, caption: str = "") -
     return table_html(frame, caption=caption)
 
 
-def paragraph(text: str, *, note: bool = False) -> str:
-    """Escaped paragraph; `note=True` renders it as a muted remark."""
-    cls = ' class="note"' if note else ""
+def paragraph(text: str, *, note: bool = False, warning: bool = False) -> str:
+    """Escaped paragraph; `note=True` renders it as a muted remark, `warning=True` stands out."""
+    cls = ' class="note"' if note else ' class="warning"' if warning else ""
     return f"<p{cls}>{html.escape(text)}</p>"
 
 
@@ -133,17 +151,25 @@ class Section:
 
 
 def _slug(title: str) -> str:
-    return "".join(ch if ch.isalnum() else "-" for ch in title.lower()).strip("-") or "section"
+    """`Keystroke stages: measured and model` → `keystroke-stages-measured-and-model`."""
+    return re.sub(r"[^0-9a-z]+", "-", title.lower()).strip("-") or "section"
 
 
 def page_html(title: str, sections: Sequence[Section], *, subtitle: str = "") -> str:
-    """Assemble a complete, self-contained HTML document (inline CSS only, no external resources)."""
-    sub = paragraph(subtitle, note=True) if subtitle else ""
+    """Assemble a complete, self-contained HTML document (inline CSS only, no external resources).
+
+    The title and a one-line subtitle head the page, then links to each section.
+    """
+    sub = f'<p class="lead">{html.escape(subtitle)}</p>' if subtitle else ""
+    links = "".join(f'<a href="#{html.escape(_slug(s.title), quote=True)}">{html.escape(s.title)}</a>'
+                    for s in sections)
+    nav = f"<nav>{links}</nav>" if len(sections) > 1 else ""
     body = "".join(s.render() for s in sections)
     return (
         "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+        "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">"
         f"<title>{html.escape(title)}</title><style>{_STYLE}</style></head>"
-        f"<body><h1>{html.escape(title)}</h1>{sub}{body}</body></html>\n"
+        f"<body><h1>{html.escape(title)}</h1>{sub}{nav}{body}</body></html>\n"
     )
 
 

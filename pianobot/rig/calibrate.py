@@ -17,7 +17,8 @@ from pathlib import Path
 from typing import Any
 
 from pianobot.rig.errors import DeviceUnavailable, RigError
-from pianobot.rig.ur5_link import failure, open_control, open_receive, read_status
+from pianobot.rig.ur5_session import open_links
+from pianobot.rig.ur5_status import failure, read_status
 from pianobot.spec.loader import load_rig, write_rig_calibration
 
 NOTE_NAMES = ("C", "C#", "D", "D#", "E", "F", "F#", "G", "G#", "A", "A#", "B")
@@ -65,6 +66,7 @@ def calibrate_reference_pose(
     now: Callable[[], datetime] = _utc_now,
     receive_factory: Any = None,
     control_factory: Any = None,
+    dashboard_factory: Any = None,
 ) -> Calibration:
     """Freedrive, let the operator place the fingertip, write the TCP pose into the rig file.
 
@@ -79,10 +81,10 @@ def calibrate_reference_pose(
             "calibration needs an operator at a terminal to place the finger (stdin is not a TTY)"
         )
     ur5 = rig.ur5
-    receive = open_receive(ur5.host, ur5.frequency_hz, ur5.connect_timeout_s, receive_factory)
-    control = None
+    links = open_links(ur5, receive_factory=receive_factory, control_factory=control_factory,
+                       dashboard_factory=dashboard_factory)
+    receive, control = links.receive, links.control
     try:
-        control = open_control(ur5.host, ur5.frequency_hz, ur5.connect_timeout_s, control_factory)
         status = read_status(receive, control)
         if status.stopped or status.link_down:
             raise failure("calibration", status)
@@ -103,7 +105,7 @@ def calibrate_reference_pose(
         finally:
             control.endTeachMode()
     finally:
-        for link in (control, receive):
+        for link in (control, receive, links.dashboard):
             _close(link)
     when = now()
     warnings = []

@@ -2,8 +2,14 @@
 
 Each device is checked in its own thread with the rig's short connect timeout, so a rig with
 nothing on the network answers within a few seconds with one reason per device. Nothing is
-commanded: the arm is read over RTDE receive only (the control interface would take the arm
-over), the vacuum I/O is connected but no output is set.
+commanded: the arm is read over RTDE receive and the dashboard only (the control interface
+would take the arm over), the vacuum I/O is connected but no output is set.
+
+The arm's report is what decides whether a run's data will be what was planned: controller
+generation and the RTDE rate that follows from it (and the rate the stream really has), the
+pendant's speed slider, the trajectory limiter and their combined scaling, safety status,
+robot mode and program state. The vacuum's report is the regulator's declared signal and span
+and, with a monitor, the pressure it reads now.
 """
 
 from __future__ import annotations
@@ -16,9 +22,17 @@ from typing import Any
 
 from pianobot.rig.clock import WallClock
 from pianobot.rig.errors import RigError
+from pianobot.rig.lab import command_span, monitor_span
 from pianobot.rig.midi import MidiKeyboard, mido_backend
-from pianobot.rig.ur5_link import open_dashboard, open_io, open_receive, read_status
-from pianobot.rig.vacuum import ANALOG_INPUT_FULL_SCALE_V, LinearCalibration
+from pianobot.rig.ur5_link import (
+    choose_rate,
+    open_dashboard,
+    open_io,
+    open_receive,
+    read_controller,
+)
+from pianobot.rig.ur5_session import slider_warnings
+from pianobot.rig.ur5_status import read_status
 from pianobot.spec.rig import RigSpec
 
 GRACE_S = 3.0  # beyond the connect timeout, a check that has not answered is reported as hung
@@ -67,25 +81,70 @@ def _disconnect(link: Any) -> None:
         pass
 
 
-def check_arm(rig: RigSpec, factory: Any = None) -> DeviceCheck:
-    """RTDE receive: robot mode, safety status, speed scaling, TCP pose."""
+def measured_rate_hz(receive: Any, window_s: float = 0.1) -> float | None:
+    """The rate the RTDE stream really has: the smallest step between distinct timestamps."""
+    seen: list[float] = []
+    deadline = time.monotonic() + window_s
+    while time.monotonic() < deadline and len(seen) < 50:
+        ts = float(receive.getTimestamp())
+        if not seen or ts != seen[-1]:
+            seen.append(ts)
+        time.sleep(0.0005)
+    steps = [b - a for a, b in zip(seen, seen[1:], strict=False) if b > a]
+    return round(1.0 / min(steps), 1) if steps else None
+
+
+def check_arm(rig: RigSpec, factory: Any = None, dashboard_factory: Any = None) -> DeviceCheck:
+    """Controller version and RTDE rate, speed slider and scaling, safety and program state."""
     assert rig.ur5 is not None
     ur5 = rig.ur5
-    receive = open_receive(ur5.host, ur5.frequency_hz, ur5.connect_timeout_s, factory)
+    dashboard = open_dashboard(ur5.host, ur5.connect_timeout_s, dashboard_factory)
     try:
-        status = read_status(receive)
-        pose = [round(float(v), 5) for v in receive.getActualTCPPose()]
+        controller = read_controller(dashboard, ur5.host)
+        rate, warnings = choose_rate(ur5.frequency_hz, controller)
+        program = _answer(dashboard, "programState")
+        remote = _answer(dashboard, "isInRemoteControl") if controller.major >= 5 else None
+        receive = open_receive(ur5.host, rate, ur5.connect_timeout_s, factory)
+        try:
+            status = read_status(receive)
+            pose = [round(float(v), 5) for v in receive.getActualTCPPose()]
+            measured = measured_rate_hz(receive)
+        finally:
+            _disconnect(receive)
     finally:
-        _disconnect(receive)
-    details = {**status.to_dict(), "tcp_pose": pose}
-    summary = f"{ur5.host}: {status.text()}"
+        _disconnect(dashboard)
+    warnings += slider_warnings(ur5, status)
+    source = "rig file" if ur5.frequency_hz is not None else f"{controller.generation} default"
+    details = {
+        **status.to_dict(), "controller": controller.to_dict(), "rtde_rate_hz": rate,
+        "rtde_rate_source": source, "measured_rate_hz": measured, "dashboard_program": program,
+        "remote_control": remote, "tcp_pose": pose, "warnings": warnings,
+    }
+    summary = (f"{ur5.host}: {controller.generation} (PolyScope {controller.polyscope_version}), "
+               f"RTDE {rate:g} Hz ({source}"
+               + (f", streaming at {measured:g} Hz" if measured else "") + f"); {status.text()}")
+    if status.speed_scaling_combined is not None:
+        summary += f"; combined scaling {status.speed_scaling_combined:.2f}"
     if status.stopped:
         return DeviceCheck("arm", False, f"{summary}; clear the stop on the teach pendant", details)
     if status.robot_mode is not None and status.robot_mode != 7:
         return DeviceCheck("arm", False, f"{summary}; power on and release the brakes", details)
-    if status.speed_scaling is not None and status.speed_scaling < ur5.max_speed_scaling_warning:
-        summary += " (speed slider below 100 %: every move will be stretched)"
+    if status.paused:
+        return DeviceCheck("arm", False, f"{summary}; a program is paused on the teach pendant: "
+                           "stop it before a run", details)
+    if remote is False:
+        return DeviceCheck("arm", False, f"{summary}; switch the pendant to Remote Control",
+                           details)
+    for warning in warnings:
+        summary += f" — warning: {warning}"
     return DeviceCheck("arm", True, summary, details)
+
+
+def _answer(client: Any, method: str) -> Any:
+    try:
+        return getattr(client, method)()
+    except Exception:  # CB3 controllers lack some queries: report what answers
+        return None
 
 
 def check_dashboard(rig: RigSpec, factory: Any = None) -> DeviceCheck:
@@ -97,20 +156,16 @@ def check_dashboard(rig: RigSpec, factory: Any = None) -> DeviceCheck:
         for key, method in (
             ("polyscope_version", "polyscopeVersion"), ("robot_model", "getRobotModel"),
             ("serial_number", "getSerialNumber"), ("robot_mode", "robotmode"),
-            ("safety_status", "safetystatus"), ("remote_control", "isInRemoteControl"),
+            ("safety_status", "safetystatus"), ("program_state", "programState"),
         ):
-            try:
-                details[key] = getattr(client, method)()
-            except Exception:  # CB3 controllers lack some queries: report what answers
-                details[key] = None
+            details[key] = _answer(client, method)
     finally:
         _disconnect(client)
     version = details.get("polyscope_version") or "unknown PolyScope version"
     summary = f"{version}, {details.get('robot_model') or 'unknown model'}"
-    if details.get("safety_status"):
-        summary += f", {details['safety_status']}"
-    if details.get("remote_control") is False:
-        summary += " (not in remote control: ur_rtde cannot take the arm)"
+    for key in ("safety_status", "program_state"):
+        if details.get(key):
+            summary += f", {details[key]}"
     return DeviceCheck("dashboard", True, summary, details)
 
 
@@ -139,7 +194,7 @@ def check_calibration(rig: RigSpec) -> DeviceCheck:
 
 
 def check_vacuum(rig: RigSpec, io_factory: Any = None, receive_factory: Any = None) -> DeviceCheck:
-    """The regulator's I/O link and, if wired, its read-back."""
+    """The regulator's signal and span, its I/O link and, if wired, its monitor reading."""
     vac = rig.vacuum
     if vac.mode == "manual":
         return DeviceCheck("vacuum", True, "manual: the operator sets the regulator when asked",
@@ -147,22 +202,32 @@ def check_vacuum(rig: RigSpec, io_factory: Any = None, receive_factory: Any = No
     if vac.mode == "sim":
         return DeviceCheck("vacuum", True, "no regulator (levels are recorded, not driven)",
                            {"mode": "sim"})
-    assert rig.ur5 is not None
-    ur5 = rig.ur5
+    assert rig.ur5 is not None and vac.regulator is not None
+    ur5, regulator = rig.ur5, vac.regulator
+    command = command_span(regulator)
     _disconnect(open_io(ur5.host, ur5.connect_timeout_s, io_factory))
-    details: dict[str, Any] = {"mode": "ur-analog", "output_channel": vac.output_channel,
-                               "input_channel": vac.input_channel}
-    summary = f"RTDE I/O reachable, setpoint on analog output {vac.output_channel}"
-    if vac.input_channel is not None:
-        receive = open_receive(ur5.host, ur5.frequency_hz, ur5.connect_timeout_s, receive_factory)
+    details: dict[str, Any] = {
+        "mode": "ur-analog", "output_channel": regulator.output_channel,
+        "signal": regulator.signal, "signal_span": list(regulator.signal_span),
+        "kpa_span": list(regulator.kpa_span),
+    }
+    summary = (f"RTDE I/O reachable; regulator on analog output {regulator.output_channel} "
+               f"({regulator.signal} domain): {command.text()}")
+    if vac.monitor is not None:
+        monitor = monitor_span(vac.monitor, regulator)
+        # -1: ur_rtde picks the rate from the controller version (a reading needs no more).
+        receive = open_receive(ur5.host, -1.0, ur5.connect_timeout_s, receive_factory)
         try:
-            volts = float(getattr(receive, f"getStandardAnalogInput{vac.input_channel}")())
+            value = float(getattr(receive, f"getStandardAnalogInput{vac.monitor.input_channel}")())
         finally:
             _disconnect(receive)
-        calibration = LinearCalibration(vac.kpa_at_ratio_0, vac.kpa_at_ratio_1)
-        kpa = calibration.kpa(volts / ANALOG_INPUT_FULL_SCALE_V)
-        details.update(read_back_v=volts, read_back_kpa=round(kpa, 2))
-        summary += f"; read-back {kpa:.1f} kPa ({volts:.2f} V on input {vac.input_channel})"
+        kpa = monitor.kpa_for(value)
+        details.update(monitor_channel=vac.monitor.input_channel, monitor=monitor.text(),
+                       monitor_value=value, monitor_kpa=round(kpa, 2))
+        summary += (f"; monitor on analog input {vac.monitor.input_channel} ({monitor.text()}) "
+                    f"reads {value:.2f} {monitor.unit} = {kpa:.1f} kPa")
+    else:
+        summary += "; no monitor: levels are not read back"
     return DeviceCheck("vacuum", True, summary, details)
 
 
@@ -202,7 +267,7 @@ def check_rig(
     if rig.kind != "ur5" or rig.ur5 is None or rig.midi is None:
         raise ValueError("rig check needs a lab rig (kind: ur5) with ur5: and midi: sections")
     checks: dict[str, Callable[[], DeviceCheck]] = {
-        "arm": lambda: check_arm(rig, receive_factory),
+        "arm": lambda: check_arm(rig, receive_factory, dashboard_factory),
         "dashboard": lambda: check_dashboard(rig, dashboard_factory),
         "calibration": lambda: check_calibration(rig),
         "vacuum": lambda: check_vacuum(rig, io_factory, receive_factory),

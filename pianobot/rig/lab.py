@@ -16,9 +16,10 @@ from pianobot.rig.errors import DeviceUnavailable, RigError
 from pianobot.rig.midi import MidiKeyboard, mido_backend
 from pianobot.rig.protocols import Arm, Clock, Keyboard, Mocap, Vacuum
 from pianobot.rig.ur5 import DEFAULT_KEYBOARD_AXIS, UR5Arm
-from pianobot.rig.ur5_link import open_dashboard, open_io
-from pianobot.rig.vacuum import AnalogVacuum, CommandedVacuum, LinearCalibration, ManualVacuum
-from pianobot.spec.rig import RigSpec
+from pianobot.rig.ur5_link import open_io
+from pianobot.rig.ur5_session import close_link
+from pianobot.rig.vacuum import AnalogVacuum, CommandedVacuum, ManualVacuum, SignalSpan
+from pianobot.spec.rig import RegulatorCommand, RegulatorMonitor, RigSpec
 
 
 class LabDevices(NamedTuple):
@@ -92,6 +93,7 @@ def open_lab_devices(
             clock=run_clock,
             receive_factory=factories.receive,
             control_factory=factories.control,
+            dashboard_factory=factories.dashboard,
             io=io,
             geometry=keyboard_geometry(rig_spec),
             keyboard_axis=keyboard_axis(rig_spec),
@@ -99,16 +101,17 @@ def open_lab_devices(
             travel_acceleration_mps2=rig_spec.travel.acceleration_mps2,
         )
         opened.append(arm)
-        arm.dashboard = _optional_dashboard(ur5.host, ur5.connect_timeout_s, factories.dashboard)
         vacuum: Vacuum
         if io is not None:
+            assert vac.regulator is not None  # the rig file's validation guarantees it
             vacuum = AnalogVacuum(
-                LinearCalibration(vac.kpa_at_ratio_0, vac.kpa_at_ratio_1),
+                command_span(vac.regulator),
                 io=io,
                 receive=arm.receive,
                 clock=run_clock,
-                output_channel=vac.output_channel,
-                input_channel=vac.input_channel,
+                output_channel=vac.regulator.output_channel,
+                monitor=None if vac.monitor is None else monitor_span(vac.monitor, vac.regulator),
+                input_channel=None if vac.monitor is None else vac.monitor.input_channel,
                 settle_timeout_s=vac.settle_timeout_s,
                 tolerance_kpa=vac.tolerance_kpa,
             )
@@ -125,18 +128,22 @@ def open_lab_devices(
     return LabDevices(arm=arm, vacuum=vacuum, keyboard=keyboard, mocap=None, clock=run_clock)
 
 
-def _optional_dashboard(host: str, timeout_s: float, factory: Any) -> Any:
-    """The dashboard client, only for the versions in run metadata: None if it will not answer."""
-    try:
-        return open_dashboard(host, timeout_s, factory)
-    except RigError:
-        return None
+def command_span(regulator: RegulatorCommand) -> SignalSpan:
+    """The regulator's command signal ↔ pressure map from the rig file."""
+    return SignalSpan(regulator.signal, regulator.signal_span, regulator.kpa_span)
+
+
+def monitor_span(monitor: RegulatorMonitor, regulator: RegulatorCommand) -> SignalSpan:
+    """The monitor output's signal ↔ pressure map (the command's pressures unless given)."""
+    return SignalSpan(monitor.signal, monitor.signal_span, monitor.kpa_span or regulator.kpa_span)
 
 
 def _close(device: Any) -> None:
-    close = getattr(device, "close", None) or getattr(device, "disconnect", None)
+    close = getattr(device, "close", None)
+    if close is None:  # a ur_rtde object
+        close_link(device)
+        return
     try:
-        if close is not None:
-            close()
+        close()
     except Exception:  # closing after a failure must not hide that failure
         pass

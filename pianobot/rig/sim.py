@@ -29,7 +29,7 @@ Fault randomness is seeded by (rig seed, key), so it too repeats exactly for a r
 from __future__ import annotations
 
 import hashlib
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -141,8 +141,9 @@ class SimArm:
                         "above its re-trigger depth",)
         stroke = state.world.keystroke(press, state.vacuum_kpa, note=note, t0_s=t0_s, key=state.key)
         self._publish(stroke)
-        t_up_s = t0_s + _arm_back_s(stroke, press)
-        state.key_ready_s[note] = t0_s + _key_ready_s(stroke, _retrigger_m(state.world))
+        back_s, ready_s = stroke_times(stroke, press, _retrigger_m(state.world))
+        t_up_s = t0_s + back_s
+        state.key_ready_s[note] = t0_s + ready_s
         state.clock.sleep(t_up_s - state.clock.now())
         arm = Trace(t_s=_f64(stroke.arm_t_s), x0_m=_f64(stroke.arm_x0_m), source="arm")
         return PressRecord(t_start_s=t0_s, t_end_s=t_up_s, arm=arm, warnings=warnings)
@@ -256,13 +257,27 @@ class SimMocap:
         return {"kind": "sim-mocap", "mocap_drop_prob": self.state.faults.mocap_drop_prob}
 
 
-def _arm_back_s(stroke: Any, press: Press) -> float:
+def stroke_times(stroke: Any, press: Press, retrigger_m: float) -> tuple[float, float]:
+    """(arm back at its hover height, key above its re-trigger depth), from motion start.
+
+    A stroke that carries these already (`stroke.times`, a parallel sweep's timeline) gives
+    them; otherwise they come from its truth trace. Both are read on the truth's own grid of
+    times from motion start, so they do not depend on where the stroke falls on the run clock.
+    """
+    times = getattr(stroke, "times", None)
+    if times is not None:
+        return float(times[0]), float(times[1])
+    rel = getattr(stroke, "rel_t_s", None)
+    t_s = _f64(rel) if rel is not None else _f64(stroke.truth_t_s) - float(stroke.t0_s)
+    return _arm_back_s(stroke, press, t_s), _key_ready_s(stroke, retrigger_m, t_s)
+
+
+def _arm_back_s(stroke: Any, press: Press, t_s: FloatArray) -> float:
     """Motion start → the arm is back at its hover height (commanded profile, or later if it lags).
 
     The answer is a sample time of the world's truth trace, so run-clock times stay on the
     world's output grid (a resumed run then stamps MIDI exactly like the uninterrupted one).
     """
-    t_s = _f64(stroke.truth_t_s) - float(stroke.t0_s)
     if not t_s.size:
         return float(stroke.duration_s)
     away = np.nonzero(np.abs(_f64(stroke.truth_x0_m)) > ARM_AT_REST_M)[0]
@@ -271,9 +286,8 @@ def _arm_back_s(stroke: Any, press: Press) -> float:
     return float(t_s[min(k, t_s.size - 1)])
 
 
-def _key_ready_s(stroke: Any, retrigger_m: float) -> float:
+def _key_ready_s(stroke: Any, retrigger_m: float, t_s: FloatArray) -> float:
     """Motion start → the key is above its re-trigger depth for the rest of the stroke."""
-    t_s = _f64(stroke.truth_t_s) - float(stroke.t0_s)
     deep = np.nonzero(_f64(stroke.truth_x2_m) >= retrigger_m)[0]
     if not deep.size:
         return 0.0
@@ -337,6 +351,12 @@ def build_sim_rig(rig_spec: Any, seed: int, *, world: Any | None = None) -> Rig:
     def clear_stop() -> None:
         state.stop_armed = False
 
+    def prepare(trials: Sequence[TrialLike]) -> None:
+        # The block's true trajectories in one vectorised batch; each press then only observes.
+        prefetch = getattr(state.world, "prefetch", None)
+        if callable(prefetch):
+            prefetch([t.press() for t in trials], [t.vacuum_kpa for t in trials])
+
     settle = rig_spec.settle_s
     station = Station(
         arm, vacuum, keyboard, mocap, clock,
@@ -358,6 +378,7 @@ def build_sim_rig(rig_spec: Any, seed: int, *, world: Any | None = None) -> Rig:
         station=station,
         finish=finish,
         clear_stop=clear_stop,
+        prepare=prepare,
         description={
             "seed": seed,
             "world": {"preset": "default", **rig_spec.world},

@@ -26,7 +26,7 @@ starts after lift-off, while the key is already settling, so it counts toward th
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -246,6 +246,7 @@ class Rig:
         finish: Callable[[KeystrokeResult], KeystrokeResult] | None = None,
         clear_stop: Callable[[], None] | None = None,
         description: dict[str, Any] | None = None,
+        prepare: Callable[[Sequence[TrialLike]], None] | None = None,
     ) -> None:
         self.kind = kind
         self.arm = arm
@@ -257,10 +258,32 @@ class Rig:
         self._finish = finish
         self._clear_stop = clear_stop
         self._description = dict(description or {})
+        self._prepare = prepare
 
     @property
     def simulated(self) -> bool:
         return self.kind == "sim"
+
+    @property
+    def batches(self) -> bool:
+        """Whether the rig can work out blocks of keystrokes ahead (`prepare`): the sim can."""
+        return self._prepare is not None
+
+    def prepare(self, trials: Sequence[TrialLike]) -> None:
+        """Work out the next keystrokes ahead, all at once (the sim's physics); no motion.
+
+        The keystrokes still run one by one through `keystroke`, with the same faults, retries
+        and results as without; a real rig has nothing to prepare and keeps its pace.
+        """
+        if self._prepare is not None:
+            self._prepare(trials)
+
+    @property
+    def warnings(self) -> tuple[str, ...]:
+        """What the devices found when they were opened (e.g. the UR's speed slider below
+        100 %): to be shown before any motion."""
+        return tuple(w for device in (self.arm, self.vacuum)
+                     for w in getattr(device, "warnings", ()))
 
     def keystroke(
         self, trial: TrialLike, attempt: int = 1, *, start_at_s: float | None = None,

@@ -8,15 +8,17 @@ frame z (up); the recorded trace is converted to downward displacement from the 
 everywhere else in pianobot.
 
 Motion. A press is: moveL to hover `distance` above the key, moveL down by distance + depth at
-(v_down, a), hold, moveL back up at (v_up, a). Each moveL is sent asynchronously and the
-receive interface is sampled at the controller rate meanwhile, so the trace carries controller
-timestamps; the controller clock is mapped onto the run clock by the smallest observed
-(read time − controller time), i.e. the least-delayed read.
+(v_down, a), hold, moveL back up at (v_up, a). A two-segment press (`Press.approach_m`,
+`retract_m`) sends up to four moveLs, each from rest to rest: a fast approach that stops above
+the key, the spec's move to the bottom, the spec's move up, a fast retract. Every target is
+checked against the rig's workspace box and `isPoseWithinSafetyLimits` before the first move
+is sent (SafetyViolation, nothing sent). Each moveL is a `GuardedMotion` (ur5_motion): sent only
+over live links, waited for with the extended progress call, the TCP sampled once per cycle,
+stalls judged on trajectory time so a slow speed slider never reads as one.
 
-Failures. ur_rtde answers `False` instead of raising; every False, every stall and every stop
-seen while sampling is diagnosed (`ur5_link.failure`): stops raise SafetyStop (after
-`make_safe`), a dropped link ConnectionLost. Every target is checked against the rig's workspace
-box and `isPoseWithinSafetyLimits` before it is sent (SafetyViolation, nothing sent).
+Failures are diagnosed from what the controller says (`ur5_status.failure`): stops and pauses
+raise SafetyStop (after `make_safe`), a dropped link or an ended control script ConnectionLost.
+Taking the arm and recovering it is `ur5_session`.
 """
 
 from __future__ import annotations
@@ -28,21 +30,21 @@ from typing import Any
 import numpy as np
 
 from pianobot.physics.keyboard import KeyboardGeometry
-from pianobot.physics.trajectory import Press, move_profile
-from pianobot.rig.errors import ConnectionLost, DeviceUnavailable, RigError, SafetyViolation
+from pianobot.physics.trajectory import Press, check_press
+from pianobot.rig.errors import DeviceUnavailable, RigError, SafetyViolation
 from pianobot.rig.protocols import Clock, PressRecord
-from pianobot.rig.ur5_link import failure, open_control, open_receive, read_status
+from pianobot.rig.ur5_link import ControllerInfo, quietly
+from pianobot.rig.ur5_motion import GuardedMotion, Pose, fmt_pose
+from pianobot.rig.ur5_session import Links, close_link, open_links, reconnect
+from pianobot.rig.ur5_status import read_status
 from pianobot.rig.ur5_trace import TcpRecorder
 from pianobot.spec.rig import UR5Config
 
-Pose = list[float]
 DEFAULT_KEYBOARD_AXIS = (1.0, 0.0, 0.0)  # treble towards base +x unless the rig says otherwise
 TRAVEL_VELOCITY_MPS = 0.1
 TRAVEL_ACCELERATION_MPS2 = 0.5
-STOP_DECELERATION_MPS2 = 2.0
-AT_TARGET_M = 0.0005  # a move that ends further than this from its target stopped short
 LATERAL_MOVE_M = 0.0005  # closer than this the arm is already over the key
-STALL_MARGIN_S = 2.0  # beyond the profile duration (stretched by speed scaling) a move stalled
+MISSED_WARNING_FRACTION = 0.1  # warn when the host missed more of the press's cycles than this
 
 
 class UR5Arm:
@@ -55,6 +57,8 @@ class UR5Arm:
         clock: the run clock.
         geometry: key positions relative to the reference key.
         keyboard_axis: base-frame horizontal direction from bass to treble.
+        controller, rate_hz: what `connect_to` learnt (PolyScope version, RTDE rate in use).
+        warnings: what the pre-flight check found (shown before any motion).
     """
 
     def __init__(
@@ -70,6 +74,9 @@ class UR5Arm:
         keyboard_axis: Sequence[float] = DEFAULT_KEYBOARD_AXIS,
         travel_velocity_mps: float = TRAVEL_VELOCITY_MPS,
         travel_acceleration_mps2: float = TRAVEL_ACCELERATION_MPS2,
+        controller: ControllerInfo | None = None,
+        rate_hz: float | None = None,
+        warnings: Sequence[str] = (),
     ) -> None:
         if config.reference_pose is None:
             raise DeviceUnavailable(
@@ -82,17 +89,43 @@ class UR5Arm:
                 f"keyboard axis must be a horizontal 3-vector, got {list(keyboard_axis)}"
             )
         self.config = config
-        self.control = control
-        self.receive = receive
+        self.links = Links(control, receive, dashboard, controller,
+                           rate_hz or config.frequency_hz or (controller.loop_hz if controller
+                                                              else 500.0), list(warnings))
         self.io = io
-        self.dashboard = dashboard
         self.clock = clock
         self.geometry = geometry or KeyboardGeometry(reference_note=config.reference_note)
         self.keyboard_axis = tuple(float(v) for v in axis / norm)
         self.travel_velocity_mps = travel_velocity_mps
         self.travel_acceleration_mps2 = travel_acceleration_mps2
         self.reference_pose: Pose = [float(v) for v in config.reference_pose]
-        self._period_s = 1.0 / config.frequency_hz
+        self.motion = GuardedMotion(self.links, clock)
+        self._measured_rate_hz: float | None = None
+        # Controller time → run clock offset of the last press's trace (provenance, checks).
+        self.last_trace_offset_s: float | None = None
+
+    @property
+    def control(self) -> Any:
+        return self.links.control
+
+    @property
+    def receive(self) -> Any:
+        return self.links.receive
+
+    @property
+    def dashboard(self) -> Any:
+        return self.links.dashboard
+
+    @property
+    def rate_hz(self) -> float:
+        """The RTDE rate asked of ur_rtde."""
+        assert self.links.rate_hz is not None
+        return self.links.rate_hz
+
+    @property
+    def warnings(self) -> tuple[str, ...]:
+        """What the pre-flight check found: to be shown before any motion."""
+        return tuple(self.links.warnings)
 
     @classmethod
     def connect_to(
@@ -102,25 +135,22 @@ class UR5Arm:
         clock: Clock,
         receive_factory: Any = None,
         control_factory: Any = None,
+        dashboard_factory: Any = None,
         **options: Any,
     ) -> UR5Arm:
-        """Open the RTDE receive and control interfaces (ur_rtde imported here, lazily).
-
-        Raises DeviceUnavailable naming the host and the reason when the arm cannot be reached.
-        The factories replace the SDK classes (tests pass fakes).
-        """
+        """Open the dashboard, the receive interface and, after the pre-flight check, the
+        control interface (ur_rtde imported lazily). Raises DeviceUnavailable naming the host
+        and the reason when the arm cannot be reached or taken. Factories replace the SDK
+        classes (tests pass fakes)."""
         if config.reference_pose is None:  # fail before taking control of the arm
             raise DeviceUnavailable(
                 "the UR5 has no calibrated reference pose: run `pianobot rig calibrate RIGFILE`"
             )
-        host, rate, timeout = config.host, config.frequency_hz, config.connect_timeout_s
-        receive = open_receive(host, rate, timeout, receive_factory)
-        try:
-            control = open_control(host, rate, timeout, control_factory)
-        except RigError:
-            _quietly(receive, "disconnect")
-            raise
-        return cls(config, control=control, receive=receive, clock=clock, **options)
+        links = open_links(config, receive_factory=receive_factory,
+                           control_factory=control_factory, dashboard_factory=dashboard_factory)
+        return cls(config, control=links.control, receive=links.receive,
+                   dashboard=links.dashboard, clock=clock, controller=links.controller,
+                   rate_hz=links.rate_hz, warnings=links.warnings, **options)
 
     # -- poses -------------------------------------------------------------------------------
     def key_pose(self, note: int, height_m: float = 0.0) -> Pose:
@@ -142,67 +172,15 @@ class UR5Arm:
             if not lo - 1e-9 <= value <= hi + 1e-9:
                 raise SafetyViolation(
                     f"target {axis} = {value:.4f} m is outside the workspace [{lo:g}, {hi:g}] m "
-                    f"(pose {_fmt(pose)})"
+                    f"(pose {fmt_pose(pose)})"
                 )
-        try:
-            within = self.control.isPoseWithinSafetyLimits(list(pose))
-        except RuntimeError as exc:
-            raise ConnectionLost(f"safety-limit check failed: {exc}") from exc
-        if not within:
-            raise SafetyViolation(
-                f"target {_fmt(pose)} is outside the robot's safety limits or reach"
-            )
-
-    # -- motion ------------------------------------------------------------------------------
-    def _fail(self, action: str) -> RigError:
-        return failure(action, read_status(self.receive, self.control))
+        self.motion.check_reach(pose)
 
     def _move(self, target: Pose, speed_mps: float, acceleration_mps2: float,
               recorder: TcpRecorder | None = None) -> None:
-        """One guarded asynchronous moveL; returns when the arm is at the target."""
+        """Check the target, then one guarded moveL to it."""
         self.check_target(target)
-        action = f"moveL to {_fmt(target)}"
-        start = self.receive.getActualTCPPose()
-        length_m = math.dist(start[:3], target[:3])
-        expected_s = move_profile(length_m, speed_mps, acceleration_mps2).duration_s
-        try:
-            before = self.control.getAsyncOperationProgress()
-            sent = self.control.moveL(list(target), speed_mps, acceleration_mps2, True)
-        except RuntimeError as exc:
-            raise ConnectionLost(f"{action}: {exc}") from exc
-        if not sent:
-            raise self._fail(action)
-        try:
-            self._wait_for_move(action, before, expected_s, recorder)
-            reached = self.receive.getActualTCPPose()
-        except RuntimeError as exc:  # a dead link may raise instead of answering
-            raise ConnectionLost(f"{action}: {exc}") from exc
-        if math.dist(reached[:3], target[:3]) > AT_TARGET_M:
-            error = self._fail(f"{action} (stopped {1000 * math.dist(reached[:3], target[:3]):.1f}"
-                               " mm short)")
-            raise error
-
-    def _wait_for_move(self, action: str, before: int, expected_s: float,
-                       recorder: TcpRecorder | None) -> None:
-        """Sample until the asynchronous move ends; diagnose stops, drops and stalls."""
-        t_sent = self.clock.now()
-        while True:
-            if recorder is not None:
-                recorder.sample()
-            progress = self.control.getAsyncOperationProgress()
-            if progress < 0 and progress != before:  # the script toggles -1/-2 when a move ends
-                break
-            status = read_status(self.receive, self.control)
-            if status.stopped or status.link_down:
-                raise failure(action, status)
-            # Speed scaling stretches the profile in time; beyond that (plus a margin) it stalled.
-            scaling = max(status.speed_scaling or 1.0, 0.05)
-            if self.clock.now() - t_sent > expected_s / scaling + STALL_MARGIN_S:
-                _quietly(self.control, "stopL", STOP_DECELERATION_MPS2)
-                raise self._fail(f"{action} (no end after {self.clock.now() - t_sent:.1f} s)")
-            self.clock.sleep(self._period_s / 2)
-        if recorder is not None:
-            recorder.sample()
+        self.motion.move(target, speed_mps, acceleration_mps2, recorder)
 
     def _travel(self, target: Pose) -> None:
         """Go to `target`, lifting first when the move is sideways (never drag across keys)."""
@@ -225,84 +203,116 @@ class UR5Arm:
         self._travel(self.key_pose(note, distance_m))
 
     def press(self, press: Press, note: int) -> PressRecord:
-        """Down by distance + depth at (v_down, a), hold, up at (v_up, a); the TCP trace."""
+        """Down, hold, up — as one moveL each way, or as a two-segment press (fast approach to
+        `approach_m` below the hover, the spec's move to the bottom, hold, the spec's move up to
+        `retract_m` below the hover, a fast retract) — with the TCP trace of all of it."""
+        try:
+            check_press(press)
+        except ValueError as exc:
+            raise SafetyViolation(str(exc)) from exc
         for name in ("down_velocity_mps", "up_velocity_mps", "acceleration_mps2"):
             if not getattr(press, name) > 0:
                 raise SafetyViolation(f"{name} must be > 0 for a moveL, got {getattr(press, name)}")
-        if press.depth_m < 0 or press.distance_m < 0 or press.hold_s < 0:
-            raise SafetyViolation(f"distance, depth and hold must be >= 0, got {press}")
         hover = self.key_pose(note, press.distance_m)
         bottom = self.key_pose(note, -press.depth_m)
-        self.check_target(hover)
-        self.check_target(bottom)
+        moves = self._press_moves(press, note, bottom)
+        for target, _, _ in moves:  # refuse the whole press before the first move
+            self.check_target(target)
         self._travel(hover)
         recorder = TcpRecorder(self.receive, self.clock)
+        self.motion.min_scaling = math.inf
         t_start_s = self.clock.now()
         try:
-            self._move(bottom, press.down_velocity_mps, press.acceleration_mps2, recorder)
-            hold_until_s = self.clock.now() + press.hold_s
-            while self.clock.now() < hold_until_s:
-                recorder.sample()
-                self.clock.sleep(min(self._period_s / 2, hold_until_s - self.clock.now()))
-            self._move(hover, press.up_velocity_mps, press.acceleration_mps2, recorder)
+            for target, speed, acceleration in moves:
+                self._move(target, speed, acceleration, recorder)
+                if target is bottom:
+                    self._hold(press.hold_s, recorder)
         except RigError:
             self.make_safe()
             raise
         t_end_s = self.clock.now()
+        if recorder.period_s is not None:
+            self._measured_rate_hz = 1.0 / recorder.period_s
+        self.last_trace_offset_s = recorder.offset_s
+        return PressRecord(t_start_s, t_end_s, recorder.trace(hover[2]),
+                           self._press_warnings(recorder))
+
+    def _press_moves(self, press: Press, note: int,
+                     bottom: Pose) -> list[tuple[Pose, float, float]]:
+        """(target, speed, acceleration) of each moveL of the press, in order."""
+        fast = (press.travel_velocity_mps, press.travel_acceleration_mps2)
+        spec_down = (press.down_velocity_mps, press.acceleration_mps2)
+        spec_up = (press.up_velocity_mps, press.acceleration_mps2)
+        moves: list[tuple[Pose, float, float]] = []
+        if press.approach_m > 0.0:  # stops above the key (check_press)
+            moves.append((self.key_pose(note, press.distance_m - press.approach_m), *fast))
+        moves.append((bottom, *spec_down))
+        moves.append((self.key_pose(note, press.distance_m - press.retract_m), *spec_up))
+        if press.retract_m > 0.0:  # starts at or above the key surface (check_press)
+            moves.append((self.key_pose(note, press.distance_m), *fast))
+        return moves
+
+    def _hold(self, hold_s: float, recorder: TcpRecorder) -> None:
+        hold_until_s = self.clock.now() + hold_s
+        while self.clock.now() < hold_until_s:
+            recorder.sample()
+            self.clock.sleep(min(0.5 / self.rate_hz, hold_until_s - self.clock.now()))
+
+    def _press_warnings(self, recorder: TcpRecorder) -> tuple[str, ...]:
         warnings = []
-        if recorder.min_scaling < self.config.max_speed_scaling_warning - 1e-9:
+        if self.motion.min_scaling < 1.0 - 1e-6:
             warnings.append(
-                f"speed scaling {recorder.min_scaling:.2f} < 1 stretches every move "
-                "(the arm ran slower than commanded)"
+                f"speed scaling fell to {self.motion.min_scaling:.2f} during the press (speed slider "
+                "or trajectory limiter): the arm ran slower than commanded"
             )
-        return PressRecord(t_start_s, t_end_s, recorder.trace(hover[2]), tuple(warnings))
+        samples = len(recorder.ctrl_s)
+        missed = recorder.missed_cycles
+        if samples and missed > MISSED_WARNING_FRACTION * (samples + missed):
+            warnings.append(f"the arm trace misses {missed} of {samples + missed} controller "
+                            "cycles (the host was too busy to read them)")
+        return tuple(warnings)
 
     def make_safe(self) -> None:
         """Stop, then retract `safe_lift_m` above the keys if the arm can move. Never raises."""
-        _quietly(self.control, "stopL", STOP_DECELERATION_MPS2)
+        self.motion.stop()
         try:
             status = read_status(self.receive, self.control)
-            if status.stopped or status.link_down:
-                return  # nothing may move until the link is back or an operator clears the stop
+            if status.stopped or status.link_down or status.paused or status.script_stopped:
+                return  # nothing may move until the link is back or an operator acts
             current = self.receive.getActualTCPPose()
             lift_z = max(current[2], self.reference_pose[2] + self.config.safe_lift_m)
             up = [*current[:2], min(lift_z, self.config.workspace_max_m[2]), *current[3:6]]
-            if up[2] - current[2] > 1e-5:
-                self.check_target(up)
-                self.control.moveL(up, self.travel_velocity_mps, self.travel_acceleration_mps2)
+            if up[2] - current[2] > 1e-5:  # guarded: a synchronous moveL could wait 300 s
+                self._move(up, self.travel_velocity_mps, self.travel_acceleration_mps2)
         except Exception:  # make_safe runs on the way out of failures: it must not add one
             pass
 
     # -- connection --------------------------------------------------------------------------
     def connect(self) -> None:
-        """Re-open dropped links (and the control script); ConnectionLost if that fails."""
-        for name, link in (("receive", self.receive), ("control", self.control), ("io", self.io)):
-            if link is None:
-                continue
-            try:
-                up = bool(link.isConnected())
-                if name == "control" and up:
-                    up = bool(link.isProgramRunning())
-                if not up and not link.reconnect():
-                    raise ConnectionLost(f"arm: RTDE {name} did not reconnect to {self.config.host}")
-            except RuntimeError as exc:
-                raise ConnectionLost(f"arm: RTDE {name} reconnect failed: {exc}") from exc
-        status = read_status(self.receive, self.control)
-        if status.stopped or status.link_down:
-            raise failure("reconnect", status)
+        """Re-open dropped links, re-upload an ended control script; ConnectionLost if a link
+        stays down, SafetyStop if an operator must act first."""
+        reconnect(self.links, self.io, self.config.host)
 
     def close(self) -> None:
         """Stop the control script and disconnect every link. Never raises."""
-        _quietly(self.control, "stopScript")
-        for link in (self.control, self.receive, self.io, self.dashboard):
-            _quietly(link, "disconnect")
+        if self.motion.links_up() and quietly(self.control, "isProgramRunning"):
+            quietly(self.control, "stopScript")
+        for link in (self.control, self.receive, self.io):
+            close_link(link)
+        quietly(self.dashboard, "disconnect")
 
     def describe(self) -> dict[str, Any]:
-        """Host, calibration and controller versions, for run metadata."""
+        """Host, controller, RTDE rate, calibration, for run metadata."""
+        controller = self.links.controller
         info: dict[str, Any] = {
             "kind": "ur5",
             "host": self.config.host,
-            "frequency_hz": self.config.frequency_hz,
+            "rtde_rate_hz": self.rate_hz,
+            "rtde_rate_source": "rig file" if self.config.frequency_hz is not None
+            else "controller version",
+            "measured_rate_hz": self._measured_rate_hz,
+            "controller": None if controller is None else controller.to_dict(),
+            "warnings": list(self.warnings),
             "reference_pose": self.reference_pose,
             "reference_note": self.geometry.reference_note,
             "calibrated_utc": self.config.calibrated_utc,
@@ -310,24 +320,9 @@ class UR5Arm:
             "white_pitch_m": self.geometry.white_pitch_m,
         }
         if self.dashboard is not None:
-            for key, method in (("polyscope_version", "polyscopeVersion"),
-                                ("robot_model", "getRobotModel"),
+            for key, method in (("robot_model", "getRobotModel"),
                                 ("serial_number", "getSerialNumber")):
-                value = _quietly(self.dashboard, method)
+                value = quietly(self.dashboard, method)
                 if value is not None:
                     info[key] = str(value)
         return info
-
-
-def _quietly(obj: Any, method: str, *args: Any) -> Any:
-    """Call obj.method(*args); None if obj is None or the call fails."""
-    if obj is None:
-        return None
-    try:
-        return getattr(obj, method)(*args)
-    except Exception:  # cleanup and metadata calls must never mask the real error
-        return None
-
-
-def _fmt(pose: Sequence[float]) -> str:
-    return "[" + ", ".join(f"{v:.4f}" for v in pose) + "]"

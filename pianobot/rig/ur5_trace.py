@@ -1,20 +1,27 @@
-"""The TCP trace of a press: z samples with controller timestamps, mapped onto the run clock.
+"""The TCP trace of a press: one sample per controller cycle, timestamp and pose from one package.
 
-The receive interface is polled faster than the controller rate and a sample is kept only when
-the controller timestamp changes, so the trace has one sample per controller cycle (500 Hz on a
-CB3/e-Series). The controller clock is mapped onto the run clock by the smallest observed
-(read time − controller time): a read can only come after the controller produced the sample,
-so the least-delayed read is the best estimate of the offset.
+ur_rtde's receive thread writes every field of an RTDE package under one lock, and each getter
+takes that lock; so reading the timestamp, then the pose, then the timestamp again, and keeping
+the pose only when both timestamps agree, proves the pose came from the package that timestamp
+belongs to (a read that straddles a new package is retried). Each controller cycle is kept
+once. `startFileRecording` is no alternative: its thread samples on the host's clock (a cycle
+can be written twice or skipped) and reads the fields of a row under separate locks.
+
+The controller clock is mapped onto the run clock by the smallest observed (read time −
+controller time): a read can only come after the controller produced the sample, so the
+least-delayed read is the best estimate of the offset. Cycles the host missed (a loaded
+machine) are gaps in the trace, counted in `missed_cycles`; nothing is interpolated.
 """
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
 
 from pianobot.rig.protocols import Clock, Trace
+
+READ_ATTEMPTS = 3  # a new package during every attempt: take the cycle at the next poll
 
 
 class TcpRecorder:
@@ -27,29 +34,56 @@ class TcpRecorder:
         self.ctrl_s: list[float] = []
         self.read_s: list[float] = []
         self.z_m: list[float] = []
-        self.min_scaling = math.inf
+        self.torn_reads = 0  # reads that straddled a package and were retried
 
     def sample(self) -> None:
-        ts = float(self._receive.getTimestamp())
-        if ts == self._last_ts:
+        """Record the newest controller cycle, if it is new."""
+        receive = self._receive
+        for _ in range(READ_ATTEMPTS):
+            ts = float(receive.getTimestamp())
+            if ts == self._last_ts:
+                return
+            read_s = self._clock.now()
+            pose = receive.getActualTCPPose()
+            if float(receive.getTimestamp()) != ts:
+                self.torn_reads += 1
+                continue
+            self._last_ts = ts
+            self.ctrl_s.append(ts)
+            self.read_s.append(read_s)
+            self.z_m.append(float(pose[2]))
             return
-        read_s = self._clock.now()
-        pose = self._receive.getActualTCPPose()
-        self._last_ts = ts
-        self.ctrl_s.append(ts)
-        self.read_s.append(read_s)
-        self.z_m.append(float(pose[2]))
-        scaling = self._receive.getSpeedScaling()
-        if scaling is not None:
-            self.min_scaling = min(self.min_scaling, float(scaling))
+
+    @property
+    def period_s(self) -> float | None:
+        """The controller's cycle as seen in the trace (the smallest step between samples)."""
+        if len(self.ctrl_s) < 2:
+            return None
+        steps = np.diff(np.asarray(self.ctrl_s))
+        steps = steps[steps > 0]
+        return float(np.min(steps)) if steps.size else None
+
+    @property
+    def missed_cycles(self) -> int:
+        """Controller cycles inside the trace that the host did not read in time."""
+        period = self.period_s
+        if period is None:
+            return 0
+        steps = np.diff(np.asarray(self.ctrl_s))
+        return int(np.sum(np.round(steps / period) - 1))
+
+    @property
+    def offset_s(self) -> float | None:
+        """Run-clock time minus controller time (the least-delayed read's)."""
+        if not self.ctrl_s:
+            return None
+        return float(np.min(np.asarray(self.read_s) - np.asarray(self.ctrl_s)))
 
     def trace(self, z_start_m: float) -> Trace | None:
         """Downward displacement from the hover height, on the run clock."""
-        if not self.ctrl_s:
+        offset_s = self.offset_s
+        if offset_s is None:
             return None
         ctrl = np.asarray(self.ctrl_s, dtype=np.float64)
-        # A read can only come after the controller produced the sample: the least-delayed read
-        # gives the best controller → run clock offset.
-        offset_s = float(np.min(np.asarray(self.read_s) - ctrl))
         x0_m = z_start_m - np.asarray(self.z_m, dtype=np.float64)
         return Trace(t_s=ctrl + offset_s, x0_m=x0_m, source="arm")

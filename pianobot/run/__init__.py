@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from pianobot.run.readout import SampleChunk, TrialData, read_keystroke
 from pianobot.run.records import (
+    BlockEnded,
     Record,
     RunEnded,
     RunStarted,
@@ -24,6 +25,7 @@ from pianobot.run.signals import StopControl
 from pianobot.run.sweep import PreparedSweep, RunOutcome, dry_run, prepare_sweep, run_sweep
 
 __all__ = [
+    "BlockEnded",
     "PreparedSweep",
     "Record",
     "RetryPolicy",

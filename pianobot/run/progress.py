@@ -1,105 +1,103 @@
-"""ProgressBar: a rich progress display subscribed to the runner (on stderr).
+"""ProgressBar: the runner's records shown through the shared progress display (on stderr).
 
-Shows trials done/total, the remaining time in *lab* time (on the sim rig the virtual clock runs
-far ahead of the wall clock, and lab time is what a real sweep would take), retries so far and
-the parameters of the current trial.
+One task per session: trials done/total with the wall-clock ETA the shared display computes,
+and a note with the remaining *lab* time (on the sim rig the virtual clock runs far ahead of the
+wall clock, and lab time is what the real rig would take), retries so far and the current
+trial's parameters. A resumed run counts the trials done before without letting them speed up
+the ETA.
 """
 
 from __future__ import annotations
 
-import sys
+from contextlib import ExitStack
 from typing import Any
 
-from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-
+from pianobot.durations import format_duration
+from pianobot.progress import Progress, Task, progress_display
 from pianobot.run.records import Record, RunEnded, RunStarted, TrialDone, TrialRetried, TrialStarted
 
+# parameter → (unit shown, scale, format); lengths and speeds in mm like every other output
 _SHORT = {
-    "vacuum_kpa": ("kPa", "{:g}"),
-    "down_velocity_mps": ("m/s", "{:.3g}"),
-    "acceleration_mps2": ("m/s²", "{:.3g}"),
-    "depth_m": ("mm", "{:.3g}"),
+    "vacuum_kpa": ("kPa", 1.0, "{:g}"),
+    "down_velocity_mps": ("mm/s", 1e3, "{:.3g}"),
+    "acceleration_mps2": ("m/s²", 1.0, "{:.3g}"),
+    "depth_m": ("mm", 1e3, "{:.3g}"),
 }
-
-
-def format_duration(seconds: float) -> str:
-    """`3h05m`, `4m12s`, `9s`."""
-    if not seconds == seconds or seconds < 0:
-        return "?"
-    total = int(round(seconds))
-    hours, rest = divmod(total, 3600)
-    minutes, secs = divmod(rest, 60)
-    if hours:
-        return f"{hours}h{minutes:02d}m"
-    if minutes:
-        return f"{minutes}m{secs:02d}s"
-    return f"{secs}s"
 
 
 def describe_parameters(parameters: dict[str, Any]) -> str:
     """The current trial's varied parameters in a few characters each."""
     parts = []
-    for name, (unit, fmt) in _SHORT.items():
+    for name, (unit, scale, fmt) in _SHORT.items():
         if name in parameters:
-            value = parameters[name] * (1000.0 if unit == "mm" else 1.0)
-            parts.append(f"{fmt.format(value)} {unit}")
+            parts.append(f"{fmt.format(parameters[name] * scale)} {unit}")
     return " · ".join(parts)
 
 
 class ProgressBar:
-    """Subscriber drawing a progress bar; use as a context manager around the run."""
+    """Subscriber drawing a sweep's progress; use as a context manager around the run.
 
-    def __init__(self, console: Console | None = None) -> None:
-        self.console = console or Console(file=sys.stderr)
-        self.progress = Progress(
-            TextColumn("[bold]{task.fields[name]}"),
-            BarColumn(),
-            MofNCompleteColumn(),
-            TextColumn("lab ETA {task.fields[eta]}"),
-            TextColumn("retries {task.fields[retries]}"),
-            TimeElapsedColumn(),
-            TextColumn("{task.fields[current]}"),
-            console=self.console,
-            transient=False,
-        )
-        self._task: Any = None
+    Args:
+        progress: where to draw; default the shared display on stderr (nothing when stderr is
+            not a terminal).
+    """
+
+    def __init__(self, progress: Progress | None = None) -> None:
+        self._progress = progress if progress is not None else progress_display(True)
+        self._stack = ExitStack()
+        self._task: Task | None = None
         self._retries = 0
         self._session_start_lab_s: float | None = None
         self._session_done = 0
         self._total = 0
         self._done = 0
+        self._lab_eta = "?"
+        self._current = ""
 
     def __enter__(self) -> ProgressBar:
-        self.progress.start()
         return self
 
     def __exit__(self, *exc: object) -> None:
-        self.progress.stop()
+        self._stack.close()
 
     def __call__(self, record: Record) -> None:
         if isinstance(record, RunStarted):
             self._total, self._done = record.planned, record.done
-            self._task = self.progress.add_task(
-                "sweep", total=record.planned, completed=record.done, name=record.run_id,
-                eta="?", retries=0, current="",
-            )
-        elif self._task is None:
+            self._task = self._stack.enter_context(
+                self._progress.task("sweep", total=record.planned, completed=record.done))
+            self._show()
             return
-        elif isinstance(record, TrialStarted):
+        task = self._task
+        if task is None:
+            return
+        if isinstance(record, TrialStarted):
             if self._session_start_lab_s is None:
                 self._session_start_lab_s = record.t_s
-            self.progress.update(self._task, current=describe_parameters(record.parameters))
+            self._current = describe_parameters(record.parameters)
+            self._show()
         elif isinstance(record, TrialRetried):
             self._retries += 1
-            self.progress.update(self._task, retries=self._retries)
+            self._show()
         elif isinstance(record, TrialDone):
             if record.status != "failed":
                 self._done += 1
                 self._session_done += 1
-            self.progress.update(self._task, completed=self._done, eta=self._eta(record.lab_time_s))
+            self._lab_eta = self._eta(record.lab_time_s)
+            task.update(completed=self._done)
+            self._show()
         elif isinstance(record, RunEnded):
-            self.progress.update(self._task, current=record.status, eta="0s")
+            self._lab_eta, self._current = "0 s", record.status
+            self._show()
+
+    def _show(self) -> None:
+        if self._task is None:
+            return
+        parts = [f"lab {self._lab_eta} left"]
+        if self._retries:
+            parts.append(f"{self._retries} {'retry' if self._retries == 1 else 'retries'}")
+        if self._current:
+            parts.append(self._current)
+        self._task.update(note=" · ".join(parts))
 
     def _eta(self, lab_time_s: float) -> str:
         """Lab time still needed, at the average lab time per trial of this session."""

@@ -2,7 +2,8 @@
 
 The runner never writes files or draws bars itself (bluesky's callbacks pattern): it emits a
 `RunStarted`, then per trial `TrialStarted`, zero or more `TrialRetried`, and one of
-`TrialDone` / `TrialFailed` / `TrialStopped`, and finally `RunEnded`.
+`TrialDone` / `TrialFailed` / `TrialStopped`, and finally `RunEnded`. On a rig that works out
+blocks of keystrokes ahead (the simulator), each block ends with a `BlockEnded`.
 """
 
 from __future__ import annotations
@@ -22,6 +23,8 @@ class RunStarted:
     done: int  # trials already completed (a resume)
     todo: int  # trials this session will attempt
     resumed: bool
+    blocks: bool = False  # trials come in blocks, each closed by a `BlockEnded`
+    warnings: tuple[str, ...] = ()  # what the rig found when it opened, before any motion
 
 
 @dataclass(frozen=True)
@@ -75,6 +78,17 @@ class TrialStopped:
 
 
 @dataclass(frozen=True)
+class BlockEnded:
+    """A block of trials worked out together (a simulated rig) is through: store it as one part."""
+
+    trials: int  # trials of the block that were run
+    lab_time_s: float
+    # The block's parts already encoded by a worker (table name -> Parquet bytes), or None
+    # when the store writes the block from the trials' records itself.
+    parts: dict[str, bytes] | None = None
+
+
+@dataclass(frozen=True)
 class RunEnded:
     """The session ends: completed, stopped (safety), interrupted (signal) or failed."""
 
@@ -85,7 +99,7 @@ class RunEnded:
     retries: int  # retries in this session
 
 
-Record = RunStarted | TrialStarted | TrialRetried | TrialDone | TrialStopped | RunEnded
+Record = RunStarted | TrialStarted | TrialRetried | TrialDone | TrialStopped | BlockEnded | RunEnded
 
 
 class Subscriber(Protocol):

@@ -17,6 +17,7 @@ from pianobot.rig import Rig, TrialLike
 from pianobot.rig.errors import ConnectionLost, DeviceUnavailable, SafetyStop, SafetyViolation
 from pianobot.run.readout import TrialData, failed_trial, parameters_of, read_keystroke
 from pianobot.run.records import (
+    BlockEnded,
     Record,
     RunEnded,
     RunStarted,
@@ -27,6 +28,11 @@ from pianobot.run.records import (
     TrialStopped,
 )
 from pianobot.run.signals import StopControl
+
+# Trials a batching (simulated) rig works out at once: enough for the vectorised simulator to
+# fill its SIMD lanes with keystrokes of similar length, few enough that a block's true
+# trajectories stay a few tens of MB and a kill redoes little.
+BLOCK_TRIALS = 128
 
 
 @dataclass(frozen=True)
@@ -68,8 +74,10 @@ class Runner:
         control: StopControl | None = None,
         clock_offset_s: float = 0.0,
         motion: bool = False,
+        block_trials: int = BLOCK_TRIALS,
     ) -> None:
         self.rig = rig
+        self.block_trials = block_trials  # trials a batching rig prepares at once
         self.motion = motion  # keep the commanded fast moves in the trials rows
         self.subscribers = list(subscribers)
         self.retry = retry or RetryPolicy()
@@ -86,16 +94,25 @@ class Runner:
             subscriber(record)
 
     def run(self, run_id: str, trials: Sequence[TrialLike], *, planned: int, done: int = 0) -> SessionResult:
-        """Execute `trials` in order; `done` trials of `planned` were completed before."""
-        self.publish(RunStarted(run_id, planned=planned, done=done, todo=len(trials), resumed=done > 0))
+        """Execute `trials` in order; `done` trials of `planned` were completed before.
+
+        On a rig that batches (the simulator) the trials go in blocks: the rig prepares a
+        block at once (its physics in one vectorised batch), then each trial runs as on any rig
+        (faults, retries, records), and a `BlockEnded` lets the store write the block as a part.
+        """
+        blocked = self.rig.batches
+        self.publish(RunStarted(run_id, planned=planned, done=done, todo=len(trials),
+                                resumed=done > 0, blocks=blocked,
+                                warnings=self.rig.warnings))
         counts = {"executed": 0, "silent": 0, "retries": 0, "done": done}
         status, reason = "completed", None
         try:
-            for trial in trials:
-                if self.control.requested is not None:
-                    status, reason = "interrupted", self.control.requested
-                    break
-                outcome = self._trial(trial, counts)
+            for block in self._blocks(trials) if blocked else [trials]:
+                if blocked:
+                    self.rig.prepare(block)
+                outcome = self.run_block(block, counts)
+                if blocked:
+                    self.publish(BlockEnded(len(block), self.now()))
                 if outcome is not None:
                     status, reason = outcome
                     break
@@ -116,6 +133,23 @@ class Runner:
             retries=counts["retries"],
             lab_time_s=lab_time_s,
         )
+
+    def _blocks(self, trials: Sequence[TrialLike]) -> list[Sequence[TrialLike]]:
+        size = max(1, self.block_trials)
+        return [trials[i : i + size] for i in range(0, len(trials), size)]
+
+    def run_block(self, trials: Sequence[TrialLike], counts: dict[str, int]) -> tuple[str, str] | None:
+        """Run trials one by one, updating `counts`; (status, reason) if the run must end.
+
+        The keys of `counts`: executed, silent, retries, done (see `SessionResult`).
+        """
+        for trial in trials:
+            if self.control.requested is not None:
+                return "interrupted", self.control.requested
+            outcome = self._trial(trial, counts)
+            if outcome is not None:
+                return outcome
+        return None
 
     def _trial(self, trial: TrialLike, counts: dict[str, int]) -> tuple[str, str] | None:
         """Run one trial with retries; returns (status, reason) if the run must end."""

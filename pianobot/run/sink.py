@@ -1,7 +1,7 @@
 """StoreSink: the subscriber that writes a run's records to its run folder.
 
 Trials are written in batches (every `batch_trials` trials or `batch_s` wall seconds, whichever
-comes first) so a 2,000-trial sim sweep is not 6,000 tiny files, while a kill -9 loses at most
+comes first; on a simulated rig, one batch per block of trials the rig prepared together) so a 2,000-trial sim sweep is not 6,000 tiny files, while a kill -9 loses at most
 the batch in memory. Order on disk, which resume relies on:
 
 1. `started` is journalled before the arm moves (durable with the next flush);
@@ -19,6 +19,7 @@ from typing import Any
 
 from pianobot.run.readout import TrialData, midi_table, samples_table, trials_table
 from pianobot.run.records import (
+    BlockEnded,
     Record,
     RunEnded,
     RunStarted,
@@ -40,6 +41,7 @@ class StoreSink:
         self._batch: list[TrialData] = []
         self._last_flush = time.monotonic()
         self._lab_time_s = 0.0
+        self._blocks = False  # a batching rig: one part per block (at BlockEnded), whatever it takes
 
     def __call__(self, record: Record) -> None:
         if isinstance(record, TrialStarted):
@@ -55,10 +57,17 @@ class StoreSink:
         elif isinstance(record, TrialDone):
             self._batch.append(record.data)
             self._lab_time_s = record.lab_time_s
-            if record.status == "failed":
+            if self._blocks:
+                pass  # the block is written as one part at its end
+            elif record.status == "failed":
                 self.flush()  # a failure is rare and worth having on disk at once
-            elif len(self._batch) >= self.batch_trials or time.monotonic() - self._last_flush >= self.batch_s:
+            elif len(self._batch) >= self.batch_trials or (
+                time.monotonic() - self._last_flush >= self.batch_s
+            ):
                 self.flush()
+        elif isinstance(record, BlockEnded):
+            self._lab_time_s = record.lab_time_s
+            self.flush(record.parts)
         elif isinstance(record, TrialStopped):
             self.flush()
             self.writer.journal(
@@ -66,9 +75,11 @@ class StoreSink:
                 error=record.reason, kind="safety_stop", t_s=record.t_s,
             )
         elif isinstance(record, RunStarted):
+            self._blocks = record.blocks
             self.writer.journal(
                 "resumed" if record.resumed else "run_started",
                 planned=record.planned, done=record.done, todo=record.todo,
+                **({"warnings": list(record.warnings)} if record.warnings else {}),
             )
         elif isinstance(record, RunEnded):
             self._lab_time_s = record.lab_time_s
@@ -78,13 +89,19 @@ class StoreSink:
                 retries=record.retries, lab_time_s=record.lab_time_s,
             )
 
-    def flush(self) -> None:
-        """Write the pending batch as one part set, then journal its trials as done/failed."""
+    def flush(self, encoded: dict[str, bytes] | None = None) -> None:
+        """Write the pending batch as one part set, then journal its trials as done/failed.
+
+        `encoded`: the batch's parts as a worker encoded them (its records carry rows only).
+        """
         self._last_flush = time.monotonic()
         if not self._batch:
             return
         batch, self._batch = self._batch, []
-        part = self.writer.append(trials_table(batch), samples_table(batch), midi_table(batch))
+        if encoded is not None:
+            part = self.writer.append_encoded(encoded)
+        else:
+            part = self.writer.append(trials_table(batch), samples_table(batch), midi_table(batch))
         events: list[tuple[str, dict[str, Any]]] = [
             (
                 "failed" if d.status == "failed" else "done",

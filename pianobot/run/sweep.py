@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from pianobot.errors import InputError
+from pianobot.executor import IN_PROCESS, Executor, ExecutorSettings, open_executor
 from pianobot.plan import (
     DEFAULT_MAX_TRIALS,
     PlanSummary,
@@ -28,10 +29,11 @@ from pianobot.plan import (
 from pianobot.plan.approach import apply_approach
 from pianobot.rig import Rig, open_rig
 from pianobot.rig.errors import DeviceUnavailable
+from pianobot.run.parallel import SweepSetup, run_parallel
 from pianobot.run.progress import ProgressBar
 from pianobot.run.records import Subscriber
 from pianobot.run.resume import check_rig, record_rig_session, refuse_damaged
-from pianobot.run.runner import RetryPolicy, Runner, SessionResult
+from pianobot.run.runner import BLOCK_TRIALS, RetryPolicy, Runner, SessionResult
 from pianobot.run.signals import SignalHandlers, StopControl
 from pianobot.run.sink import StoreSink
 from pianobot.spec import (
@@ -53,6 +55,8 @@ from pianobot.store import (
     summarize_run,
 )
 from pianobot.store.tables import read_run_table, trial_status_counts
+
+BATCH_TRIALS = 50  # trials per part on a rig that runs keystrokes one at a time
 
 
 @dataclass(frozen=True)
@@ -133,11 +137,12 @@ def run_sweep(
     progress: bool = True,
     subscribers: Iterable[Subscriber] = (),
     control: StopControl | None = None,
-    batch_trials: int = 50,
+    batch_trials: int | None = None,
     batch_s: float = 2.0,
     world: Any | None = None,
     max_trials: int = DEFAULT_MAX_TRIALS,
     rig_override: bool = False,
+    executor: ExecutorSettings | None = None,
 ) -> RunOutcome:
     """Run a sweep on its rig into a new run folder, or resume run `resume`.
 
@@ -151,9 +156,14 @@ def run_sweep(
         subscribers: more record consumers (e.g. a test collector).
         control: a stop control (tests); by default SIGINT/SIGTERM drive one.
         batch_trials, batch_s: part batching (a kill loses at most one batch, redone on resume).
+            On a batching rig (the simulator) a batch is also the block of trials simulated
+            together; default 50 trials, 128 on a batching rig.
         world: a physics World for the sim rig instead of the rig file's (tests, benchmarks).
         max_trials: refuse a plan with more trials (a resume allows the run's own plan).
         rig_override: let a resume run on another rig than the run started with (recorded).
+        executor: where a simulated sweep's blocks run (`--workers`, `--scheduler`; default: this
+            process for small sweeps, else a local cluster sized to the machine). The driver
+            (this process) keeps the run lock, the journal and every write.
 
     Raises:
         InputError: bad spec, unknown run, a spec that changed since the run started, a damaged
@@ -187,6 +197,7 @@ def run_sweep(
             writer, rig, prepared, done_ids,
             resumed=resume is not None, progress=progress, subscribers=list(subscribers),
             control=control or StopControl(), batch_trials=batch_trials, batch_s=batch_s,
+            executor=executor, world=world,
         )
     raise AssertionError("unreachable")  # for type checkers: the with block always returns
 
@@ -272,15 +283,20 @@ def _session(
     progress: bool,
     subscribers: list[Subscriber],
     control: StopControl,
-    batch_trials: int,
+    batch_trials: int | None,
     batch_s: float,
+    executor: ExecutorSettings | None,
+    world: Any | None,
 ) -> RunOutcome:
     """Run the trials not yet done on an open rig; the run folder records how it ended."""
     meta = writer.meta
     todo = [t for t in prepared.trials if t.trial_id not in done_ids]
     if resumed:
         _note_resume(writer, meta, done_ids)
-    writer.update_meta(rig={**meta.get("rig", {}), "description": rig.describe()})
+    writer.update_meta(rig={**meta.get("rig", {}), "description": rig.describe(),
+                            "warnings": list(rig.warnings)})
+    if batch_trials is None:
+        batch_trials = BLOCK_TRIALS if rig.batches else BATCH_TRIALS
     sink = StoreSink(writer, batch_trials=batch_trials, batch_s=batch_s)
     retry = prepared.rig.retry
     with ExitStack() as stack:
@@ -291,18 +307,28 @@ def _session(
                 # Resuming a run a protective stop ended means the operator cleared it.
                 rig.clear_stop()
                 writer.journal("stop_cleared")
-            runner = Runner(
-                rig,
-                subscribers=[sink, *([bar] if bar is not None else []), *subscribers],
-                retry=RetryPolicy(retry.max_attempts, retry.backoff_s, retry.backoff_factor),
-                record=prepared.spec.record,
-                control=control,
-                clock_offset_s=float(meta.get("lab_time_s") or 0.0),
-                motion=prepared.spec.approach == "fast",
-            )
-            result = runner.run(
-                writer.run_id, todo, planned=len(prepared.trials), done=len(done_ids)
-            )
+            everyone: list[Subscriber] = [sink, *([bar] if bar is not None else []), *subscribers]
+            policy = RetryPolicy(retry.max_attempts, retry.backoff_s, retry.backoff_factor)
+            offset_s = float(meta.get("lab_time_s") or 0.0)
+            fast = prepared.spec.approach == "fast"
+            pool = _executor(rig, executor, len(todo))
+            writer.update_meta(executor=pool.describe())
+            if pool.kind != "in-process":
+                setup = SweepSetup(writer.run_id, prepared.rig, prepared.seed, world,
+                                   tuple(prepared.spec.record), fast, policy, offset_s)
+                result = run_parallel(
+                    rig, setup, pool, run_id=writer.run_id, trials=todo,
+                    planned=len(prepared.trials), done=len(done_ids), block_trials=batch_trials,
+                    subscribers=everyone, control=control,
+                )
+            else:
+                runner = Runner(
+                    rig, subscribers=everyone, retry=policy, record=prepared.spec.record,
+                    control=control, clock_offset_s=offset_s, motion=fast, block_trials=batch_trials,
+                )
+                result = runner.run(
+                    writer.run_id, todo, planned=len(prepared.trials), done=len(done_ids)
+                )
         except BaseException as exc:
             # A bug, a device failure or a Ctrl-C outside the trial loop: keep what was
             # measured and say why the run ended.
@@ -312,7 +338,20 @@ def _session(
             raise
     _record_end(writer, result)
     writer.finish(result.status, result.reason, lab_time_s=result.lab_time_s)
-    return _outcome(writer, result, resumed=resumed)
+    return _outcome(writer, result, resumed=resumed, warnings=rig.warnings)
+
+
+# Measured per simulated trial with every stream stored (one core): what the executor weighs
+# against the cost of starting worker processes.
+SIM_TRIAL_COST_S = 3e-3
+
+
+def _executor(rig: Rig, settings: ExecutorSettings | None, todo: int) -> Executor:
+    """Where the keystrokes run: a real rig presses one key at a time, here; the simulator's
+    blocks go to the executor the settings ask for (in this process for small sweeps)."""
+    if not rig.batches:
+        return IN_PROCESS
+    return open_executor(settings, work_s=todo * SIM_TRIAL_COST_S)
 
 
 def _note_resume(writer: RunWriter, meta: dict[str, Any], done_ids: set[str]) -> None:
@@ -345,7 +384,9 @@ def _flush_quietly(sink: StoreSink) -> None:
         pass
 
 
-def _outcome(writer: RunWriter, result: SessionResult | None, *, resumed: bool) -> RunOutcome:
+def _outcome(
+    writer: RunWriter, result: SessionResult | None, *, resumed: bool, warnings: tuple[str, ...] = ()
+) -> RunOutcome:
     summary = summarize_run(Run(run_id=writer.run_id, path=writer.path))
     counts = trial_status_counts(writer.paths)
     return RunOutcome(
@@ -361,6 +402,7 @@ def _outcome(writer: RunWriter, result: SessionResult | None, *, resumed: bool) 
         executed=0 if result is None else result.executed,
         lab_time_s=summary.lab_time_s,
         resumed=resumed,
+        warnings=list(warnings),
     )
 
 

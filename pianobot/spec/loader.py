@@ -204,3 +204,10 @@ def _write_atomically(path: Path, text: str) -> None:
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def load_model(path: str | Path, model: type[ModelT]) -> ModelT:
+    """Any YAML file validated into a pydantic model, with the spec's one-line errors."""
+    label = str(path)
+    data, root = _read_yaml(Path(path))
+    return _validate(model, data, label, root)

@@ -149,7 +149,12 @@ class UR5Config(StrictModel):
     """The UR5 arm, reached over RTDE."""
 
     host: str = Field(min_length=1, description="IP address or host name of the UR controller.")
-    frequency_hz: float = Field(500.0, gt=0.0, le=500.0, description="RTDE control/receive rate.")
+    frequency_hz: float | None = Field(
+        None, gt=0.0, le=500.0,
+        description="RTDE rate; null (the default) takes it from the controller version like "
+        "ur_rtde does: 125 Hz on a CB3, 500 Hz on an e-Series. A rate above the controller's "
+        "loop rate is lowered to it, with a warning.",
+    )
     connect_timeout_s: float = Field(2.0, gt=0.0, le=120.0, description="Connection timeout.")
     workspace_min_m: Vector3 = Field(
         description="Lower corner [x, y, z] of the box the TCP must stay in (base frame)."
@@ -174,15 +179,92 @@ class UR5Config(StrictModel):
     safe_lift_m: float = Field(
         0.05, ge=0.0, le=0.3, description="Height above the hover pose the arm retracts to."
     )
-    max_speed_scaling_warning: float = Field(
+    warn_speed_slider_below: float = Field(
         1.0, gt=0.0, le=1.0,
-        description="Warn when the controller's speed slider is below this (it stretches moves).",
+        description="Warn before any motion when the teach pendant's speed slider "
+        "(target_speed_fraction) is below this: every move then runs slower than commanded.",
     )
+
+    @model_validator(mode="before")
+    @classmethod
+    def _renamed(cls, data: Any) -> Any:
+        if isinstance(data, dict) and "max_speed_scaling_warning" in data:
+            raise ValueError(
+                "max_speed_scaling_warning was renamed warn_speed_slider_below (it is about the "
+                "pendant's speed slider, target_speed_fraction)"
+            )
+        return data
 
     @model_validator(mode="after")
     def _box(self) -> UR5Config:
         if any(lo >= hi for lo, hi in zip(self.workspace_min_m, self.workspace_max_m, strict=True)):
             raise ValueError("workspace_min_m must be below workspace_max_m on every axis")
+        return self
+
+
+Signal = Literal["voltage", "current"]
+# What a UR standard analog output drives over its ratio 0..1, per domain (V or mA).
+UR_ANALOG_SPAN: dict[str, tuple[float, float]] = {"voltage": (0.0, 10.0), "current": (4.0, 20.0)}
+SIGNAL_UNIT = {"voltage": "V", "current": "mA"}
+
+
+def _check_span(signal: str, span: tuple[float, float], what: str) -> None:
+    lo, hi = UR_ANALOG_SPAN[signal]
+    unit = SIGNAL_UNIT[signal]
+    if span[0] == span[1]:
+        raise ValueError(f"{what} must have two different ends, got [{span[0]:g}, {span[1]:g}]")
+    if min(span) < lo - 1e-9 or max(span) > hi + 1e-9:
+        raise ValueError(
+            f"{what} [{span[0]:g}, {span[1]:g}] {unit} leaves the UR's {signal} range "
+            f"[{lo:g}, {hi:g}] {unit}"
+        )
+
+
+class RegulatorCommand(StrictModel):
+    """How the UR's analog output commands the regulator (its set-point input)."""
+
+    output_channel: int = Field(0, ge=0, le=1, description="UR standard analog output 0 or 1.")
+    signal: Signal = Field(
+        description="The regulator's command input: voltage (0-10 V, 0-5 V) or current "
+        "(4-20 mA). pianobot puts the UR output in that domain (ur_rtde's "
+        "setAnalogOutputVoltage / setAnalogOutputCurrent)."
+    )
+    signal_span: Pair = Field(
+        description="The input signal's two ends in V or mA, e.g. [0, 10] V or [4, 20] mA."
+    )
+    kpa_span: Pair = Field(
+        description="The pressure (kPa gauge) at the two ends of signal_span, from the "
+        "regulator's data sheet, e.g. [0, -80] for an SMC ITV2090."
+    )
+
+    @model_validator(mode="after")
+    def _spans(self) -> RegulatorCommand:
+        _check_span(self.signal, self.signal_span, "signal_span")
+        if self.kpa_span[0] == self.kpa_span[1]:
+            raise ValueError("kpa_span must have two different ends")
+        if max(self.kpa_span) > 0:
+            raise ValueError(f"kpa_span must be <= 0 kPa (gauge vacuum), got {list(self.kpa_span)}")
+        return self
+
+
+class RegulatorMonitor(StrictModel):
+    """The regulator's pressure monitor output, wired to a UR analog input."""
+
+    input_channel: int = Field(0, ge=0, le=1, description="UR standard analog input 0 or 1.")
+    signal: Signal = Field(
+        "voltage", description="Domain of the monitor output; the UR input must be set to the "
+        "same domain on the teach pendant."
+    )
+    signal_span: Pair = Field(
+        description="The monitor's two ends in V or mA, e.g. [1, 5] V on an SMC ITV."
+    )
+    kpa_span: Pair | None = Field(
+        None, description="Pressure at the two ends of signal_span (null: the command's)."
+    )
+
+    @model_validator(mode="after")
+    def _spans(self) -> RegulatorMonitor:
+        _check_span(self.signal, self.signal_span, "monitor signal_span")
         return self
 
 
@@ -194,16 +276,41 @@ class VacuumConfig(StrictModel):
         description="sim: commanded = measured; manual: the operator sets the regulator when "
         "asked; ur-analog: the UR's analog output drives the regulator.",
     )
-    output_channel: int = Field(0, ge=0, le=1, description="UR analog output of the setpoint.")
-    input_channel: int | None = Field(
-        None, ge=0, le=1, description="UR analog input of the pressure sensor (null: none)."
+    regulator: RegulatorCommand | None = Field(
+        None, description="The regulator's command signal and span (needed for ur-analog)."
     )
-    kpa_at_ratio_0: float = Field(0.0, description="Pressure when the output ratio is 0.")
-    kpa_at_ratio_1: float = Field(-100.0, description="Pressure when the output ratio is 1.")
+    monitor: RegulatorMonitor | None = Field(
+        None, description="The regulator's pressure monitor on a UR analog input (null: none; "
+        "then the settle pause covers the regulator)."
+    )
     settle_timeout_s: float = Field(
         20.0, gt=0.0, le=600.0, description="Give up if the level has not settled by then."
     )
     tolerance_kpa: float = Field(2.0, gt=0.0, le=50.0, description="Settled when within this.")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _replaced(cls, data: Any) -> Any:
+        old = [k for k in ("kpa_at_ratio_0", "kpa_at_ratio_1", "output_channel", "input_channel")
+               if isinstance(data, dict) and k in data]
+        if old:
+            raise ValueError(
+                f"{', '.join(old)} replaced by `regulator:` (output_channel, signal, signal_span, "
+                "kpa_span) and `monitor:` (input_channel, signal, signal_span): declare the "
+                "regulator's signal and span, e.g. signal: voltage, signal_span: [0, 10], "
+                "kpa_span: [0, -80] for an SMC ITV2090"
+            )
+        return data
+
+    @model_validator(mode="after")
+    def _regulator_for_ur_analog(self) -> VacuumConfig:
+        if self.mode == "ur-analog" and self.regulator is None:
+            raise ValueError(
+                "vacuum mode ur-analog needs a `regulator:` section with its signal (voltage | "
+                "current), signal_span and kpa_span: pianobot assumes no span, a wrong one puts "
+                "every vacuum level off"
+            )
+        return self
 
 
 class MidiConfig(StrictModel):

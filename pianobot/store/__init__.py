@@ -14,7 +14,7 @@ from pianobot.store.lock import LockLost, RunLock, RunLocked, read_holder
 from pianobot.store.reader import Run, RunSummary, list_runs, load_run, rig_summary, summarize_run
 from pianobot.store.repair import RepairReport, repair_run
 from pianobot.store.schema import SCHEMA_VERSION, TABLE_SCHEMAS, empty_frame
-from pianobot.store.writer import RunWriter
+from pianobot.store.writer import RunWriter, encode_part
 
 __all__ = [
     "Damage",
@@ -32,6 +32,7 @@ __all__ = [
     "RunWriter",
     "check_data_dir",
     "check_run",
+    "encode_part",
     "empty_frame",
     "list_runs",
     "load_run",

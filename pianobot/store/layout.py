@@ -171,11 +171,14 @@ def _temp_name(path: Path) -> Path:
 
 def write_parquet_atomic(path: Path, table: pa.Table) -> None:
     """Write a Parquet file so readers see either nothing or the whole file, never a torn one."""
-    write_bytes_atomic(path, parquet_bytes(table))
+    write_bytes_atomic(path, encode_parquet(table))
 
 
-def parquet_bytes(table: pa.Table) -> bytes:
-    """`table` as the bytes of a Parquet file (written with `parquet_options`)."""
+def encode_parquet(table: pa.Table) -> bytes:
+    """`table` as the bytes of a Parquet file (written with `parquet_options`).
+
+    Also for work done elsewhere (a parallel sweep's worker) that only the run's writer stores.
+    """
     sink = pa.BufferOutputStream()
     pq.write_table(table, sink, **parquet_options(table.schema))
     data: bytes = sink.getvalue().to_pybytes()

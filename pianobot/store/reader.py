@@ -5,15 +5,17 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import pandas as pd
 import pyarrow.parquet as pq
 
 from pianobot.store.integrity import READ_ERRORS, check_run
 from pianobot.store.journal import read_journal
 from pianobot.store.layout import RunDamaged, RunPaths, read_json, resolve_run, runs_dir
 from pianobot.store.tables import read_run_table, trial_status_counts
+
+if TYPE_CHECKING:  # pandas takes a third of a second to import: only where frames are made
+    import pandas as pd
 
 
 @dataclass(frozen=True)
@@ -51,6 +53,8 @@ class Run:
     def plan(self) -> pd.DataFrame:
         """Every planned trial (empty for a run without a plan, e.g. an import)."""
         if not self.paths.plan.is_file():
+            import pandas as pd
+
             return pd.DataFrame()
         try:
             frame: pd.DataFrame = pq.read_table(self.paths.plan).to_pandas()

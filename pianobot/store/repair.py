@@ -38,8 +38,8 @@ from pianobot.store.journal import Journal
 from pianobot.store.layout import (
     TABLE_NAMES,
     RunPaths,
+    encode_parquet,
     fsync_dir,
-    parquet_bytes,
     read_json,
     utc_now,
     write_bytes_atomic,
@@ -182,7 +182,7 @@ class _Repair:
         if problem is not None:
             self.report.unrepairable.append(f"plan.parquet: {problem}")
             return
-        data = parquet_bytes(table)
+        data = encode_parquet(table)
         record = FileRecord.parse(meta.get("plan_file"))
         same_bytes = record is not None and record.sha256 == hashlib.sha256(data).hexdigest()
         same_trials = table.num_rows == meta.get("trials_planned") and self._ids_match(table)

@@ -8,10 +8,14 @@ polars, DuckDB) instead of a type that changes with the data.
 
 from __future__ import annotations
 
-import pandas as pd
+from typing import TYPE_CHECKING
+
 import pyarrow as pa
 
 from pianobot.spec.parameters import PARAMETER_NAMES
+
+if TYPE_CHECKING:  # pandas takes a third of a second to import: only where frames are made
+    import pandas as pd
 
 SCHEMA_VERSION = "1"
 METADATA_VERSION_KEY = b"pianobot.schema_version"
@@ -123,7 +127,8 @@ def to_table(frame: pd.DataFrame | pa.Table, name: str, run_id: str) -> pa.Table
     arrays: list[pa.Array | pa.ChunkedArray] = []
     for column in schema:
         if column.name == "run_id":
-            arrays.append(pa.array([run_id] * n_rows, type=pa.string()))
+            # pa.repeat, not a Python list of n_rows strings (a samples part has millions).
+            arrays.append(pa.repeat(pa.scalar(run_id, type=pa.string()), n_rows))
         elif column.name in source.column_names:
             arrays.append(source.column(column.name).cast(column.type))
         else:

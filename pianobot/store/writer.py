@@ -11,9 +11,8 @@ from __future__ import annotations
 import os
 import shutil
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
@@ -26,9 +25,9 @@ from pianobot.store.layout import (
     RunDamaged,
     RunPaths,
     check_data_dir,
+    encode_parquet,
     git_commit,
     new_run_id,
-    parquet_bytes,
     parquet_options,
     read_json,
     resolve_run,
@@ -58,6 +57,9 @@ from pianobot.store.schema import (
     with_metadata,
 )
 from pianobot.store.tables import committed_batches, dedupe_trials, drop_orphan_parts
+
+if TYPE_CHECKING:  # pandas takes a third of a second to import: only where frames are made
+    import pandas as pd
 
 # Fields of run.json that change with every part batch; journalled without a disk flush of
 # their own (they ride on the next one).
@@ -155,7 +157,7 @@ class RunWriter:
         }
         if plan is not None:
             table = pa.Table.from_pandas(plan, preserve_index=False)
-            data = parquet_bytes(with_metadata(table, "plan"))
+            data = encode_parquet(with_metadata(table, "plan"))
             write_bytes_atomic(paths.plan, data)
             record["plan_file"] = FileRecord.of_bytes("plan.parquet", data, table.num_rows).to_dict()
         write_json_atomic(paths.run_json, record)
@@ -204,12 +206,31 @@ class RunWriter:
         for name, table in tables.items():  # trials last: it commits the batch
             if table is not None and (table.num_rows or name == "trials"):
                 path = self.paths.part(name, batch)
-                data = parquet_bytes(with_metadata(table, name))
+                data = encode_parquet(with_metadata(table, name))
                 write_bytes_atomic(path, data)
                 files[name] = FileRecord.of_bytes(self.paths.relative(path), data, table.num_rows)
                 trials_bytes = data
         self._next_batch += 1
         self._journal.write(PART, part_record(batch, files, trials_bytes))
+        return batch
+
+    def append_encoded(self, parts: dict[str, bytes]) -> int:
+        """Write one batch that was encoded elsewhere (`encode_part`): the same order and
+        atomicity as `append` (samples, midi, then the trials part that commits the batch)."""
+        if "trials" not in parts:
+            raise ValueError("an encoded batch needs its trials part")
+        self._lock.verify()  # the run is still ours (a parallel sweep's driver holds the lock)
+        batch = self._next_batch
+        files: dict[str, FileRecord] = {}
+        for name in ("samples", "midi", "trials"):
+            if name in parts:
+                path = self.paths.part(name, batch)
+                data = parts[name]
+                write_bytes_atomic(path, data)
+                rows = pq.read_metadata(pa.BufferReader(data)).num_rows
+                files[name] = FileRecord.of_bytes(self.paths.relative(path), data, rows)
+        self._next_batch += 1
+        self._journal.write(PART, part_record(batch, files, parts["trials"]))
         return batch
 
     def journal(self, event: str, **fields: Any) -> None:
@@ -291,6 +312,11 @@ class RunWriter:
         self.close()
 
 
+def encode_part(table: pd.DataFrame | pa.Table, name: str, run_id: str) -> bytes:
+    """One part of table `name` of run `run_id`, encoded as `RunWriter.append` would write it."""
+    return encode_parquet(with_metadata(to_table(table, name, run_id), name))
+
+
 def _new_folder(base: Path, name: str) -> Path:
     for _ in range(20):
         root = base / new_run_id(name)
@@ -322,14 +348,16 @@ def _compact_table(
                 TABLE_SCHEMAS[name].empty_table()
             )
             expected = merged.num_rows
-            write_bytes_atomic(temp, parquet_bytes(with_metadata(merged, name, batches)))
+            write_bytes_atomic(temp, encode_parquet(with_metadata(merged, name, batches)))
         else:
             # samples and midi can be large: stream them part by part so memory stays bounded.
             schema = with_metadata(TABLE_SCHEMAS[name].empty_table(), name, batches).schema
             expected = 0
             with pq.ParquetWriter(temp, schema, **parquet_options(schema)) as out:
+                # Text columns (ids, sources) read as dictionaries: no million-fold string copies.
+                text = [f.name for f in schema if pa.types.is_string(f.type)]
                 for source in sources:
-                    parquet = pq.ParquetFile(source)
+                    parquet = pq.ParquetFile(source, read_dictionary=text)
                     for group in range(parquet.num_row_groups):
                         rows = parquet.read_row_group(group).cast(schema)
                         expected += rows.num_rows

@@ -158,3 +158,29 @@ def test_fixture_soft_60_cli(zhang2022: Path, data_dir: Path) -> None:
     code, out = invoke("import", "keystroke-log", str(path), "--data", str(data_dir), "--json")
     payload = json.loads(out)
     assert code == 0 and (payload["trials"], payload["silent"]) == (135, 32)
+
+
+def test_keystroke_log_says_where_the_run_was_written(tmp_path: Path, data_dir: Path) -> None:
+    code, out = invoke("import", "keystroke-log", str(soft_log(tmp_path)), "--data", str(data_dir))
+    assert code == 0
+    run_dir = out.split("written to", 1)[1].split()[0]
+    assert (Path(run_dir) / "run.json").is_file() and str(data_dir) in run_dir
+    code, out = invoke("import", "keystroke-log", str(soft_log(tmp_path)), "--data", str(data_dir), "--json")
+    assert Path(json.loads(out)["run_dir"]).is_dir()
+
+
+def test_keystroke_log_declared_columns(
+    tmp_path: Path, data_dir: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = tmp_path / "eight.txt"
+    path.write_text(repr({"control": [0, 1.0, 0.8, 0.2, 0.3, 0.03, 0.5, 0.01],
+                          "midi": [[[144, 60, 50, 0], 900], [[128, 60, 70, 0], 1900]]}) + "\n")  # fmt: skip
+    code, _, err = run_main(["import", "keystroke-log", str(path), "--data", str(data_dir)], monkeypatch, capsys)
+    assert code == 2 and err.count("\n") == 1 and "line 1: 8 control values" in err and "--columns" in err
+    columns = "finger_angle_deg,acceleration_mps2,up_acceleration_mps2,down_velocity_mps,up_velocity_mps,distance_m,hold_s,depth_m"
+    code, out = invoke("import", "keystroke-log", str(path), "--columns", columns, "--finger", "rigid",
+                       "--data", str(data_dir), "--json")  # fmt: skip
+    assert code == 0 and json.loads(out)["layout"] == "declared" and json.loads(out)["sounded"] == 1
+    code, _, err = run_main(["import", "keystroke-log", str(path), "--columns", "dwell_s", "--data", str(data_dir)],
+                            monkeypatch, capsys)  # fmt: skip
+    assert code == 2 and err.startswith("error: --columns:") and "dwell_s" in err and err.count("\n") == 1

@@ -51,7 +51,7 @@ def test_simulate_prints_midi_outcome_and_plots(monkeypatch: pytest.MonkeyPatch,
                         "--world", "default", "--json")
     assert code == 0 and json.loads(out)["silent"] is True
     code, out, _ = _run(monkeypatch, capsys, "model", "simulate", "--world", "linear")
-    assert code == 0 and "on_velocity" in out
+    assert code == 0 and "note-on velocity (MIDI)" in out
 
 
 @pytest.mark.parametrize(

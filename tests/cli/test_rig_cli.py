@@ -46,7 +46,8 @@ ur5:
   calibrated_utc: {when}
 vacuum:
   mode: ur-analog
-  input_channel: 0
+  regulator: {{output_channel: 0, signal: voltage, signal_span: [0, 10], kpa_span: [0, -80]}}
+  monitor: {{input_channel: 0, signal: voltage, signal_span: [0, 10]}}
 midi:
   api: JACK
   port: ES8
@@ -76,9 +77,9 @@ def fake_devices(robot: Any, monkeypatch: pytest.MonkeyPatch) -> Any:
     midi = fake_midi.FakeMidiBackend(["Kawai ES8:Kawai ES8 MIDI 1 20:0"])
     monkeypatch.setattr(rig_cli, "check_rig", partial(
         check_rig,
-        receive_factory=lambda host, f: fake_rtde.FakeReceive(robot, host, f),
-        io_factory=lambda host: fake_rtde.FakeIO(robot, host),
-        dashboard_factory=lambda host: fake_rtde.FakeDashboard(robot, host),
+        receive_factory=partial(fake_rtde.FakeReceive, robot),
+        io_factory=partial(fake_rtde.FakeIO, robot),
+        dashboard_factory=partial(fake_rtde.FakeDashboard, robot),
         midi_backend=lambda api: midi,
     ))
     return robot
@@ -96,7 +97,8 @@ def test_check_with_nothing_reachable_exits_2_with_one_line_per_device(
     errors = [line for line in err.splitlines() if line.startswith("error:")]
     devices = [line.split(":")[1].strip() for line in errors]
     assert devices == ["arm", "dashboard", "vacuum", "midi"]
-    assert "127.0.0.1:30004" in errors[0] and "127.0.0.1:29999" in errors[1]
+    assert "127.0.0.1:29999" in errors[0] and "127.0.0.1:29999" in errors[1]
+    assert "127.0.0.1:30004" in errors[2]  # the vacuum I/O
     assert "Traceback" not in err
     assert "FAIL" in out
 
@@ -113,7 +115,8 @@ def test_check_json_on_a_healthy_rig_exits_0(
         "arm", "dashboard", "calibration", "vacuum", "midi"
     ]
     assert report["devices"][0]["speed_scaling"] == 1.0
-    assert report["devices"][3]["read_back_kpa"] == pytest.approx(0.0)
+    assert report["devices"][3]["monitor_kpa"] == pytest.approx(0.0)
+    assert report["devices"][3]["kpa_span"] == [0.0, -80.0]
 
 
 def test_check_json_still_exits_2_when_a_device_fails(
@@ -165,8 +168,9 @@ def test_calibrate_writes_the_pose_and_reports_it(
         calibrate_reference_pose,
         ask=lambda prompt: "",
         interactive=lambda: True,
-        receive_factory=lambda host, f: fake_rtde.FakeReceive(robot, host, f),
-        control_factory=lambda host, f: fake_rtde.FakeControl(robot, host, f),
+        receive_factory=partial(fake_rtde.FakeReceive, robot),
+        control_factory=partial(fake_rtde.FakeControl, robot),
+        dashboard_factory=partial(fake_rtde.FakeDashboard, robot),
     ))
     path = rig_file(tmp_path, calibrated=False)
     code, out, err = cli(["rig", "calibrate", str(path), "--json"], capsys, monkeypatch)

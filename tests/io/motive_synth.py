@@ -36,8 +36,15 @@ def motive_csv(
     units: str = "Meters",
     first_cells: bool = False,
     seed: int = 0,
+    split: dict[str, tuple[float, ...]] | None = None,
+    markers: tuple[str, ...] = ("Unlabeled:100", "Unlabeled:101", "Unlabeled:102", "Unlabeled:103"),
 ) -> Path:
-    """A Motive 1.2x export: arm, finger middle, fingertip, key markers (Y up) plus two ghosts."""
+    """A Motive 1.2x export: arm, finger middle, fingertip, key markers (Y up) plus two ghosts.
+
+    `split`: marker -> fractions of the take where Motive lost it for a few frames and gave it a
+    new ID (e.g. (0.4, 0.7): pieces of 40, 30 and 30 % of the frames, the later ones named
+    `Unlabeled:5xx`). `markers`: which of the four markers are in view.
+    """
     rng = np.random.default_rng(seed)
     t = np.arange(0, duration_s, 1 / RATE_HZ)
     arm = arm_press_track(t, starts_s, speeds_mps, travel_m)
@@ -56,7 +63,7 @@ def motive_csv(
         "Unlabeled:103": key,
     }
     scale = {"Meters": 1.0, "Millimeters": 1000.0}[units]
-    names = list(heights) + ["Unlabeled:900", "Unlabeled:901"]
+    names = [n for n in heights if n in markers] + ["Unlabeled:900", "Unlabeled:901"]
     columns = []
     for name in names:
         if name in heights:
@@ -70,7 +77,20 @@ def motive_csv(
             present = np.zeros(t.size, bool)
             begin = rng.integers(0, t.size - 30)
             present[begin : begin + 20] = True  # a short ghost track
-        columns.append((name, x * scale, y * scale, z * scale, present))
+        cuts = (split or {}).get(name, ())
+        if not cuts:
+            columns.append((name, x * scale, y * scale, z * scale, present))
+            continue
+        edges = [0, *(int(c * t.size) for c in cuts), t.size]
+        for piece, (begin, end) in enumerate(zip(edges[:-1], edges[1:], strict=True)):
+            mask = present.copy()
+            mask[:begin] = False
+            mask[end:] = False
+            if piece + 1 < len(edges) - 1:
+                mask[end - int(rng.integers(2, 12)) : end] = False  # occluded for a few frames
+            label = name if piece == 0 else f"Unlabeled:{500 + 10 * int(name[-1]) + piece}"
+            columns.append((label, x * scale, y * scale, z * scale, mask))
+    names = [c[0] for c in columns]
     meta = (
         "Format Version,1.21,Take Name,synthetic,Capture Frame Rate,120.000000,Export Frame Rate,"
         f"120.000000,Rotation Type,Quaternion,Length Units,{units},Coordinate Space,Global"

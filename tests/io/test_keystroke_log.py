@@ -166,7 +166,9 @@ def test_fixture_soft_0_is_all_silent(zhang2022: Path) -> None:
     assert len(log.trials) == 135 and (log.trials["status"] == "silent").all()
 
 
-def test_fixture_rigid_changing_acc_every_note_on_once(zhang2022: Path) -> None:
+def test_fixture_rigid_changing_acc_by_timestamp(zhang2022: Path) -> None:
+    """Every keystroke makes 4-6 events (double strikes, two note-offs); read(2) leaves the rest
+    for later lines, so the backlog grows to the end of the log. Assigned by timestamp."""
     path = zhang2022 / "data/rigid/rigid_data_angle_0_changing_acc.txt"
     log = read_keystroke_log(path)
     ons = log.midi[log.midi["type"] == "note_on"]
@@ -181,6 +183,62 @@ def test_fixture_rigid_changing_acc_every_note_on_once(zhang2022: Path) -> None:
     slow = ok["up_acceleration_mps2"] == 0.01
     assert slow.any() and (ok.loc[slow, "midi_hold_s"] > 2.0).all()
     assert (ok.loc[~slow, "midi_hold_s"] < 1.5).all()
+    # the first 64 keystrokes sounded (63 moved off the line that printed them); the log ends
+    # before the last 51 keystrokes' events were read
+    counts = log.trials["assignment"].value_counts().to_dict()
+    assert counts == {"own line": 1, "moved": 63, "unread": 51}
+    moved = log.trials[log.trials["assignment"] == "moved"]
+    assert moved["assignment_evidence"].str.contains("backlog from line").all()
+    assert (moved["moved_from_line"] > moved["source_line"]).all()
+
+
+def test_fixture_seq_data(zhang2022: Path) -> None:
+    """The sequential rigid log: named keys, 99 sequences, note letters of octave 4."""
+    log = read_keystroke_log(zhang2022 / "experiments/rigid/data/seq_data.txt")
+    trials = log.trials
+    assert len(trials) == 1151 and log.layout == "named-keys" and log.finger == "rigid"
+    assert trials["sequence_id"].nunique() == 99
+    assert trials.groupby("sequence_id").size().max() == 12
+    assert trials["note"].between(60, 71).all()
+    # the 8 lines that printed nothing are silent
+    empty = trials["read_line"].isna() & (trials["assignment"] == "silent")
+    lines = (zhang2022 / "experiments/rigid/data/seq_data.txt").read_text().splitlines()
+    printed_nothing = {n for n, line in enumerate(lines, start=1) if line.endswith("'midi': []}")}
+    assert len(printed_nothing) == 8
+    assert printed_nothing <= set(trials.loc[trials["status"] == "silent", "source_line"])
+    # every sounded keystroke got a press of its own key
+    ons = log.midi[log.midi["type"] == "note_on"].groupby("index")["note"].first()
+    ok = trials[trials["status"] == "ok"]
+    assert (ok["index"].map(ons) == ok["note"]).all()
+    # the other silent lines printed the previous keystroke's note: their own key never sounded
+    assert int(empty.sum()) >= 8 and (trials["status"] == "silent").sum() == 14
+    assert (trials["status"] == "ok").sum() == 1135 and trials["assignment"].eq("unread").sum() == 2
+    # three presses belong to keystrokes the log never wrote (groups cut short by a connection drop)
+    unassigned = log.assignment["unassigned_presses"]
+    assert [p["line"] for p in unassigned] == [468, 974, 1092]
+    assert {"move_velocity_mps", "move_acceleration_mps2", "up_acceleration_mps2"} <= set(trials)
+    assert log.columns["group"] == "sequence_id" and log.columns["press_depth"] == "depth_m"
+
+
+@pytest.mark.parametrize(
+    ("name", "lines", "sounded", "silent", "moved", "unknown"),
+    [
+        ("data/soft/ctrl_midi/soft_0_angle_20.txt", 135, 0, 135, 0, 0),
+        ("data/soft/ctrl_midi/soft_60_angle_45.txt", 135, 103, 32, 0, 0),
+        ("data/soft/ctrl_midi/soft_80_angle_20.txt", 135, 92, 43, 0, 0),
+        ("data/rigid/rigid__angle_0.txt", 100, 98, 2, 0, 0),
+        ("data/rigid/rigid_pre_test_changing_hold_time.txt", 21, 21, 0, 0, 0),
+        ("data/soft/soft_0_data_angle_90_smaller_interval.txt", 257, 257, 0, 0, 0),
+    ],
+)
+def test_fixture_counts(zhang2022: Path, name: str, lines: int, sounded: int, silent: int, moved: int,
+                        unknown: int) -> None:  # fmt: skip
+    """Logs whose lines each hold their own keystroke's events: nothing moves."""
+    trials = read_keystroke_log(zhang2022 / name).trials
+    status = trials["status"].value_counts()
+    assert len(trials) == lines
+    assert (status.get("ok", 0), status.get("silent", 0), status.get("failed", 0)) == (sounded, silent, unknown)
+    assert (trials["assignment"] == "moved").sum() == moved
 
 
 def test_fixture_rigid_restart_is_two_sessions(zhang2022: Path) -> None:
@@ -195,3 +253,4 @@ def test_fixture_malformed_lines(zhang2022: Path) -> None:
     records = sum(1 for line in path.read_text().splitlines() if "'control'" in line)
     assert len(log.trials) == records - 2
     assert (log.trials["status"] == "ok").all()
+    assert log.n_sessions == 3  # two headers, and a restart without one after the cut line 232

@@ -1,4 +1,5 @@
-"""A private JACK server (dummy driver) for the MIDI tests; skipped when jackd is absent.
+"""Fixtures of the rig tests: a private JACK server (dummy driver) for the MIDI tests, skipped
+when jackd is absent, and `ur_emulator`, the emulated UR controller (tests/hardware_emulator).
 
 Each pytest process (each xdist worker) starts its own server under a unique name and points
 `JACK_DEFAULT_SERVER` at it, so parallel workers never share or kill each other's server.
@@ -15,6 +16,7 @@ import uuid
 from collections.abc import Iterator
 
 import pytest
+from hardware_emulator.fixtures import ur_emulator  # noqa: F401  (the emulated UR controller)
 
 # Small periods keep the JACK MIDI delivery jitter (one period) near 1 ms.
 JACK_RATE_HZ = 48_000

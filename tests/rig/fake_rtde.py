@@ -5,19 +5,25 @@ are the four ur_rtde objects talking to it. Like the real ones:
 
 - construction raises RuntimeError when nothing listens (`controller.listening = False`);
 - commands return False instead of raising (protective stop, dead control script, drop);
-- an asynchronous `moveL` returns at once, `getAsyncOperationProgress()` is >= 0 while it runs
-  and toggles between -1 and -2 when moves finish;
+- an asynchronous `moveL` returns at once; `getAsyncOperationProgressEx()` carries an operation
+  id that moves on when a move starts, and a "running" bit while it runs;
+- the speed slider (`getTargetSpeedFraction`) and the trajectory limiter (`getSpeedScaling`)
+  stretch moves in time; `getSpeedScalingCombined` is their product, 0 while paused;
 - the controller time (`getTimestamp`) advances in 2 ms ticks (500 Hz), on its own origin.
 
 Time comes from a `FakeClock` shared with the code under test, so runs are deterministic and
-fast. Every call is recorded in `controller.calls` as (interface, method, args).
+fast. Every call is recorded in `controller.calls` as (interface, method, args). The method
+names and signatures are checked against the installed ur_rtde (test_fakes_match_sdk.py); the
+emulated controller in tests/hardware_emulator is what checks the behaviour.
 """
 
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any
 
 from pianobot.physics.trajectory import move_profile
@@ -31,6 +37,7 @@ ROBOT_MODE_RUNNING = 7
 SAFETY_MODE_NORMAL = 1
 SAFETY_MODE_PROTECTIVE_STOP = 3
 SAFETY_MODE_ROBOT_EMERGENCY_STOP = 7
+RUNTIME_STOPPED, RUNTIME_PLAYING, RUNTIME_PAUSED = 1, 2, 4
 
 
 class FakeClock:
@@ -64,27 +71,32 @@ class FakeController:
     listening: bool = True
     connected: bool = True
     program_running: bool = True
+    paused: bool = False
     protective_stopped: bool = False
     emergency_stopped: bool = False
-    speed_scaling: float = 1.0
+    speed_slider: float = 1.0  # the pendant's slider (target_speed_fraction)
+    limiter_scaling: float = 1.0  # the trajectory limiter (speed_scaling)
     robot_mode: int = ROBOT_MODE_RUNNING
+    polyscope: str = "URSoftware 5.11.1.108318 (Aug 24 2021)"
+    remote_control: bool = True
     reach_m: float = 0.85  # isPoseWithinSafetyLimits: inside this sphere around the base
     reconnect_works: bool = True
     # Failure injection: on the n-th moveL (1-based), `what` happens `after_s` into the move.
     fail_on_move: int | None = None
     fail_what: str = "protective_stop"  # "protective_stop" | "emergency_stop" | "drop"
     fail_after_s: float = 0.05
-    analog_out: list[float] = field(default_factory=lambda: [0.0, 0.0])  # voltage ratios
+    analog_out: list[float] = field(default_factory=lambda: [0.0, 0.0])  # ratios of the span
+    analog_domain: list[str] = field(default_factory=lambda: ["voltage", "voltage"])
     regulator_tau_s: float = 0.5  # the vacuum regulator follows the analog output like this
-    regulator_gain: float = 1.0  # monitor volts per commanded volt (1 = perfect regulator)
+    regulator_gain: float = 1.0  # monitor signal per command signal (1 = perfect regulator)
     regulator_output_channel: int = 1  # the analog output that drives the regulator
     regulator_input_channel: int = 0  # the analog input its monitor output is wired to
     calls: list[tuple[str, str, tuple[Any, ...]]] = field(default_factory=list)
     on_tick: Callable[[FakeController], None] | None = None  # e.g. a piano watching the TCP
     _move: _Move | None = None
     _moves_started: int = 0
-    _progress: int = -1
-    _last_finished: int = -1
+    _operation_id: int = 0
+    _running: bool = False
     _updated_at_s: float = -1.0
     _regulator: tuple[float, float, float] = (0.0, 0.0, 0.0)  # (volts at t, target volts, t)
 
@@ -118,6 +130,16 @@ class FakeController:
         if self.on_tick is not None:
             self.on_tick(self)
 
+    @property
+    def speed_scaling(self) -> float:
+        """How fast trajectories run: slider × limiter, 0 while paused."""
+        return 0.0 if self.paused else self.speed_slider * self.limiter_scaling
+
+    def runtime_state(self) -> int:
+        if self.paused:
+            return RUNTIME_PAUSED
+        return RUNTIME_PLAYING if self.program_running else RUNTIME_STOPPED
+
     def _pose_along(self, move: _Move, t_s: float) -> list[float]:
         travelled = _travelled_m(move.profile, t_s * self.speed_scaling)
         length = move.profile.distance_m
@@ -141,28 +163,29 @@ class FakeController:
         self.fail_on_move = None
 
     def _finish_move(self) -> None:
-        # Like the control script: each finished move toggles the register between -1 and -2.
+        # Like the control script: the operation keeps its id, the running bit clears.
         self._move = None
-        self._last_finished = -2 if self._last_finished == -1 else -1
-        self._progress = self._last_finished
+        self._running = False
 
     def start_move(self, target: list[float], speed: float, acceleration: float) -> bool:
         self.update()
-        if self._failed() or not self.program_running:
+        if self._failed() or not self.program_running or self.paused:
             return False
         length = math.dist(self.pose[:3], target[:3])
         # Speed scaling slows the whole profile in time: v·s and a·s².
         profile = move_profile(max(length, 1e-12), speed, acceleration)
-        duration = profile.duration_s / self.speed_scaling
+        duration = profile.duration_s / max(self.speed_scaling, 1e-9)
         self._moves_started += 1
         self._updated_at_s = -1.0
         self._move = _Move(list(self.pose), list(target), self.clock.now(), duration, profile)
-        self._progress = 0
+        self._operation_id = (self._operation_id + 1) % 128
+        self._running = True
         return True
 
-    def progress(self) -> int:
+    def status_word(self) -> int:
+        """The control script's async status register (op id, running bit)."""
         self.update()
-        return self._progress
+        return self._operation_id * 16777216 + (32768 if self._running else 0)
 
     def stop(self) -> None:
         self.update()
@@ -170,12 +193,18 @@ class FakeController:
             self._finish_move()
 
     # -- analog I/O with a first-order regulator -------------------------------------------
-    def set_analog(self, channel: int, ratio: float) -> None:
+    def set_analog(self, channel: int, ratio: float, domain: str = "voltage") -> None:
         self.analog_out[channel] = ratio
+        self.analog_domain[channel] = domain
         if channel == self.regulator_output_channel:
             now = self.clock.now()
             volts = self._regulator_volts()
-            self._regulator = (volts, ratio * 10.0 * self.regulator_gain, now)
+            self._regulator = (volts, self.analog_out_value(channel) * self.regulator_gain, now)
+
+    def analog_out_value(self, channel: int) -> float:
+        """Volts (0-10) or milliamps (4-20) the output drives."""
+        ratio = self.analog_out[channel]
+        return 4.0 + 16.0 * ratio if self.analog_domain[channel] == "current" else 10.0 * ratio
 
     def _regulator_volts(self) -> float:
         value, target, t0 = self._regulator
@@ -183,7 +212,7 @@ class FakeController:
         return target + (value - target) * math.exp(-dt / self.regulator_tau_s)
 
     def analog_in(self, channel: int) -> float:
-        """Volts on an analog input: the regulator's monitor output where it is wired."""
+        """The regulator's monitor output where it is wired: it repeats the command signal."""
         return self._regulator_volts() if channel == self.regulator_input_channel else 0.0
 
     def safety_bits(self) -> int:
@@ -217,19 +246,51 @@ def _travelled_m(profile: Any, t_s: float) -> float:
     return float(profile.distance_m) - 0.5 * a * left * left
 
 
+def sdk_factories(controller: FakeController) -> dict[str, Callable[..., Any]]:
+    """Stand-ins for the four SDK classes, called like them (host first), for `*_factory`."""
+    return {
+        "receive": partial(FakeReceive, controller),
+        "control": partial(FakeControl, controller),
+        "io": partial(FakeIO, controller),
+        "dashboard": partial(FakeDashboard, controller),
+    }
+
+
 def _refuse_if_nothing_listens(controller: FakeController, host: str) -> None:
     if not controller.listening:
         raise RuntimeError(f"Error: Could not connect to: {host} at 30004, verify the IP")
 
 
+class FakeAsyncStatus:
+    """rtde_control.AsyncOperationStatus."""
+
+    def __init__(self, arg0: int, /) -> None:
+        self._value = arg0
+
+    def value(self) -> int:
+        return self._value
+
+    def operationId(self) -> int:  # noqa: N802
+        return (self._value >> 24) & 0x7F
+
+    def isAsyncOperationRunning(self) -> bool:  # noqa: N802
+        return bool(self._value & 0x8000)
+
+    def progress(self) -> int:
+        return self._value & 0x7FFF if self.isAsyncOperationRunning() else -1
+
+    def changeCount(self) -> int:  # noqa: N802
+        return (self._value >> 16) & 0xFF
+
+
 class FakeControl:
     """rtde_control.RTDEControlInterface."""
 
-    def __init__(self, controller: FakeController, host: str = "192.0.2.10",
-                 frequency: float = 500.0) -> None:
-        _refuse_if_nothing_listens(controller, host)
+    def __init__(self, controller: FakeController, hostname: str,
+                 frequency: float = -1.0) -> None:
+        _refuse_if_nothing_listens(controller, hostname)
         self.c = controller
-        self.c.record("control", "__init__", host, frequency)
+        self.c.record("control", "__init__", hostname, frequency)
 
     def moveL(self, pose: list[float], speed: float = 0.25, acceleration: float = 1.2,  # noqa: N802
               asynchronous: bool = False) -> bool:
@@ -238,7 +299,7 @@ class FakeControl:
             return False
         if asynchronous:
             return True
-        while self.c.progress() >= 0:  # blocking: let the clock run until the move ends
+        while self.c.status_word() & 0x8000:  # blocking: let the clock run until the move ends
             self.c.clock.sleep(CONTROLLER_PERIOD_S)
         return not self.c._failed()
 
@@ -246,19 +307,21 @@ class FakeControl:
         self.c.record("control", "stopL", a, asynchronous)
         self.c.stop()
 
-    def getAsyncOperationProgress(self) -> int:  # noqa: N802
-        return self.c.progress()
+    def getAsyncOperationProgressEx(self) -> FakeAsyncStatus:  # noqa: N802
+        return FakeAsyncStatus(self.c.status_word())
 
-    def isPoseWithinSafetyLimits(self, pose: list[float]) -> bool:  # noqa: N802
-        self.c.record("control", "isPoseWithinSafetyLimits", list(pose))
-        return math.hypot(*pose[:3]) <= self.c.reach_m
+    def isPoseWithinSafetyLimits(self, arg0: list[float], /) -> bool:  # noqa: N802
+        self.c.record("control", "isPoseWithinSafetyLimits", list(arg0))
+        if not (self.c.connected and self.c.program_running and not self.c.paused):
+            return False  # ur_rtde answers False when the script cannot answer
+        return math.hypot(*arg0[:3]) <= self.c.reach_m
 
     def isConnected(self) -> bool:  # noqa: N802
         return self.c.connected
 
     def isProgramRunning(self) -> bool:  # noqa: N802
         self.c.update()
-        return self.c.connected and self.c.program_running
+        return self.c.connected and self.c.program_running and not self.c.paused
 
     def reconnect(self) -> bool:
         self.c.record("control", "reconnect")
@@ -267,6 +330,16 @@ class FakeControl:
         self.c.connected = True
         if not (self.c.protective_stopped or self.c.emergency_stopped):
             self.c.program_running = True  # reconnecting re-uploads the control script
+            self.c.paused = False
+        return True
+
+    def reuploadScript(self) -> bool:  # noqa: N802
+        self.c.record("control", "reuploadScript")
+        if not self.c.connected:
+            return False
+        if not (self.c.protective_stopped or self.c.emergency_stopped):
+            self.c.program_running = True
+            self.c.paused = False
         return True
 
     def teachMode(self) -> bool:  # noqa: N802
@@ -288,11 +361,11 @@ class FakeControl:
 class FakeReceive:
     """rtde_receive.RTDEReceiveInterface."""
 
-    def __init__(self, controller: FakeController, host: str = "192.0.2.10",
-                 frequency: float = 500.0) -> None:
-        _refuse_if_nothing_listens(controller, host)
+    def __init__(self, controller: FakeController, hostname: str,
+                 frequency: float = -1.0, variables: list[str] = []) -> None:  # noqa: B006
+        _refuse_if_nothing_listens(controller, hostname)
         self.c = controller
-        self.c.record("receive", "__init__", host, frequency)
+        self.c.record("receive", "__init__", hostname, frequency)
 
     def getActualTCPPose(self) -> list[float]:  # noqa: N802
         self.c.update()
@@ -314,7 +387,16 @@ class FakeReceive:
         return SAFETY_MODE_PROTECTIVE_STOP if self.c.protective_stopped else SAFETY_MODE_NORMAL
 
     def getSpeedScaling(self) -> float:  # noqa: N802
+        return 0.0 if self.c.paused else self.c.limiter_scaling
+
+    def getTargetSpeedFraction(self) -> float:  # noqa: N802
+        return self.c.speed_slider
+
+    def getSpeedScalingCombined(self) -> float:  # noqa: N802
         return self.c.speed_scaling
+
+    def getRuntimeState(self) -> int:  # noqa: N802
+        return self.c.runtime_state()
 
     def isProtectiveStopped(self) -> bool:  # noqa: N802
         self.c.update()
@@ -329,6 +411,12 @@ class FakeReceive:
 
     def getStandardAnalogInput1(self) -> float:  # noqa: N802
         return self.c.analog_in(1)
+
+    def getStandardAnalogOutput0(self) -> float:  # noqa: N802
+        return self.c.analog_out_value(0)
+
+    def getStandardAnalogOutput1(self) -> float:  # noqa: N802
+        return self.c.analog_out_value(1)
 
     def isConnected(self) -> bool:  # noqa: N802
         return self.c.connected
@@ -347,20 +435,32 @@ class FakeReceive:
 class FakeIO:
     """rtde_io.RTDEIOInterface."""
 
-    def __init__(self, controller: FakeController, host: str = "192.0.2.10") -> None:
-        _refuse_if_nothing_listens(controller, host)
+    def __init__(self, controller: FakeController, hostname: str,
+                 verbose: bool = False) -> None:
+        _refuse_if_nothing_listens(controller, hostname)
         self.c = controller
-        self.c.record("io", "__init__", host)
+        self.c.record("io", "__init__", hostname)
 
-    def setAnalogOutputVoltage(self, output_id: int, voltage_ratio: float) -> bool:  # noqa: N802
-        self.c.record("io", "setAnalogOutputVoltage", output_id, voltage_ratio)
+    def setAnalogOutputVoltage(self, arg0: int, arg1: float, /) -> bool:  # noqa: N802
+        self.c.record("io", "setAnalogOutputVoltage", arg0, arg1)
         if not self.c.connected:
             return False
-        self.c.set_analog(output_id, voltage_ratio)
+        self.c.set_analog(arg0, arg1, "voltage")
+        return True
+
+    def setAnalogOutputCurrent(self, arg0: int, arg1: float, /) -> bool:  # noqa: N802
+        self.c.record("io", "setAnalogOutputCurrent", arg0, arg1)
+        if not self.c.connected:
+            return False
+        self.c.set_analog(arg0, arg1, "current")
         return True
 
     def isConnected(self) -> bool:  # noqa: N802
         return self.c.connected
+
+    def reconnect(self) -> bool:
+        self.c.record("io", "reconnect")
+        return self.c.listening and self.c.reconnect_works
 
     def disconnect(self) -> None:
         self.c.record("io", "disconnect")
@@ -369,7 +469,7 @@ class FakeIO:
 class FakeDashboard:
     """dashboard_client.DashboardClient (constructing it does not connect; connect() does)."""
 
-    def __init__(self, controller: FakeController, host: str = "192.0.2.10",
+    def __init__(self, controller: FakeController, hostname: str,
                  port: int = 29999) -> None:
         self.c = controller
         self._connected = False
@@ -384,19 +484,28 @@ class FakeDashboard:
         return self._connected
 
     def polyscopeVersion(self) -> str:  # noqa: N802
-        return "URSoftware 5.11.1.108318 (Aug 24 2021)"
+        # ur_rtde returns the version number found in the server's answer.
+        found = re.search(r"\d+\.\d+\.\d+\.\d+", self.c.polyscope)
+        return found.group(0) if found else self.c.polyscope
 
     def getRobotModel(self) -> str:  # noqa: N802
         return "UR5"
 
     def getSerialNumber(self) -> str:  # noqa: N802
+        if not self.c.polyscope.startswith("URSoftware 5"):
+            raise RuntimeError("getSerialNumber() function is not supported on the dashboard "
+                               "server for PolyScope versions less than 5.6.0")
         return "20195500042"
 
     def isInRemoteControl(self) -> bool:  # noqa: N802
-        return True
+        return self.c.remote_control
 
     def robotmode(self) -> str:
         return "Robotmode: RUNNING"
+
+    def programState(self) -> str:  # noqa: N802
+        names = {RUNTIME_STOPPED: "STOPPED", RUNTIME_PLAYING: "PLAYING", RUNTIME_PAUSED: "PAUSED"}
+        return f"{names[self.c.runtime_state()]} <unnamed>"
 
     def safetystatus(self) -> str:
         if self.c.emergency_stopped:

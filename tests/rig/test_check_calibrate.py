@@ -7,11 +7,11 @@ from pathlib import Path
 
 import pytest
 from fake_midi import FakeMidiBackend
-from fake_rtde import FakeClock, FakeControl, FakeController, FakeDashboard, FakeIO, FakeReceive
+from fake_rtde import FakeClock, FakeController, sdk_factories
 
 from pianobot.rig.calibrate import calibrate_reference_pose, note_name
 from pianobot.rig.check import check_rig
-from pianobot.rig.errors import DeviceUnavailable, RigError, SafetyStop
+from pianobot.rig.errors import DeviceUnavailable, RigError
 from pianobot.spec import load_rig
 from pianobot.spec.rig import RigSpec
 
@@ -28,8 +28,8 @@ ur5:
   calibrated_utc: null
 vacuum:
   mode: ur-analog
-  output_channel: 1
-  input_channel: 0
+  regulator: {output_channel: 1, signal: voltage, signal_span: [0, 10], kpa_span: [0, -100]}
+  monitor: {input_channel: 0, signal: voltage, signal_span: [0, 10]}
 midi:
   api: JACK
   port: ES8
@@ -51,10 +51,11 @@ def rig_file(tmp_path: Path) -> Path:
 
 def fakes(robot: FakeController, ports: list[str] | None = None) -> dict[str, object]:
     midi = FakeMidiBackend(ports if ports is not None else ["Kawai ES8:Kawai ES8 MIDI 1 20:0"])
+    sdk = sdk_factories(robot)
     return {
-        "receive_factory": lambda host, f: FakeReceive(robot, host, f),
-        "io_factory": lambda host: FakeIO(robot, host),
-        "dashboard_factory": lambda host: FakeDashboard(robot, host),
+        "receive_factory": sdk["receive"],
+        "io_factory": sdk["io"],
+        "dashboard_factory": sdk["dashboard"],
         "midi_backend": lambda api: midi,
     }
 
@@ -66,10 +67,13 @@ def test_check_reports_every_device(robot: FakeController, rig_file: Path) -> No
     by_name = {d.device: d for d in report.devices}
     assert list(by_name) == ["arm", "dashboard", "calibration", "vacuum", "midi"]
     assert by_name["arm"].ok and "robot mode RUNNING" in by_name["arm"].summary
+    assert "e-Series (PolyScope 5.11.1.108318), RTDE 500 Hz" in by_name["arm"].summary
     assert by_name["arm"].details["tcp_pose"] == pytest.approx(TAUGHT_POSE)
-    assert by_name["dashboard"].details["polyscope_version"].startswith("URSoftware 5.11")
+    assert by_name["arm"].details["speed_slider"] == 1.0
+    assert by_name["dashboard"].details["polyscope_version"] == "5.11.1.108318"
     assert not by_name["calibration"].ok and "rig calibrate" in by_name["calibration"].summary
-    assert by_name["vacuum"].details["read_back_kpa"] == pytest.approx(-40.0, abs=0.1)
+    assert by_name["vacuum"].details["monitor_kpa"] == pytest.approx(-40.0, abs=0.1)
+    assert "0-10 V = 0 to -100 kPa" in by_name["vacuum"].summary
     assert by_name["midi"].details["port"] == "Kawai ES8:Kawai ES8 MIDI 1 20:0"
     assert [d.device for d in report.failures] == ["calibration"]
     assert not any(name == "moveL" for _, name, _ in robot.calls)  # a check moves nothing
@@ -83,9 +87,10 @@ def test_check_flags_a_protective_stop_and_slow_speed_slider(
     arm = report.devices[0]
     assert not arm.ok and "protective stopped" in arm.summary and "teach pendant" in arm.summary
     robot.protective_stopped = False
-    robot.speed_scaling = 0.3
+    robot.speed_slider = 0.3
     arm = check_rig(load_rig(rig_file), **fakes(robot)).devices[0]  # type: ignore[arg-type]
-    assert arm.ok and "speed scaling 0.30" in arm.summary and "stretched" in arm.summary
+    assert arm.ok and "speed slider 30 %" in arm.summary and "warning" in arm.summary
+    assert arm.details["speed_scaling_combined"] == pytest.approx(0.3)
 
 
 def test_check_with_nothing_reachable_gives_one_reason_per_device(
@@ -96,7 +101,7 @@ def test_check_with_nothing_reachable_gives_one_reason_per_device(
     assert not report.ok
     reasons = {d.device: d.summary for d in report.failures}
     assert set(reasons) == {"arm", "dashboard", "calibration", "vacuum", "midi"}
-    assert "ur_rtde could not connect" in reasons["arm"]
+    assert "192.0.2.10:29999" in reasons["arm"]
     assert "UR dashboard server at 192.0.2.10:29999" in reasons["dashboard"]
     assert "available: none" in reasons["midi"]
 
@@ -104,6 +109,12 @@ def test_check_with_nothing_reachable_gives_one_reason_per_device(
 def test_check_needs_a_lab_rig() -> None:
     with pytest.raises(ValueError, match="kind: ur5"):
         check_rig(RigSpec())
+
+
+def calibration_fakes(robot: FakeController) -> dict[str, object]:
+    sdk = sdk_factories(robot)
+    return {"receive_factory": sdk["receive"], "control_factory": sdk["control"],
+            "dashboard_factory": sdk["dashboard"]}
 
 
 def calibrate(robot: FakeController, rig_file: Path, answer: str = "") -> object:
@@ -120,8 +131,7 @@ def calibrate(robot: FakeController, rig_file: Path, answer: str = "") -> object
         ask=ask,
         interactive=lambda: True,
         now=lambda: datetime(2026, 3, 4, 5, 6, 7, tzinfo=UTC),
-        receive_factory=lambda host, f: FakeReceive(robot, host, f),
-        control_factory=lambda host, f: FakeControl(robot, host, f),
+        **calibration_fakes(robot),
     )
     assert "B3 (MIDI 59)" in prompts[0] and "1.5 cm" in prompts[0]
     return result
@@ -150,11 +160,10 @@ def test_calibrate_abort_leaves_the_file_alone(robot: FakeController, rig_file: 
 
 def test_calibrate_refuses_a_stopped_arm(robot: FakeController, rig_file: Path) -> None:
     robot.protective_stopped = True
-    with pytest.raises(SafetyStop):
+    with pytest.raises(DeviceUnavailable, match="protective stopped.*teach pendant"):
         calibrate_reference_pose(
             rig_file, ask=lambda p: "", interactive=lambda: True,
-            receive_factory=lambda host, f: FakeReceive(robot, host, f),
-            control_factory=lambda host, f: FakeControl(robot, host, f),
+            **calibration_fakes(robot),
         )
     assert not robot.calls_to("teachMode")
     assert rig_file.read_text() == RIG_YAML
@@ -166,7 +175,7 @@ def test_calibrate_without_a_terminal_fails_before_connecting(
     with pytest.raises(DeviceUnavailable, match="needs an operator at a terminal"):
         calibrate_reference_pose(
             rig_file, interactive=lambda: False,
-            receive_factory=lambda host, f: FakeReceive(robot, host, f),
+            **calibration_fakes(robot),
         )
     assert robot.calls == []
 

@@ -9,14 +9,7 @@ from typing import Any
 
 import pytest
 from fake_midi import FakeMidiBackend
-from fake_rtde import (
-    FakeClock,
-    FakeControl,
-    FakeController,
-    FakeDashboard,
-    FakeIO,
-    FakeReceive,
-)
+from fake_rtde import FakeClock, FakeController, sdk_factories
 
 from pianobot.physics.trajectory import Press
 from pianobot.rig import lab, open_rig
@@ -31,6 +24,11 @@ PIANO_PORT = "Kawai ES8:Kawai ES8 MIDI 1 20:0"
 REFERENCE_POSE = [-0.5, -0.1, 0.1, 0.0, math.pi, 0.0]
 
 
+# The fake regulator's monitor repeats its command: same span both ways.
+REGULATOR = {"output_channel": 1, "signal": "voltage", "signal_span": [0, 10], "kpa_span": [0, -100]}
+MONITOR = {"input_channel": 0, "signal": "voltage", "signal_span": [0, 10]}
+
+
 def lab_rig(**vacuum: Any) -> RigSpec:
     return RigSpec.model_validate({
         "kind": "ur5",
@@ -41,7 +39,7 @@ def lab_rig(**vacuum: Any) -> RigSpec:
             "reference_pose": REFERENCE_POSE,
             "calibrated_utc": "2026-01-01T00:00:00Z",
         },
-        "vacuum": {"mode": "ur-analog", "output_channel": 1, "input_channel": 0, **vacuum},
+        "vacuum": {"mode": "ur-analog", "regulator": REGULATOR, "monitor": MONITOR, **vacuum},
         "midi": {"api": "ALSA", "port": "ES8"},
         "keyboard": {"offsets_m": {60: 0.0005}},
         "settle_s": {"after_vacuum_change_s": 1.0, "between_presses_s": 0.3},
@@ -59,12 +57,10 @@ class Lab:
 def fake_lab() -> Lab:
     robot = FakeController(clock=FakeClock(), pose=[-0.5, -0.1, 0.2, 0.0, math.pi, 0.0])
     midi = FakeMidiBackend([PIANO_PORT, "Midi Through:Midi Through Port-0 14:0"])
+    fakes = sdk_factories(robot)
     factories = SdkFactories(
-        receive=lambda host, f: FakeReceive(robot, host, f),
-        control=lambda host, f: FakeControl(robot, host, f),
-        io=lambda host: FakeIO(robot, host),
-        midi_backend=lambda api: midi,
-        dashboard=lambda host: FakeDashboard(robot, host),
+        receive=fakes["receive"], control=fakes["control"], io=fakes["io"],
+        midi_backend=lambda api: midi, dashboard=fakes["dashboard"],
     )
     return Lab(robot, midi, factories)
 
@@ -80,7 +76,7 @@ def test_open_lab_devices_builds_every_device(fake_lab: Lab) -> None:
     assert arm.key_pose(60)[0] == pytest.approx(REFERENCE_POSE[0] + 0.0235 + 0.0005)
     assert vacuum.set_kpa(-30.0) == pytest.approx(-30.0, abs=2.0)  # read back on input 0
     assert fake_lab.robot.analog_out[1] == pytest.approx(0.3)
-    assert arm.describe()["polyscope_version"].startswith("URSoftware")
+    assert arm.describe()["controller"]["polyscope_version"] == "5.11.1.108318"
 
 
 def test_midi_note_filter_from_the_rig_file(fake_lab: Lab) -> None:
@@ -104,7 +100,7 @@ def test_vacuum_mode_picks_the_regulator(fake_lab: Lab, mode: str, kind: type) -
 
 def test_unreachable_arm_closes_the_midi_port_again(fake_lab: Lab) -> None:
     fake_lab.robot.listening = False
-    with pytest.raises(DeviceUnavailable, match="192.0.2.10:30004"):
+    with pytest.raises(DeviceUnavailable, match="192.0.2.10:(30004|29999)"):
         open_lab_devices(lab_rig(), clock=fake_lab.robot.clock, factories=fake_lab.factories)
     assert fake_lab.midi.ports and all(port.closed for port in fake_lab.midi.ports)
 

@@ -13,6 +13,7 @@ from fake_rtde import (
     FakeControl,
     FakeController,
     FakeReceive,
+    sdk_factories,
 )
 
 from pianobot.physics.keyboard import KeyboardGeometry
@@ -26,9 +27,10 @@ from pianobot.rig.errors import (
 )
 from pianobot.rig.protocols import Arm
 from pianobot.rig.ur5 import UR5Arm
-from pianobot.rig.ur5_link import ArmStatus, failure
+from pianobot.rig.ur5_status import ArmStatus, failure
 from pianobot.spec.rig import UR5Config
 
+HOST = "192.0.2.10"
 REFERENCE_POSE = (0.45, -0.10, 0.10, 0.0, math.pi, 0.0)
 PRESS = Press(
     distance_m=0.02, depth_m=0.01, down_velocity_mps=0.05, up_velocity_mps=0.1,
@@ -56,8 +58,8 @@ def robot() -> FakeController:
 def make_arm(robot: FakeController, **overrides: object) -> UR5Arm:
     return UR5Arm(
         make_config(**overrides),
-        control=FakeControl(robot),
-        receive=FakeReceive(robot),
+        control=FakeControl(robot, HOST),
+        receive=FakeReceive(robot, HOST),
         clock=robot.clock,
     )
 
@@ -84,8 +86,8 @@ def test_key_poses_follow_the_keyboard_geometry(robot: FakeController) -> None:
 def test_keyboard_axis_and_offsets_come_from_the_rig(robot: FakeController) -> None:
     arm = UR5Arm(
         make_config(),
-        control=FakeControl(robot),
-        receive=FakeReceive(robot),
+        control=FakeControl(robot, HOST),
+        receive=FakeReceive(robot, HOST),
         clock=robot.clock,
         geometry=KeyboardGeometry(0.0235, 59, ((57, 0.001),)),
         keyboard_axis=(0.0, -2.0, 0.0),
@@ -145,12 +147,12 @@ def test_trace_clock_mapping_uses_the_controller_time(robot: FakeController) -> 
                        atol=0.51)
 
 
-def test_speed_scaling_below_one_warns(robot: FakeController) -> None:
-    robot.speed_scaling = 0.5
+def test_speed_slider_below_one_stretches_and_warns(robot: FakeController) -> None:
+    robot.speed_slider = 0.5
     arm = make_arm(robot)
     arm.move_to_key(59, PRESS.distance_m)
     record = arm.press(PRESS, 59)
-    assert len(record.warnings) == 1 and "speed scaling 0.50" in record.warnings[0]
+    assert len(record.warnings) == 1 and "speed scaling fell to 0.50" in record.warnings[0]
     travel_m = PRESS.distance_m + PRESS.depth_m
     nominal_s = (
         move_profile(travel_m, PRESS.down_velocity_mps, PRESS.acceleration_mps2).duration_s
@@ -274,40 +276,79 @@ def test_uncalibrated_arm_is_unavailable(robot: FakeController) -> None:
         make_arm(robot, reference_pose=None)
 
 
+def connect(robot: FakeController, **config: object) -> UR5Arm:
+    fakes = sdk_factories(robot)
+    return UR5Arm.connect_to(make_config(**config), clock=robot.clock,
+                             receive_factory=fakes["receive"], control_factory=fakes["control"],
+                             dashboard_factory=fakes["dashboard"])
+
+
 def test_connect_to_maps_a_refused_connection(robot: FakeController) -> None:
     robot.listening = False
+    with pytest.raises(DeviceUnavailable, match=r"192\.0\.2\.10:29999: connect failed"):
+        connect(robot)
+    robot.listening = True
+    fakes = sdk_factories(robot)
 
-    def receive_factory(host: str, frequency: float) -> FakeReceive:
-        return FakeReceive(robot, host, frequency)
+    def refusing_receive(*args: object) -> FakeReceive:
+        robot.listening = False
+        return fakes["receive"](*args)
 
     with pytest.raises(DeviceUnavailable, match=r"192\.0\.2\.10:30004: ur_rtde could not connect"):
-        UR5Arm.connect_to(make_config(), clock=robot.clock, receive_factory=receive_factory)
+        UR5Arm.connect_to(make_config(), clock=robot.clock, receive_factory=refusing_receive,
+                          dashboard_factory=fakes["dashboard"])
 
 
-def test_connect_to_with_fakes_builds_a_working_arm(robot: FakeController) -> None:
-    arm = UR5Arm.connect_to(
-        make_config(),
-        clock=robot.clock,
-        receive_factory=lambda host, f: FakeReceive(robot, host, f),
-        control_factory=lambda host, f: FakeControl(robot, host, f),
-    )
-    assert ("control", "__init__", ("192.0.2.10", 500.0)) in robot.calls
+@pytest.mark.parametrize(("polyscope", "rate_hz"), [
+    ("URSoftware 5.11.1.108318 (Aug 24 2021)", 500.0),
+    ("URSoftware 3.15.7.106331 (Feb 02 2022)", 125.0),
+])
+def test_connect_to_picks_the_rate_from_the_controller(
+    robot: FakeController, polyscope: str, rate_hz: float,
+) -> None:
+    robot.polyscope = polyscope
+    arm = connect(robot)
+    assert ("control", "__init__", (HOST, rate_hz)) in robot.calls
+    assert ("receive", "__init__", (HOST, rate_hz)) in robot.calls
+    assert arm.rate_hz == rate_hz and arm.describe()["rtde_rate_source"] == "controller version"
     assert arm.press(PRESS, 59).arm is not None
+
+
+def test_a_rate_above_the_controller_loop_is_lowered_with_a_warning(robot: FakeController) -> None:
+    robot.polyscope = "URSoftware 3.15.7.106331 (Feb 02 2022)"
+    arm = connect(robot, frequency_hz=500.0)
+    assert arm.rate_hz == 125.0
+    assert any("125 Hz" in w for w in arm.warnings)
+    robot.polyscope = "URSoftware 5.11.1.108318 (Aug 24 2021)"
+    assert connect(robot, frequency_hz=250.0).rate_hz == 250.0
 
 
 def test_connect_to_an_unreachable_host_fails_fast() -> None:
     config = make_config(host="127.0.0.1", connect_timeout_s=0.5)
-    with pytest.raises(DeviceUnavailable, match=r"127\.0\.0\.1:30004"):
+    with pytest.raises(DeviceUnavailable, match=r"127\.0\.0\.1:29999"):
         UR5Arm.connect_to(config, clock=FakeClock())
 
 
+def status(**changes: object) -> ArmStatus:
+    fields: dict[str, object] = {
+        "receive_connected": True, "control_connected": True, "program_running": True,
+        "protective_stopped": False, "emergency_stopped": False, "safety_status_bits": 1,
+        "robot_mode": 7, "safety_mode": 1, "runtime_state": 2, "speed_slider": 1.0,
+        "speed_scaling": 1.0, "speed_scaling_combined": 1.0,
+    }
+    fields.update(changes)
+    return ArmStatus(**fields)  # type: ignore[arg-type]
+
+
 def test_unknown_failures_are_not_mislabelled() -> None:
-    quiet = ArmStatus(True, True, True, False, False, 1, 7, 1, 1.0)
-    assert type(failure("moveL", quiet)) is RigError
-    powered_off = ArmStatus(True, True, True, False, False, 1, 3, 1, 1.0)
-    assert isinstance(failure("moveL", powered_off), SafetyStop)
-    script_dead = ArmStatus(True, True, False, False, False, 1, 7, 1, 1.0)
+    assert type(failure("moveL", status())) is RigError
+    assert isinstance(failure("moveL", status(robot_mode=3)), SafetyStop)
+    script_dead = status(program_running=False, runtime_state=1)
     assert isinstance(failure("moveL", script_dead), ConnectionLost)
+    paused = status(program_running=False, runtime_state=4, speed_scaling_combined=0.0)
+    assert isinstance(failure("moveL", paused), SafetyStop)
+    assert "paused" in str(failure("moveL", paused))
+    assert isinstance(failure("moveL", status(speed_slider=0.0)), SafetyStop)
 
 
 def test_a_dead_control_script_is_a_connection_loss(robot: FakeController) -> None:
@@ -315,7 +356,72 @@ def test_a_dead_control_script_is_a_connection_loss(robot: FakeController) -> No
     robot.program_running = False  # moveL answers False, as ur_rtde does
     with pytest.raises(ConnectionLost, match="control script not running"):
         arm.move_to_key(59, 0.02)
-    arm.connect()  # reconnecting re-uploads the script
-    assert robot.calls_to("reconnect") and robot.program_running
+    arm.connect()  # the links are up: only the script is re-uploaded
+    assert robot.calls_to("reuploadScript") and not robot.calls_to("reconnect")
+    assert robot.program_running
     arm.move_to_key(59, 0.02)
     assert robot.pose == pytest.approx(arm.key_pose(59, 0.02))
+
+
+def test_a_two_segment_press_is_four_moves_each_checked_before_the_first(
+    robot: FakeController,
+) -> None:
+    arm = make_arm(robot)
+    two = Press(0.05, 0.02, 0.03, 0.05, 1.0, 0.1, approach_m=0.03, retract_m=0.04,
+                travel_velocity_mps=0.25, travel_acceleration_mps2=1.5)
+    arm.move_to_key(59, two.distance_m)
+    n = len(moves(robot))
+    record = arm.press(two, 59)
+    sent = robot.calls_to("moveL")[n:]
+    hover_z = REFERENCE_POSE[2] + two.distance_m
+    assert [round(args[0][2] - hover_z, 9) for args in sent] == [-0.03, -0.07, -0.04, 0.0]
+    assert [args[1:3] for args in sent] == [(0.25, 1.5), (0.03, 1.0), (0.05, 1.0), (0.25, 1.5)]
+    assert record.arm is not None and record.arm.x0_m is not None
+    assert record.arm.x0_m.max() == pytest.approx(0.07)
+    # Checked before sending: a fast approach into the key is refused, nothing moves.
+    n = len(moves(robot))
+    with pytest.raises(SafetyViolation, match="stop above the key"):
+        arm.press(Press(0.05, 0.02, 0.03, 0.05, 1.0, approach_m=0.06), 59)
+    robot.reach_m = 0.1  # every target outside the robot's reach: refused before the first
+    with pytest.raises(SafetyViolation, match="safety limits"):
+        arm.press(two, 59)
+    assert len(moves(robot)) == n
+
+
+class RacingReceive(FakeReceive):
+    """A receive interface where a new package lands between the timestamp and the pose read
+    of every other sample (ur_rtde's receive thread runs beside the caller)."""
+
+    def __init__(self, controller: FakeController, hostname: str) -> None:
+        super().__init__(controller, hostname)
+        self.truth: dict[float, float] = {}
+        self._reads = 0
+
+    def getTimestamp(self) -> float:  # noqa: N802
+        ts = super().getTimestamp()
+        self.truth[round(ts, 9)] = self.c.pose[2]
+        return ts
+
+    def getActualTCPPose(self) -> list[float]:  # noqa: N802
+        self._reads += 1
+        if self._reads % 2 == 0:
+            self.c.clock.sleep(CONTROLLER_PERIOD_S)  # the next package arrives now
+        pose = super().getActualTCPPose()
+        self.truth[round(self.c.controller_time_s(), 9)] = pose[2]
+        return pose
+
+
+def test_a_package_arriving_mid_sample_never_pairs_a_pose_with_the_wrong_time(
+    robot: FakeController,
+) -> None:
+    receive = RacingReceive(robot, HOST)
+    arm = UR5Arm(make_config(), control=FakeControl(robot, HOST), receive=receive,
+                 clock=robot.clock)
+    arm.move_to_key(59, PRESS.distance_m)
+    record = arm.press(PRESS, 59)
+    assert record.arm is not None and record.arm.x0_m is not None and arm.last_trace_offset_s
+    ctrl = np.round(record.arm.t_s - arm.last_trace_offset_s, 9)
+    hover_z = arm.key_pose(59, PRESS.distance_m)[2]
+    mismatched = [t for t, x0 in zip(ctrl, record.arm.x0_m, strict=True)
+                  if abs(hover_z - x0 - receive.truth[t]) > 1e-12]
+    assert len(ctrl) > 100 and not mismatched

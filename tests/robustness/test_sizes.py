@@ -77,7 +77,7 @@ def test_a_keystroke_log_beyond_the_line_limit_is_refused_before_parsing(
     log = tmp_path / "huge.txt"
     log.write_text("{'control': [60, 45, 0.5, 0.03, 0.04, 0.05, 0], 'midi': []}\n" * 1001)
     refused(["import", "keystroke-log", log, "--data", completed_run], completed_run, capsys,
-            monkeypatch, "has 1,001 lines", "up to 1,000 lines")
+            monkeypatch, "has more than 1,000 lines", "split it into sessions")
 
 
 def _song(n_notes: int) -> bytes:

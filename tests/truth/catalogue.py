@@ -3,7 +3,7 @@
 Mocap takes come in three schedules, used across effects *and* controls so that the schedule
 never gives the answer away: `shallow` (the study's zzz takes: finger resting on the key, about
 8 mm of arm travel), `deep` (pressed until the key of the linear chain would sit 11 mm down, past a
-≈ 10 mm key dip: needed to see a key stop or a let-off), and `hover` (the finger starts 3 mm above
+≈ 10 mm key dip: needed to see a key stop or a let-off), and `hover` (the finger starts 5 mm above
 the key, so it leaves the key on every release: needed to see adhesion). MIDI-only sessions are the
 study's soft-finger grid (3 accelerations × 15 speeds × 3 depths, 5 cm hover, hold 0).
 
@@ -21,7 +21,7 @@ from .scenario import Scenario, TakeSchedule
 
 SHALLOW = TakeSchedule()
 DEEP = TakeSchedule(key_target_m=0.011)
-HOVER = TakeSchedule(depth_m=0.008, distance_m=0.003)
+HOVER = TakeSchedule(depth_m=0.008, distance_m=0.005)
 SCHEDULES = {"shallow": SHALLOW, "deep": DEEP, "hover": HOVER}
 BASES = tuple(BASE_SETS)
 
@@ -89,6 +89,14 @@ MOCAP_EFFECTS: tuple[tuple[str, str, str, dict[str, Effect]], ...] = (
     ("arm_lag", "first_order", "shallow", {
         "strong": _e("arm_lag", "first_order", tau_s=0.025),
         "weak": _e("arm_lag", "first_order", tau_s=0.008),
+    }),
+    ("mocap_delay", "offset", "deep", {
+        "strong": _e("mocap_delay", "offset", delay_s=0.02),
+        "weak": _e("mocap_delay", "offset", delay_s=0.006),
+    }),
+    ("mocap_delay", "drifting", "shallow", {
+        "strong": _e("mocap_delay", "drifting", delay_s=0.005, rate_ppm=300.0),
+        "weak": _e("mocap_delay", "drifting", delay_s=0.0, rate_ppm=100.0),
     }),
     ("arm_lag", "servo", "deep", {
         "strong": _e("arm_lag", "servo", freq_hz=6.0, zeta=0.5),

@@ -26,6 +26,8 @@ Forms (downward positive, x2 key travel, s finger–key compression, v2 key spee
 | adhesion / cohesive | after separation δ: −F·(δ/δc)·exp(1 − δ/δc) | no |
 | arm_lag / first_order, delay | arm = command through 1/(τs + 1), or τ late | yes |
 | arm_lag / servo | arm = command through a 2nd-order servo (f, ζ) | no |
+| mocap_delay / offset | mocap clock = true clock + δ | yes |
+| mocap_delay / drifting | mocap clock = true clock·(1 + r) + δ (a clock-rate error) | no |
 | velocity_curve / tanh | 127·tanh(β·u^γ)/tanh(β), u = speed / full scale | yes |
 | velocity_curve / rational | 127·u·(1 + κ)/(u + κ), saturating | no |
 """
@@ -36,7 +38,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from . import layout as L
+from . import kernel as K
 
 # The family of each pianobot effect name (the unit discovery is scored on).
 FAMILY_OF: dict[str, str] = {
@@ -64,7 +66,7 @@ class FormInfo:
     effect: str  # pianobot effect name that is the right answer
     equals_candidate: bool
     params: tuple[str, ...]
-    where: str  # "plant" (kernel forces), "arm" (servo), "piano" (readout)
+    where: str  # "plant" (kernel forces), "arm" (servo), "piano" (readout), "mocap" (clock)
 
     @property
     def family(self) -> str:
@@ -90,6 +92,8 @@ _FORMS = (
     FormInfo("arm_lag", "first_order", "arm_lag", True, ("tau_s",), "arm"),
     FormInfo("arm_lag", "delay", "arm_lag", True, ("tau_s",), "arm"),
     FormInfo("arm_lag", "servo", "arm_lag", False, ("freq_hz", "zeta"), "arm"),
+    FormInfo("mocap_delay", "offset", "mocap_delay", True, ("delay_s",), "mocap"),
+    FormInfo("mocap_delay", "drifting", "mocap_delay", False, ("delay_s", "rate_ppm"), "mocap"),
     FormInfo("velocity_curve", "tanh", "velocity_curve", True, ("exponent", "saturation", "full_scale_mps"), "piano"),
     FormInfo("velocity_curve", "rational", "velocity_curve", False, ("knee", "full_scale_mps"), "piano"),
 )  # fmt: skip
@@ -138,56 +142,56 @@ def encode(effect: Effect, p: Any) -> None:
     q = effect.params
     kind, form = effect.kind, effect.form
     if kind == "keybed":
-        p[L.BED_X] = q["depth_m"]
+        p[K.BED_X] = q["depth_m"]
         if form == "power_law":
-            p[L.BED_FORM] = L.BED_POWER
-            p[L.BED_K], p[L.BED_N], p[L.BED_C] = (
+            p[K.BED_FORM] = K.BED_POWER
+            p[K.BED_K], p[K.BED_N], p[K.BED_C] = (
                 q["force_at_1mm_n"],
                 q["exponent"],
                 q["damping_spm"],
             )
         else:
-            p[L.BED_FORM] = L.BED_LINEAR if form == "linear" else L.BED_HC15
-            p[L.BED_K], p[L.BED_C] = q["stiffness_npm"], q["damping_nspm"]
+            p[K.BED_FORM] = K.BED_LINEAR if form == "linear" else K.BED_HC15
+            p[K.BED_K], p[K.BED_C] = q["stiffness_npm"], q["damping_nspm"]
     elif kind == "key_friction":
-        p[L.FR_FC] = q["friction_n"]
-        p[L.FR_FS] = q.get("static_friction_n", q["friction_n"])
-        p[L.FR_VS] = q.get("stribeck_velocity_mps", 1.0)
+        p[K.FR_FC] = q["friction_n"]
+        p[K.FR_FS] = q.get("static_friction_n", q["friction_n"])
+        p[K.FR_VS] = q.get("stribeck_velocity_mps", 1.0)
         if form == "lugre":
-            p[L.FR_FORM] = L.FR_LUGRE
-            p[L.FR_S0], p[L.FR_S1], p[L.FR_S2] = (
+            p[K.FR_FORM] = K.FR_LUGRE
+            p[K.FR_S0], p[K.FR_S1], p[K.FR_S2] = (
                 q["bristle_npm"],
                 q["bristle_damping_nspm"],
                 q["viscous_nspm"],
             )
         else:
-            p[L.FR_FORM] = L.FR_STRIBECK
+            p[K.FR_FORM] = K.FR_STRIBECK
     elif kind == "key_preload":
-        p[L.PRE_W] = q["preload_n"]
+        p[K.PRE_W] = q["preload_n"]
         if form == "felt_rail":
-            p[L.PRE_FORM] = L.PRE_FELT
-            p[L.PRE_DELTA], p[L.PRE_DAMP] = q["felt_compression_m"], q["felt_damping_spm"]
+            p[K.PRE_FORM] = K.PRE_FELT
+            p[K.PRE_DELTA], p[K.PRE_DAMP] = q["felt_compression_m"], q["felt_damping_spm"]
         else:
-            p[L.PRE_FORM] = L.PRE_REST_STOP
+            p[K.PRE_FORM] = K.PRE_REST_STOP
     elif kind == "finger_stiffening":
         if form == "exponential":
-            p[L.STIFF_FORM], p[L.STIFF_B] = L.STIFF_EXP, q["stiffening_per_m"]
+            p[K.STIFF_FORM], p[K.STIFF_B] = K.STIFF_EXP, q["stiffening_per_m"]
         else:
-            p[L.STIFF_FORM] = L.STIFF_POWER
-            p[L.STIFF_SREF], p[L.STIFF_Q] = q["reference_compression_m"], q["exponent"]
+            p[K.STIFF_FORM] = K.STIFF_POWER
+            p[K.STIFF_SREF], p[K.STIFF_Q] = q["reference_compression_m"], q["exponent"]
     elif kind == "finger_hysteresis":
-        p[L.HYS_ON] = 1.0
-        p[L.HYS_UY], p[L.HYS_ALPHA], p[L.HYS_N] = q["yield_m"], q["post_yield_ratio"], q["exponent"]
+        p[K.HYS_ON] = 1.0
+        p[K.HYS_UY], p[K.HYS_ALPHA], p[K.HYS_N] = q["yield_m"], q["post_yield_ratio"], q["exponent"]
     elif kind == "letoff":
-        p[L.LET_F], p[L.LET_X] = q["force_n"], q["depth_m"]
+        p[K.LET_F], p[K.LET_X] = q["force_n"], q["depth_m"]
         if form == "gaussian":
-            p[L.LET_FORM], p[L.LET_W] = L.LET_GAUSS, q["width_m"]
+            p[K.LET_FORM], p[K.LET_W] = K.LET_GAUSS, q["width_m"]
         else:
-            p[L.LET_FORM], p[L.LET_W], p[L.LET_WD] = L.LET_TRIP, q["rise_m"], q["drop_m"]
+            p[K.LET_FORM], p[K.LET_W], p[K.LET_WD] = K.LET_TRIP, q["rise_m"], q["drop_m"]
     elif kind == "adhesion":
         if form == "pull_off":
-            p[L.ADH_FORM], p[L.ADH_F] = L.ADH_PULL_OFF, q["pull_off_n"]
+            p[K.ADH_FORM], p[K.ADH_F] = K.ADH_PULL_OFF, q["pull_off_n"]
         else:
-            p[L.ADH_FORM], p[L.ADH_F], p[L.ADH_RANGE] = L.ADH_COHESIVE, q["peak_n"], q["range_m"]
+            p[K.ADH_FORM], p[K.ADH_F], p[K.ADH_RANGE] = K.ADH_COHESIVE, q["peak_n"], q["range_m"]
     else:
         raise ValueError(f"{kind}/{form} is not a plant effect")

@@ -1,7 +1,8 @@
 """Simulate a scenario and write what the lab records, plus truth.json with the answer.
 
 Folder of a mocap scenario: `take.csv` (Motive export), `presses.csv` (what the lab's script
-commanded: motion starts on the take's clock, speeds, acceleration, travel, hold), `truth.json`.
+commanded: motion starts on the arm's clock — the take's, unless the hidden effect is a mocap
+clock error — speeds, acceleration, depth, hover distance, hold), `truth.json`.
 Folder of a MIDI-only scenario: `soft_<|p|>_angle_<deg>.txt` (ctrl_midi log), `truth.json`.
 """
 
@@ -15,13 +16,15 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
+from . import kernel as K
 from .arm import PressCommand
 from .base import BASE_SETS
 from .ctrl_log import Stroke, assemble, simulate_stroke, write_log
 from .forms import FAMILY_OF
 from .motive import build_take, write_take
-from .plant import STEP_S, Plant, Trajectory
+from .plant import MOCAP_RATE_HZ, STEP_S, Plant, Trajectory
 from .scenario import Scenario
 
 SCHEMA = "pianobot-truth/1"
@@ -67,7 +70,38 @@ def simulate_take(scenario: Scenario) -> tuple[list[PressCommand], Trajectory]:
     presses = take.presses(acc, depth, rng_schedule)
     moves = [m for press in presses for m in press.moves()]
     t_end = presses[-1].t_end_s + take.tail_s
-    return presses, _plant(scenario, take.distance_m).simulate(moves, t_end, record_every=400)
+    plant = _plant(scenario, take.distance_m)
+    delay_s, rate_ppm = scenario.mocap_clock()
+    if delay_s == 0.0 and rate_ppm == 0.0:
+        return presses, plant.simulate(moves, t_end, record_every=400)
+    # The mocap clock runs off the arm's: frame k (k/120 s on the mocap clock) shows the state at
+    # true time (k/120 − δ)/(1 + r). Recorded finely, then interpolated at those times.
+    fine = plant.simulate(moves, t_end + abs(delay_s) + 1.0, record_every=40)
+    n = int(round(t_end * MOCAP_RATE_HZ)) + 1
+    t_mocap = np.arange(n) / MOCAP_RATE_HZ
+    t_true = (t_mocap - delay_s) / (1.0 + rate_ppm * 1e-6)
+    frames = resample(fine, np.clip(t_true, 0.0, None))
+    frames.data[:, K.OUT_T] = t_mocap  # the record is labelled by the mocap clock
+    return presses, frames
+
+
+def resample(traj: Trajectory, t_s: npt.NDArray[np.float64]) -> Trajectory:
+    """The trajectory at other times: cubic Hermite for positions (with their speeds), linear for
+    the rest. Accurate to nanometres from a 0.83 ms record."""
+    t = traj.t_s
+    i = np.clip(np.searchsorted(t, t_s, side="right") - 1, 0, t.size - 2)
+    h = t[i + 1] - t[i]
+    w = (t_s - t[i]) / h
+    out = traj.data[i] * (1.0 - w)[:, None] + traj.data[i + 1] * w[:, None]
+    h00, h10 = 2 * w**3 - 3 * w**2 + 1, w**3 - 2 * w**2 + w
+    h01, h11 = -2 * w**3 + 3 * w**2, w**3 - w**2
+    for x, v in (("x0_m", "v0_mps"), ("x1_m", "v1_mps"), ("x2_m", "v2_mps")):
+        cx, cv = K.OUT_NAMES.index(x), K.OUT_NAMES.index(v)
+        d = traj.data
+        out[:, cx] = (h00 * d[i, cx] + h10 * h * d[i, cv] + h01 * d[i + 1, cx]
+                      + h11 * h * d[i + 1, cv])  # fmt: skip
+    out[:, K.OUT_T] = t_s
+    return Trajectory(out, traj.events, traj.unresolved, traj.long_steps)
 
 
 def simulate_grid(scenario: Scenario) -> list[Stroke]:
@@ -97,7 +131,7 @@ def truth_dict(scenario: Scenario) -> dict[str, Any]:
     """The answer and everything a scorer needs (without the simulated outcomes)."""
     e = scenario.effect
     base = BASE_SETS[scenario.base]
-    family = None if e is None else e.info.family
+    family = "none" if e is None else e.info.family
     return {
         "schema": SCHEMA,
         "scenario": scenario.name,
@@ -105,7 +139,7 @@ def truth_dict(scenario: Scenario) -> dict[str, Any]:
         "description": scenario.description,
         "family": family,
         "effect": None if e is None else e.info.effect,
-        "accepted_effects": sorted(n for n, f in FAMILY_OF.items() if f == family),
+        "accepted_effects": sorted(n for n, f in FAMILY_OF.items() if f == family),  # [] if clean
         "truth_kind": None if e is None else e.kind,
         "form": None if e is None else e.form,
         "form_equals_candidate": None if e is None else e.info.equals_candidate,
@@ -137,7 +171,12 @@ def _write_mocap(scenario: Scenario, folder: Path) -> tuple[dict[str, Path], dic
     x2 = traj["x2_m"]
     extra: dict[str, Any] = {
         "presses": [p.to_dict() for p in presses],
-        "clock": "motion starts are on the take's clock (frame k at k/120 s), offset 0",
+        "clock": "motion starts are on the arm's clock; frame k is at k/120 s on the mocap "
+        "clock, which equals the arm's unless the hidden effect is mocap_delay",
+        "mocap_clock": {
+            "delay_s": scenario.mocap_clock()[0],
+            "rate_ppm": scenario.mocap_clock()[1],
+        },
         "mocap": {
             "frame_rate_hz": 120.0,
             "roles": take.roles,

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-from . import layout as L
+from . import kernel as K
 from .arm import ArmServo, Move, breakpoints, move_table
 from .base import BaseParams
 from .forms import Effect, encode
@@ -28,7 +28,7 @@ COARSE_STEPS = 20  # a long step (≈ 0.42 ms) while the key rests; divides 400
 
 @dataclass(frozen=True)
 class Trajectory:
-    """Recorded channels (each an array over time), named as in `layout.OUT_NAMES`."""
+    """Recorded channels (each an array over time), named as in `kernel.OUT_NAMES`."""
 
     data: FloatArray  # [n, N_OUT]
     events: int  # mode switches the integrator located
@@ -36,11 +36,11 @@ class Trajectory:
     long_steps: int = 0  # steps taken as one long step while the key rested
 
     def __getitem__(self, name: str) -> FloatArray:
-        return self.data[:, L.OUT_NAMES.index(name)]
+        return self.data[:, K.OUT_NAMES.index(name)]
 
     @property
     def t_s(self) -> FloatArray:
-        return self.data[:, L.OUT_T]
+        return self.data[:, K.OUT_T]
 
 
 @dataclass(frozen=True)
@@ -55,19 +55,19 @@ class Plant:
 
     def params(self) -> FloatArray:
         """The kernel's parameter vector."""
-        p = np.zeros(L.N_PARAMS)
+        p = np.zeros(K.N_PARAMS)
         b = self.base.at(self.vacuum_kpa)
-        p[L.M1], p[L.M2] = b["m1_kg"], b["m2_kg"]
-        p[L.K0], p[L.C0] = b["k0_npm"], b["c0_nspm"]
-        p[L.K1], p[L.C1] = b["k1_npm"], b["c1_nspm"]
-        p[L.K2], p[L.C2] = b["k2_npm"], b["c2_nspm"]
-        p[L.DIST] = self.distance_m
-        p[L.ARM_KIND] = self.servo.code()
-        p[L.ARM_TAU] = self.servo.tau_s
-        p[L.ARM_WN] = 2.0 * math.pi * self.servo.freq_hz
-        p[L.ARM_ZETA] = self.servo.zeta
-        p[L.FR_VS] = 1.0
-        p[L.BED_X] = math.inf
+        p[K.M1], p[K.M2] = b["m1_kg"], b["m2_kg"]
+        p[K.K0], p[K.C0] = b["k0_npm"], b["c0_nspm"]
+        p[K.K1], p[K.C1] = b["k1_npm"], b["c1_nspm"]
+        p[K.K2], p[K.C2] = b["k2_npm"], b["c2_nspm"]
+        p[K.DIST] = self.distance_m
+        p[K.ARM_KIND] = self.servo.code()
+        p[K.ARM_TAU] = self.servo.tau_s
+        p[K.ARM_WN] = 2.0 * math.pi * self.servo.freq_hz
+        p[K.ARM_ZETA] = self.servo.zeta
+        p[K.FR_VS] = 1.0
+        p[K.BED_X] = math.inf
         for effect in self.effects:
             if effect.info.where == "plant":
                 encode(effect, p)
@@ -90,7 +90,7 @@ class Plant:
         shift = self.servo.tau_s if self.servo.kind == "delay" else 0.0
         breaks = np.unique(np.concatenate([breakpoints(table), breakpoints(table, shift)]))
         n_steps = int(math.ceil((t_end_s - t_start_s) / STEP_S / record_every)) * record_every
-        y0 = np.zeros(L.N_STATE)
+        y0 = np.zeros(K.N_STATE)
         rec, _, counters = integrate(
             y0, self.params(), table, breaks, t_start_s, STEP_S, n_steps, record_every, coarse
         )

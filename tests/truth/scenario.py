@@ -108,8 +108,8 @@ class Scenario:
             where = self.effect.info.where
             if where == "piano" and self.kind != "midi":
                 raise ValueError(f"{self.name}: a piano effect needs a MIDI-only scenario")
-            if where == "arm" and self.kind != "mocap":
-                raise ValueError(f"{self.name}: an arm effect needs a measured arm (mocap)")
+            if where in ("arm", "mocap") and self.kind != "mocap":
+                raise ValueError(f"{self.name}: a {where} effect needs a mocap take")
 
     def servo(self) -> ArmServo:
         """How the arm follows its command (exact unless the hidden effect is an arm one)."""
@@ -119,6 +119,13 @@ class Scenario:
         if e.form == "servo":
             return ArmServo("servo", freq_hz=e.params["freq_hz"], zeta=e.params["zeta"])
         return ArmServo("lag" if e.form == "first_order" else "delay", tau_s=e.params["tau_s"])
+
+    def mocap_clock(self) -> tuple[float, float]:
+        """(offset s, rate error ppm) of the mocap clock against the arm's: zero unless hidden."""
+        e = self.effect
+        if e is None or e.info.where != "mocap":
+            return 0.0, 0.0
+        return e.params["delay_s"], e.params.get("rate_ppm", 0.0)
 
     def plant_effects(self) -> tuple[Effect, ...]:
         return () if self.effect is None or self.effect.info.where != "plant" else (self.effect,)

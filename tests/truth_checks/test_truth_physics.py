@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from tests.truth import BASE_SETS, Effect
-from tests.truth import layout as L
+from tests.truth import kernel as K
 from tests.truth.arm import ArmServo, Move, PressCommand, command, move_table
 from tests.truth.catalogue import MIDI_VACUA, MOCAP_VACUA
 from tests.truth.ctrl_log import simulate_stroke
@@ -53,17 +53,17 @@ def test_low_acceleration_caps_the_contact_speed() -> None:
 
 
 def _energy(rec: np.ndarray, p: np.ndarray) -> np.ndarray:
-    s = np.maximum(rec[:, L.OUT_X1] - rec[:, L.OUT_X2] - p[L.DIST], 0.0)
-    return (0.5 * p[L.M1] * rec[:, L.OUT_V1] ** 2 + 0.5 * p[L.M2] * rec[:, L.OUT_V2] ** 2
-            + 0.5 * p[L.K0] * (rec[:, L.OUT_XA] - rec[:, L.OUT_X1]) ** 2
-            + 0.5 * p[L.K1] * s**2 + 0.5 * p[L.K2] * rec[:, L.OUT_X2] ** 2)  # fmt: skip
+    s = np.maximum(rec[:, K.OUT_X1] - rec[:, K.OUT_X2] - p[K.DIST], 0.0)
+    return (0.5 * p[K.M1] * rec[:, K.OUT_V1] ** 2 + 0.5 * p[K.M2] * rec[:, K.OUT_V2] ** 2
+            + 0.5 * p[K.K0] * (rec[:, K.OUT_XA] - rec[:, K.OUT_X1]) ** 2
+            + 0.5 * p[K.K1] * s**2 + 0.5 * p[K.K2] * rec[:, K.OUT_X2] ** 2)  # fmt: skip
 
 
 def test_unforced_chain_only_loses_energy_and_contact_only_pushes() -> None:
     """Released from a squeezed state with the arm still: the finger bounces off the key."""
     p = Plant(BASE, -40.0).params()
-    y0 = np.zeros(L.N_STATE)
-    y0[L.X1], y0[L.X2], y0[L.V1] = 0.003, 0.001, -0.2
+    y0 = np.zeros(K.N_STATE)
+    y0[K.X1], y0[K.X2], y0[K.V1] = 0.003, 0.001, -0.2
     empty = np.zeros((0, 8))
     rec, _, counters = integrate(y0, p, empty, np.zeros(0), 0.0, STEP_S, 48_000, 1, 1)
     energy = _energy(rec, p)
@@ -71,8 +71,8 @@ def test_unforced_chain_only_loses_energy_and_contact_only_pushes() -> None:
     assert np.all(np.diff(energy) <= 1e-12 * energy[0])  # dissipative, to round-off
     assert energy[-1] < 0.2 * energy[0]
     assert counters[0] >= 2  # it separated and touched again
-    contact = rec[:, L.OUT_FC]
-    gap = rec[:, L.OUT_X1] - rec[:, L.OUT_X2]
+    contact = rec[:, K.OUT_FC]
+    gap = rec[:, K.OUT_X1] - rec[:, K.OUT_X2]
     assert contact.min() >= 0.0  # the finger never pulls the key
     assert np.all(contact[gap < 0] == 0.0)  # and touches it only in contact
 
@@ -106,7 +106,7 @@ def test_long_steps_and_halved_steps_agree(kind: str) -> None:
     fine, _, _ = integrate(np.zeros(8), p, table, breaks, 0.0, STEP_S, n, 400, 1)
     long, _, c = integrate(np.zeros(8), p, table, breaks, 0.0, STEP_S, n, 400, 20)
     for rec in (fine, long):
-        for col in (L.OUT_X1, L.OUT_X2):
+        for col in (K.OUT_X1, K.OUT_X2):
             assert np.max(np.abs(rec[:, col] - ref[:, col])) < 2e-8  # 20 nm
     assert (c[2] > 0) == (kind == "hover")  # LuGre bristles forbid long steps
 
@@ -155,3 +155,39 @@ def test_simulated_key_rings_at_the_linear_models_frequency() -> None:
     f_model = np.abs(np.linalg.eigvals(a).imag).min() / (2 * np.pi)
     assert 7.0 <= f_sim <= 11.0
     assert f_sim == pytest.approx(f_model, rel=0.03)
+
+
+def test_mocap_clock_offset_and_rate_shift_every_frame() -> None:
+    """A hidden mocap_delay: frame k shows the state at true time (k/120 − δ)/(1 + r)."""
+    from tests.truth import Scenario, TakeSchedule
+    from tests.truth.materialise import simulate_take
+
+    take = TakeSchedule(speeds_mps=(0.04, 0.08), repeats=1, lead_s=1.0, tail_s=1.0)
+    effect = Effect("mocap_delay", "drifting", {"delay_s": 0.02, "rate_ppm": 2000.0})
+    s = Scenario("clock", "mocap", "soft-key", -40.0, 1, "strong", effect, take=take)
+    presses, shifted = simulate_take(s)
+    _, true = simulate_take(s.without_effect())
+    for press in presses:
+        half = 0.5 * (press.depth_m + press.distance_m)
+        t_true = _crossing(true.t_s, true["x0_m"], press.t_start_s, half)
+        t_mocap = _crossing(shifted.t_s, shifted["x0_m"], press.t_start_s, half)
+        assert t_mocap == pytest.approx(t_true * (1 + 2000e-6) + 0.02, abs=2e-5)
+
+
+def _crossing(t: np.ndarray, x: np.ndarray, after_s: float, level: float) -> float:
+    """When x first rises through `level` after `after_s` (linear between frames)."""
+    i = int(np.searchsorted(t, after_s))
+    i += int(np.argmax(x[i:] >= level))
+    return float(t[i - 1] + (level - x[i - 1]) / (x[i] - x[i - 1]) * (t[i] - t[i - 1]))
+
+
+def test_resampling_a_fine_record_matches_recording_at_the_frames() -> None:
+    from tests.truth.materialise import resample
+
+    plant = Plant(BASE, -40.0, distance_m=0.002)
+    press = PressCommand(0.2, 0.06, 1.0, 0.01, 0.002, 0.2, 0.06)
+    frames = plant.simulate(press.moves(), 1.5, record_every=400)
+    fine = plant.simulate(press.moves(), 1.6, record_every=40)
+    again = resample(fine, frames.t_s)
+    for name in ("x0_m", "x1_m", "x2_m"):
+        assert np.max(np.abs(again[name] - frames[name])) < 5e-9

@@ -1,0 +1,106 @@
+"""Which marker of a take is the arm, the fingertip and the key — or a clear "cannot tell".
+
+Roles given by the user (`--marker ROLE=NAME`, a rig file's `mocap.markers`) are used as they
+are; a NAME may be any piece of a stitched track, and `none` says the role is not in view (e.g.
+`--marker key=none` for a take without the piano). The missing roles are inferred from the
+persistent markers, each only when the evidence is clear (otherwise InputError names the
+candidates and how to settle it):
+
+- markers that barely move (< STATIC_MOTION_M) are fixed to the piano body or the room: no role;
+- the arm marker sits on the end effector above the finger: the highest, by at least
+  ARM_SEPARATION_M;
+- the key moves least of the rest (its travel stops at the key bed, ≤ KEY_MAX_TRAVEL_M), by a
+  clear margin (at most KEY_MOTION_RATIO of the next); inferred only when at least two moving
+  markers remain besides the arm (with one, there is no piano in view);
+- the fingertip is the lowest of the rest (markers higher up the finger are ignored), by at least
+  TIP_SEPARATION_M.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+import numpy.typing as npt
+
+from pianobot.errors import InputError
+
+FloatArray = npt.NDArray[np.float64]
+ROLES = ("arm", "fingertip", "key")
+STATIC_MOTION_M = 0.0005
+ARM_SEPARATION_M = 0.02
+KEY_MOTION_RATIO = 0.75
+KEY_MAX_TRAVEL_M = 0.015
+TIP_SEPARATION_M = 0.004
+NOT_IN_VIEW = "none"
+
+
+def assign_roles(
+    names: list[str],
+    up_m: Callable[[str], FloatArray],
+    given: dict[str, str],
+    resolve: Callable[[str], str | None],
+    where: str,
+) -> dict[str, str]:
+    """Roles of the persistent markers `names` (module docstring).
+
+    Args:
+        names: persistent markers (chain names after stitching).
+        up_m: a marker's coordinate along the up axis on every frame (NaN when unseen).
+        given: role -> marker name chosen by the user.
+        resolve: the persistent marker a given name stands for (a piece -> its chain), or None.
+        where: the take's file, for messages.
+    """
+    roles: dict[str, str] = {}
+    absent = set()
+    for role, name in given.items():
+        if role not in ROLES:
+            raise InputError(f"marker role should be one of {ROLES}, got {role!r}", "--marker")
+        if name.lower() == NOT_IN_VIEW:
+            absent.add(role)
+            continue
+        chain = resolve(name)
+        if chain is None or chain not in names:
+            known = ", ".join(names[:8])
+            raise InputError(
+                f"marker {name!r} is not a persistent marker of the take ({known})", "--marker"
+            )
+        roles[role] = chain
+    free = [n for n in names if n not in roles.values()]
+    height = {n: float(np.nanmedian(up_m(n))) for n in free}
+    motion = {n: float(np.subtract(*np.nanpercentile(up_m(n), [99, 1]))) for n in free}
+    moving = [n for n in free if motion[n] >= STATIC_MOTION_M]
+    if "arm" not in roles and "arm" not in absent and moving:
+        ranked = sorted(moving, key=lambda n: height[n], reverse=True)
+        if len(ranked) > 1 and height[ranked[0]] - height[ranked[1]] < ARM_SEPARATION_M:
+            _unclear("arm", "highest", ranked[:2], height, where)
+        roles["arm"] = ranked[0]
+    rest = [n for n in moving if n not in roles.values()]
+    if "key" not in roles and "key" not in absent and len(rest) >= 2:
+        ranked = sorted(rest, key=lambda n: motion[n])
+        clear = (
+            motion[ranked[0]] <= KEY_MOTION_RATIO * motion[ranked[1]]
+            and motion[ranked[0]] <= KEY_MAX_TRAVEL_M
+        )
+        if not clear:
+            _unclear("key", "least moving", ranked[:2], motion, where)
+        roles["key"] = ranked[0]
+    rest = [n for n in moving if n not in roles.values()]
+    if "fingertip" not in roles and "fingertip" not in absent and rest:
+        ranked = sorted(rest, key=lambda n: height[n])
+        if len(ranked) > 1 and height[ranked[1]] - height[ranked[0]] < TIP_SEPARATION_M:
+            _unclear("fingertip", "lowest", ranked[:2], height, where)
+        roles["fingertip"] = ranked[0]
+    return {role: roles[role] for role in ROLES if role in roles}
+
+
+def _unclear(
+    role: str, rule: str, candidates: list[str], value: dict[str, float], where: str
+) -> None:
+    what = "height" if rule != "least moving" else "travel"
+    listed = " or ".join(f"{n} ({what} {value[n] * 1000:.1f} mm)" for n in candidates)
+    raise InputError(
+        f"cannot tell which marker is the {role} (the {rule} one): {listed}; "
+        f"name it with --marker {role}=NAME (or --marker {role}=none if it is not in view)",
+        where,
+    )
