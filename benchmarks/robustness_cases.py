@@ -27,6 +27,7 @@ import argparse
 import hashlib
 import json
 import os
+import re
 import resource
 import shutil
 import signal
@@ -65,7 +66,7 @@ class Outcome:
             return "(timed out)"
         text = self.stderr_lines[-1] if self.traceback and self.stderr_lines else (
             self.stderr_lines[0] if self.stderr_lines else "")
-        return text[:160]
+        return text
 
 
 @dataclass
@@ -212,7 +213,7 @@ def damaged(kind: str, command: str) -> Callable[[Path, Path], list[str]]:
             "resume": ["sweep", str(QUICKSTART), "--resume", run.name, "--no-progress"],
             "show": ["runs", "show", run.name],
             "report": ["report", run.name, "--out", str(folder / "report.html")],
-            "list": ["runs"],
+            "list": ["runs", "--json"],
         }[command]
         return [*args, "--data", str(data)]
 
@@ -220,7 +221,14 @@ def damaged(kind: str, command: str) -> Callable[[Path, Path], list[str]]:
 
 
 def _lists_damaged(folder: Path, outcome: Outcome) -> str | None:
-    return None if "damaged" in outcome.stdout else "the damaged run is not listed as damaged"
+    try:
+        runs = json.loads(outcome.stdout)
+    except ValueError:
+        return "no JSON list"
+    if not runs:
+        return "no run listed"
+    return None if any(r.get("status") == "damaged" for r in runs) else (
+        f"listed as {', '.join(str(r.get('status')) for r in runs)}, not damaged")
 
 
 # ---- spec, rig and option cases -------------------------------------------------------------
@@ -265,9 +273,12 @@ def grid_of(levels: int) -> Callable[[Path, Path], list[str]]:
     return spec_with(body)
 
 
-def rig_with_inf(tree: Path, folder: Path) -> list[str]:
-    rig = _write(folder, "rig.yaml", "kind: sim\nsettle_s:\n  between_presses_s: .inf\n")
-    return ["sweep", str(QUICKSTART), "--rig", str(rig), "--dry-run", "--data", str(_data(folder))]
+def rig_with(text: str) -> Callable[[Path, Path], list[str]]:
+    def build(tree: Path, folder: Path) -> list[str]:
+        rig = _write(folder, "rig.yaml", text)
+        return ["sweep", str(QUICKSTART), "--rig", str(rig), "--no-progress", "--data", str(_data(folder))]
+
+    return build
 
 
 def data_is_a_file(tree: Path, folder: Path) -> list[str]:
@@ -366,11 +377,20 @@ def _all_135_trials(folder: Path, outcome: Outcome) -> str | None:
 
 
 def long_log(lines: int) -> Callable[[Path, Path], list[str]]:
+    """The study's log repeated to `lines` lines as ONE clock session: each repetition's MIDI
+    timestamps are shifted past the previous one's, so no line starts a new session (a session
+    restart every 135 lines would hide a quadratic assignment)."""
+
     def build(tree: Path, folder: Path) -> list[str]:
         source = [line for line in LOG.read_text().splitlines() if line.strip()]
-        body = [source[i % len(source)] for i in range(lines)]
-        log = _write(folder, "long.txt", "\n".join(body) + "\n")
-        return ["import", "keystroke-log", str(log), "--json", "--data", str(_data(folder))]
+        stamp = re.compile(r"\], (\d+)\]")
+        span_ms = max(int(t) for line in source for t in stamp.findall(line)) + 5_000
+        with open(folder / "long.txt", "w") as out:
+            for i in range(lines):
+                shift = (i // len(source)) * span_ms
+                line = source[i % len(source)]
+                out.write(stamp.sub(lambda m, shift=shift: f"], {int(m.group(1)) + shift}]", line) + "\n")
+        return ["import", "keystroke-log", str(folder / "long.txt"), "--json", "--data", str(_data(folder))]
 
     return build
 
@@ -439,8 +459,11 @@ CASES: list[Case] = [
     Case("play-20k", "5", "`play --dry-run`, 20,000 notes", play_dry_run(20_000), expect="ok",
          check=_played, timeout_s=120),
     Case("spec-nan", "6", "NaN in a spec (`down_velocity_mps: [.nan]`)",
-         spec_with("sweep:\n  mode: grid\n  params:\n    down_velocity_mps: [.nan]\n")),
-    Case("rig-inf", "6", "inf in a rig file (`settle_s.between_presses_s: .inf`)", rig_with_inf),
+         spec_with("sweep:\n  mode: grid\n  params:\n    down_velocity_mps: [.nan]\n    depth_m: [0.03]\n")),
+    Case("rig-world-nan", "6", "NaN in a rig file's simulated world (`world.msd.c1_nspm: .nan`, `sweep`)",
+         rig_with("kind: sim\nworld: {msd: {c1_nspm: .nan}}\n")),
+    Case("rig-envelope-inf", "6", "inf in a rig file's envelope (`depth_m: [0.02, .inf]`, `sweep`)",
+         rig_with("kind: sim\nenvelope: {soft: {depth_m: [0.02, .inf]}}\n")),
     Case("data-is-file", "6", "`--data` names a file (`sweep`)", data_is_a_file),
     Case("identify-out-dir", "6", "`identify --out DIR`", identify_out_folder),
     Case("force-100k-digits", "6", "force reading of 100,000 digits (import)", force_with("9" * 100_000),
@@ -448,9 +471,11 @@ CASES: list[Case] = [
     Case("mocap-50mb-line", "6", "50 MB single-line mocap file (import)", mocap_one_line),
     Case("seed-negative", "6", "`sweep --seed -5`", seed("-5")),
     Case("spec-bool", "7", "`acceleration_mps2: true` in a spec", spec_with(
-        "sweep:\n  mode: grid\n  params:\n    down_velocity_mps: [0.02]\n    acceleration_mps2: [true]\n")),
+        "sweep:\n  mode: grid\n  params:\n    down_velocity_mps: [0.02]\n    depth_m: [0.03]\n"
+        "    acceleration_mps2: [true]\n")),
     Case("spec-string-number", "7", "`\"1.0\"` (a string) as a number in a spec", spec_with(
-        "sweep:\n  mode: grid\n  params:\n    down_velocity_mps: [0.02]\n    acceleration_mps2: [\"1.0\"]\n")),
+        "sweep:\n  mode: grid\n  params:\n    down_velocity_mps: [0.02]\n    depth_m: [0.03]\n"
+        "    acceleration_mps2: [\"1.0\"]\n")),
     Case("force-1e40", "7", "force reading of 1e40 (import)", force_with("1" + "0" * 40), expect="ok",
          check=_force_sane, needs_fixtures=True),
     Case("gain-nan", "7", "`import force-log --gain-n nan`", gain_nan, needs_fixtures=True),
@@ -495,7 +520,7 @@ def run_case(case: Case, tree: Path, scratch: Path) -> dict[str, Any]:
     outcome = Outcome(code, lines, out, seconds, rss, changed, "Traceback (most recent call last)" in err)
     ok, why = judge(case, folder, outcome)
     shutil.rmtree(folder, ignore_errors=True)
-    line = outcome.line().replace(f"{folder}/", "").replace(str(folder), ".")  # no temp paths
+    line = outcome.line().replace(f"{folder}/", "").replace(str(folder), ".")[:160]  # no temp paths
     return {"code": code, "stderr_lines": len(lines), "line": line, "traceback": outcome.traceback,
             "changed": changed[:10], "seconds": round(seconds, 3), "peak_rss_mib": round(rss, 1),
             "as_promised": ok, "why_not": why}
@@ -519,11 +544,20 @@ def main() -> None:
                         help="a source tree to run the cases against (default: this one, as 'after')")
     parser.add_argument("--only", action="append", default=[], help="run only cases whose key starts so")
     parser.add_argument("--out", type=Path, default=RESULTS / "robustness_cases.json")
+    parser.add_argument("--update", action="store_true",
+                        help="keep the other cases' and trees' results already in --out")
     args = parser.parse_args()
     trees = [(n, Path(p).resolve()) for n, p in (t.split("=", 1) for t in args.tree)] or [("after", REPO)]
     cases = [c for c in CASES if not args.only or any(c.key.startswith(o) for o in args.only)]
     have_fixtures = FIXTURES.is_dir()
     results: dict[str, dict[str, Any]] = {c.key: {} for c in cases}
+    previous: dict[str, Any] = {}
+    if args.update and args.out.is_file():
+        previous = json.loads(args.out.read_text())
+        for entry in previous.get("cases", []):
+            if entry["key"] in {c.key for c in CASES}:
+                results.setdefault(entry["key"], {}).update(entry["results"])
+    shown = [c for c in CASES if c.key in results]
     scratch_root = Path(tempfile.mkdtemp(prefix="pianobot-cases-"))
     try:
         for name, tree in trees:
@@ -538,21 +572,35 @@ def main() -> None:
                 print(f"{name:8s} {case.key:48s} {_cell(result)[:150]}", file=sys.stderr, flush=True)
     finally:
         shutil.rmtree(scratch_root, ignore_errors=True)
-    names = [n for n, _ in trees]
-    payload = {"trees": {n: str(p) for n, p in trees}, "memory_cap_gib": MEMORY_CAP_BYTES / 2**30,
+    all_trees = {**previous.get("trees", {}), **{n: str(p) for n, p in trees}}
+    names = list(all_trees)
+    payload = {"trees": all_trees, "memory_cap_gib": MEMORY_CAP_BYTES / 2**30,
                "load_average": os.getloadavg(),
                "cases": [{"key": c.key, "point": c.point, "what": c.what, "expect": c.expect,
-                          "results": results[c.key]} for c in cases]}
-    totals = {n: sum(bool(results[c.key][n].get("as_promised")) for c in cases) for n in names}
-    payload["as_promised"] = {n: f"{totals[n]}/{len(cases)}" for n in names}
+                          "results": results[c.key]} for c in shown]}
+    ran = {n: [c for c in shown if n in results[c.key] and not results[c.key][n].get("skipped")] for n in names}
+    totals = {n: sum(bool(results[c.key][n].get("as_promised")) for c in ran[n]) for n in names}
+    payload["as_promised"] = {n: f"{totals[n]}/{len(ran[n])}" for n in names}
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(payload, indent=2) + "\n")
+    args.out.write_text(_anonymous(json.dumps(payload, indent=2), all_trees) + "\n")
     table = ["| # | case | " + " | ".join(names) + " |", "|---|---|" + "---|" * len(names)]
-    for c in cases:
-        table.append(f"| {c.point} | {c.what} | " + " | ".join(_cell(results[c.key][n]) for n in names) + " |")
+    for c in shown:
+        table.append(f"| {c.point} | {c.what} | "
+                     + " | ".join(_cell(results[c.key][n]) if n in results[c.key] else "-" for n in names) + " |")
     table.append("| | as promised | " + " | ".join(payload["as_promised"][n] for n in names) + " |")
-    args.out.with_suffix(".md").write_text("\n".join(table) + "\n")
-    print("\n".join(table))
+    text = _anonymous("\n".join(table), all_trees)
+    args.out.with_suffix(".md").write_text(text + "\n")
+    print(text)
+
+
+def _anonymous(text: str, trees: dict[str, str]) -> str:
+    """No path of this machine in the results: trees, the interpreter and the repo by name."""
+    places = [(path, f"<{name}>") for name, path in trees.items() if path.startswith("/")]
+    places += [(sys.prefix, "<venv>"), (str(REPO), "<repo>"), (str(REPO.parent), "<repo>/..")]
+    for path, label in sorted(places, key=lambda p: -len(p[0])):
+        text = text.replace(path, label)
+    # a case folder cut short by the line limit
+    return re.sub(re.escape(tempfile.gettempdir()) + r"/pianobot-cases-[^\s`'\"|]*", "<case folder>", text)
 
 
 if __name__ == "__main__":
