@@ -28,8 +28,9 @@ import numpy as np  # noqa: E402
 from scipy.integrate import solve_ivp  # noqa: E402
 
 from pianobot.physics.effects import Effects  # noqa: E402
+from pianobot.physics.linear import simulate_linear  # noqa: E402
 from pianobot.physics.model import KeystrokeModel  # noqa: E402
-from pianobot.physics.msd import MSDParams, simulate_linear  # noqa: E402
+from pianobot.physics.msd import MSDParams  # noqa: E402
 from pianobot.physics.simulate import SimBatch, simulate_presses  # noqa: E402
 from pianobot.physics.trajectory import Press, press_timing, sample_presses  # noqa: E402
 

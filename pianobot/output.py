@@ -12,10 +12,10 @@ behind: no `model.json.tmp`, no partial target.
 from __future__ import annotations
 
 import os
-import secrets
 from collections.abc import Callable
 from pathlib import Path
 
+from pianobot.atomic_files import fsync_dir, temp_name
 from pianobot.errors import InputError
 
 
@@ -46,13 +46,21 @@ def write_output(path: Path | str, write: Callable[[Path], object], option: str 
         InputError: `path` cannot be written (a folder, a read-only place, a full disk).
     """
     target = check_output_path(path, option)
-    temp = target.with_name(f".{target.name}.{secrets.token_hex(4)}.tmp")
+    temp = temp_name(target)
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
         write(temp)
+        with open(temp, "rb+") as handle:  # durable before it replaces anything
+            os.fsync(handle.fileno())
         os.replace(temp, target)
+        fsync_dir(target.parent)
     except OSError as exc:
         raise InputError(f"cannot write {target}: {exc.strerror or exc}", option) from None
     finally:
         temp.unlink(missing_ok=True)
     return target
+
+
+def write_output_text(path: Path | str, text: str, option: str = "--out") -> Path:
+    """`write_output` of a text file (UTF-8)."""
+    return write_output(path, lambda temp: temp.write_text(text, encoding="utf-8"), option)

@@ -23,7 +23,8 @@ import numpy.typing as npt
 
 from pianobot.analysis.identify_covariance import noise_sigma_m
 from pianobot.analysis.keystroke_batch import KeystrokeBatch
-from pianobot.physics.msd import MSDParams, state_space
+from pianobot.physics.linear import state_space
+from pianobot.physics.msd import MSDParams
 
 FloatArray = npt.NDArray[np.float64]
 MIN_EXTREMA = 4

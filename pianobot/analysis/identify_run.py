@@ -18,8 +18,9 @@ from pianobot.analysis.keystroke_batch import KeystrokeBatch, keystroke_batch
 from pianobot.analysis.readout_fit import ReadoutFit, fit_readout
 from pianobot.analysis.static_stiffness import StaticStiffness
 from pianobot.errors import InputError
+from pianobot.physics.linear import peak_response
 from pianobot.physics.model import KeystrokeModel, save_model
-from pianobot.physics.msd import MSDParams, peak_response
+from pianobot.physics.msd import MSDParams
 from pianobot.store import load_run
 
 

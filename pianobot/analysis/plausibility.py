@@ -11,15 +11,18 @@ with vacuum by about 1.19 N/m per kPa, a key that rings at 7–11 Hz.
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from pianobot.physics.msd import LinearParams, MSDParams, frequency_response, peak_response
+from pianobot.physics.linear import frequency_response, peak_response
+from pianobot.physics.msd import LinearParams, MSDParams
 
 #: The study's law k1 = a + b·|p|: its slope b (N/m per kPa of vacuum).
 STUDY_K1_SLOPE_NPM_PER_KPA = MSDParams().k1_b_npm_per_kpa
@@ -59,6 +62,7 @@ class Interval:
     unit: str
     ci95: tuple[float, float]
     bounds: tuple[float, float] | None = None
+    range_kind: str = "search range"  # what `bounds` are, as the warning names them
 
 
 def _kpa(levels: Iterable[float]) -> str:
@@ -125,8 +129,10 @@ def at_bounds(estimates: Sequence[Interval], *, finger_separates: bool | None = 
         if e.bounds is None or not math.isfinite(e.value):
             continue
         lo, hi = e.bounds
-        near = [side for side, limit in (("lower", lo), ("upper", hi))
-                if math.isfinite(limit) and abs(e.value - limit) <= BOUND_TOLERANCE * max(abs(limit), 1e-12)]
+        # "At" includes beyond: a log-parameterised fit has no hard limit, only a plausible range.
+        near = [side for side, limit in (("lower", lo), ("upper", hi)) if math.isfinite(limit)
+                and (abs(e.value - limit) <= BOUND_TOLERANCE * max(abs(limit), 1e-12)
+                     or (e.value < limit if side == "lower" else e.value > limit))]
         if not near:
             continue
         coupling = e.name.startswith(("k0", "c0"))
@@ -141,7 +147,7 @@ def at_bounds(estimates: Sequence[Interval], *, finger_separates: bool | None = 
                      "interval means nothing; add keystrokes that excite it (other speeds, depths, vacuum "
                      "levels) or fix it from another measurement")
         found.append(Finding("at_bound", f"{e.name} = {e.value:.4g} {e.unit} is at the {near[0]} limit of "
-                             f"its search range [{lo:.3g}, {hi:.3g}]", cause, e.name))
+                             f"its {e.range_kind} [{lo:.3g}, {hi:.3g}]", cause, e.name))
     return found
 
 
@@ -196,6 +202,70 @@ def few_keystrokes(counts: Mapping[float, int], minimum: int, *, kind: str = "ke
     return [Finding("few_keystrokes", f"too few {kind} per vacuum level: {shown} (at least {minimum} are "
                     f"needed {needed_for})", "the run has too few presses at that vacuum; add keystrokes "
                     "there (repeats of one setting help least) or leave the level out", _kpa(thin))]
+
+
+#: A fitter searching log(value) has no hard limits: a value this factor below or above the
+#: study's has run off (it collapsed to zero or grew without bound) and is "at a bound".
+LOG_RANGE_FACTOR = 1000.0
+
+
+def study_value(name: str) -> float | None:
+    """The study's value of an identified parameter (`k1_npm@-40kPa`, `c0_nspm`, ...), or None
+    for derived quantities. The coupling k0/c0 is compared with the finger's k1/c1 (the study ties
+    them)."""
+    study = MSDParams()
+    base, _, where = name.partition("@")
+    if base == "k1_npm" or base == "k0_npm":
+        level = float(where.removesuffix("kPa")) if where.endswith("kPa") else -40.0
+        return study.k1_a_npm + study.k1_b_npm_per_kpa * abs(level)
+    if base == "c0_nspm":
+        return study.c1_nspm
+    value = getattr(study, base, None) if base in ("m1_kg", "m2_kg", "c1_nspm", "k2_npm", "c2_nspm") else None
+    return float(value) if value is not None else None
+
+
+def identify_findings(params: MSDParams, estimates: Sequence[Interval], counts_by_level: Mapping[float, int],
+                      *, finger_separates: bool | None = None) -> list[Finding]:
+    """Every check of `pianobot identify` on its result's published values.
+
+    Args:
+        params: the identified model.
+        estimates: identified quantities with their 95 % intervals; parameters without `bounds`
+            get the plausible range 1/1000 to 1000× the study's value (`LOG_RANGE_FACTOR`).
+        counts_by_level: keystrokes fitted per vacuum level (kPa).
+        finger_separates: whether the finger left the key in the data, when known.
+    """
+    ranged = []
+    for e in estimates:
+        study = study_value(e.name)
+        if e.bounds is None and study is not None and study > 0:
+            e = Interval(e.name, e.value, e.unit, e.ci95, (study / LOG_RANGE_FACTOR, study * LOG_RANGE_FACTOR),
+                         f"plausible range (1/{LOG_RANGE_FACTOR:g} to {LOG_RANGE_FACTOR:g}× the study's value)")
+        ranged.append(e)
+    levels = sorted(counts_by_level)
+    found = no_resonance(params, levels, damping_ratios=damping_ratios(params))
+    found += at_bounds(ranged, finger_separates=finger_separates)
+    slope = next((e for e in estimates if e.name == "k1_b_npm_per_kpa"), None)
+    # With one level the slope is the study's, held fixed: there is nothing to check.
+    if slope is not None and len(levels) >= 2:
+        found += stiffness_slope(slope, levels=len(levels))
+    # A parameter run off to a limit already has its finding; its interval adds nothing.
+    stuck = {f.subject for f in found if f.check == "at_bound"}
+    checked = [e for e in estimates if e.name not in stuck
+               and (study_value(e.name) is not None or (e is slope and len(levels) >= 2))]
+    found += wide_intervals(checked)
+    found += few_keystrokes(dict(counts_by_level), MIN_KEYSTROKES_IDENTIFY)
+    return found
+
+
+def store_findings(path: Path, findings: Iterable[Finding]) -> Path:
+    """Add the findings to a model or predictor file (JSON) as its `warnings`, atomically."""
+    payload = json.loads(path.read_text(encoding="utf-8"))
+    payload["warnings"] = as_dicts(findings)
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(payload, indent=2, default=str) + "\n", encoding="utf-8")
+    tmp.replace(path)
+    return path
 
 
 def as_dicts(findings: Iterable[Finding]) -> list[dict[str, Any]]:

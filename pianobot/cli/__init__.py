@@ -44,7 +44,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "fit": ("analysis", "Cross-validate learned maps to on-velocity, hold and silence; save each as a predictor."),
     "report": ("analysis", "Write one self-contained HTML report (figures embedded, no network)."),
     "discover": ("discover", "Localise where the model and the measurements disagree, name the missing effect, refit."),
-    "play": ("play", "Play a MIDI song with feedforward control from the internal model, and score it."),
+    "play": ("play", "Warm up on the piano, play a MIDI song at a tempo the finger can keep, and score it."),
 }
 COMMAND_MODULES: dict[str, str] = {name: module for name, (module, _) in COMMANDS.items()}
 _registered: set[str] = set()

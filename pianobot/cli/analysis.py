@@ -10,7 +10,7 @@ import typer
 
 from pianobot.analysis.fit_run import fit_runs, load_trials
 from pianobot.analysis.identify_run import identify_runs
-from pianobot.analysis.plausibility import as_dicts
+from pianobot.analysis.plausibility import Interval, as_dicts, identify_findings, store_findings
 from pianobot.analysis.predictors import PhysicsPredictor, load_predictor
 from pianobot.analysis.static_stiffness import (
     STUDY_COMPRESSION_M,
@@ -34,11 +34,24 @@ from pianobot.cli.common import (
 )
 from pianobot.errors import InputError
 from pianobot.output import check_output_path
-from pianobot.reports.command_figures import learned_maps, save_png
+from pianobot.reports.command_figures import identified_model, k1_by_level, learned_maps, save_png
 from pianobot.reports.run_report import build_run_report
 
 PlotOption = Annotated[Path | None, typer.Option("--plot", help="Also write a figure here (PNG).")]
 RunIds = Annotated[list[str], typer.Argument(help="Run ids (or unique prefixes).")]
+
+
+def keystrokes_per_level(runs: list[str], data: Path, vacuum_kpa: float | None, fitted: int) -> dict[float, int]:
+    """Keystrokes per vacuum level (kPa) of the runs' usable trials; a single level gets the
+    number the fit actually used."""
+    trials = load_trials(runs, data)
+    if "status" in trials:
+        trials = trials[trials["status"].isin(["ok", "silent"])]
+    fallback = 0.0 if vacuum_kpa is None else -abs(vacuum_kpa)
+    levels = trials["vacuum_kpa"].fillna(fallback) if "vacuum_kpa" in trials else pd.Series(fallback, trials.index)
+    tally = levels.value_counts()
+    counts = {float(level): int(n) for level, n in zip(tally.index.to_numpy(float), tally.to_numpy(int), strict=True)}
+    return {next(iter(counts)): fitted} if len(counts) == 1 else counts
 
 
 def register(app: typer.Typer) -> None:
@@ -57,17 +70,34 @@ def register(app: typer.Typer) -> None:
         vacuum_kpa: Annotated[float | None, typer.Option(help="Vacuum of runs that do not record it.")] = None,
         force_log: Annotated[list[str] | None, typer.Option(help="P=FILE or a folder of P.txt force logs.")] = None,
         compression_m: Annotated[float, typer.Option(help="Compression of the force-log presses.")] = STUDY_COMPRESSION_M,
+        plot: PlotOption = None,
+        no_progress: NoProgressFlag = False,
     ) -> None:
         """Identify the keystroke model from mocap trajectories; write a model file with intervals."""
         if coupling not in ("tied", "free", "auto"):
             raise InputError(f"expected tied, free or auto, got {coupling!r}", "--coupling")
         check_output_path(out, "--out")  # before minutes of fitting, not after
+        writable(plot, "--plot")
         levels = force_log_levels(force_log or [])
         static = static_stiffness_from_logs(levels, compression_m=compression_m) if levels else None
-        result = identify_runs(runs, data, out=out, coupling=coupling, bootstrap=bootstrap, seed=seed,
-                               x0_source=x0_source, vacuum_kpa=vacuum_kpa, static=static)
+        progress = command_progress(json_out, no_progress)
+        # identify_runs reports no steps yet: an elapsed-time spinner shows the fits are alive.
+        with progress.task(f"identify: held-out fit, full fit and {bootstrap} bootstrap refits"):
+            result = identify_runs(runs, data, out=out, coupling=coupling, bootstrap=bootstrap, seed=seed,
+                                   x0_source=x0_source, vacuum_kpa=vacuum_kpa, static=static)
+        findings = identify_findings(result.fit.params, [Interval(e.name, e.value, e.unit, e.ci95)
+                                                         for e in result.fit.estimates],
+                                     keystrokes_per_level(runs, data, vacuum_kpa, result.fit.n_keystrokes))
+        if result.model_path is not None:
+            store_findings(result.model_path, findings)
+        if plot is not None:
+            save_png(identified_model(result.fit.params, k1_by_level(result.fit.estimates),
+                                      title=f"Identified model ({result.fit.n_keystrokes} keystrokes)"), plot)
         if json_out:
-            emit_json(result.to_dict())
+            for finding in findings:
+                print_warning(finding.text())
+            emit_json({**result.to_dict(), "warnings": as_dicts(findings),
+                       "plot": None if plot is None else str(plot)})
             return
         print_table(ESTIMATE_COLUMNS, [[e.name, f"{e.value:.4g}", e.unit, f"{e.ci95[0]:.4g}", f"{e.ci95[1]:.4g}"]
                                        for e in result.fit.estimates], title="identified parameters")
@@ -92,6 +122,10 @@ def register(app: typer.Typer) -> None:
             st = result.static
             console.print(f"static stiffness: k1 = {st.k1_a_npm:.2f} + {st.k1_b_npm_per_kpa:.3f}|p| N/m "
                           f"(compression {1e3 * st.compression_m:.1f} mm)")
+        if plot is not None:
+            say_written("figure", plot)
+        for finding in findings:  # last, beside the numbers they qualify
+            print_warning(finding.text())
 
     @app.command()
     def fit(

@@ -8,8 +8,10 @@ run ids are never cut with "…".
 
 from __future__ import annotations
 
+import inspect
 import json
 import os
+import re
 import sys
 import textwrap
 from collections.abc import Sequence
@@ -275,6 +277,36 @@ def install_help_conventions() -> None:
     TyperOption._pianobot_flags = True  # type: ignore[attr-defined]
     for cls in (TyperCommand, TyperGroup):
         cls.parse_args = _refusing_flag_values(cls.parse_args)  # type: ignore[method-assign]
+        cls.format_help = _reflowing_help(cls.format_help)  # type: ignore[method-assign]
+
+
+def reflow(text: str) -> str:
+    """Join a docstring's hard-wrapped lines so the terminal wraps each paragraph itself.
+
+    Typer's rich help keeps the source's line breaks, so a docstring wrapped at 100 columns
+    shows on an 80-column terminal as one full line and one stub. Lists (`- `, `* `, `1. `) and
+    indented blocks keep their lines.
+    """
+    paragraphs = []
+    for paragraph in text.split("\n\n"):
+        lines = paragraph.splitlines()
+        if any(_LIST_LINE.match(line) for line in lines):
+            paragraphs.append(paragraph)
+        else:
+            paragraphs.append(" ".join(line.strip() for line in lines))
+    return "\n\n".join(paragraphs)
+
+
+_LIST_LINE = re.compile(r"^\s*([-*•]|\d+[.)])\s|^\s{2,}\S|^\x08")
+
+
+def _reflowing_help(format_help: Any) -> Any:
+    def format(self: Any, ctx: Any, formatter: Any) -> Any:
+        if self.help:
+            self.help = reflow(inspect.cleandoc(self.help))
+        return format_help(self, ctx, formatter)
+
+    return format
 
 
 def _refusing_flag_values(parse_args: Any) -> Any:

@@ -44,8 +44,8 @@ def keystroke_log(
     ] = "auto",
     columns: Annotated[
         str | None,
-        typer.Option("--columns", help="Declare the control-list columns, e.g. "
-                     "vacuum_kpa,finger_angle_deg,acceleration_mps2,velocity_mps,depth_m,distance_m,hold_s "
+        typer.Option("--columns", help="Declare the control-list columns in order, e.g. "
+                     "vacuum_kpa,velocity_mps,skip,hold_s "
                      "(skip ignores a value; a unit-less name keeps it as an extra column)."),
     ] = None,
     layout_file: Annotated[
@@ -62,8 +62,9 @@ def keystroke_log(
 ) -> None:
     """Import a dict-per-line keystroke log (control lists or named keys).
 
-    MIDI events stay on the line that printed them unless the read backlog and the predicted
-    stroke timing show they belong to an earlier keystroke; each moved event's evidence is kept.
+    MIDI events stay on the line that printed them unless the read backlog
+    and the predicted stroke timing show they belong to an earlier
+    keystroke; each moved event's evidence is kept.
     """
     declared = columns.split(",") if columns is not None else None
     result = import_keystroke_log(file, data, layout=layout, columns=declared, layout_file=layout_file,
@@ -127,8 +128,9 @@ def mocap(
 ) -> None:
     """Import a Motive CSV take: keystrokes segmented from the arm marker, or aligned to a run.
 
-    Marker tracks Motive split after an occlusion are joined first; roles are inferred only when
-    the evidence is clear, otherwise the candidates are named.
+    Marker tracks Motive split after an occlusion are joined first; roles
+    are inferred only when the evidence is clear, otherwise the candidates
+    are named.
     """
     writable(plot, "--plot")
     markers = _rig_markers(rig) if rig is not None else {}
@@ -171,11 +173,33 @@ def _rig_markers(path: Path) -> dict[str, str]:
     return {"arm": names.arm, "fingertip": names.fingertip, "key": names.key}
 
 
+_UNITS = {"_hz": "Hz", "_kpa": "kPa", "_s": "s", "_mm": "mm"}
+
+
+def _label(key: str) -> str:
+    """`rate_hz` as "rate (Hz)": the unit suffix of a summary key in words."""
+    for suffix, unit in _UNITS.items():
+        if key.endswith(suffix):
+            return f"{key.removesuffix(suffix).replace('_', ' ')} ({unit})"
+    return key.replace("_", " ")
+
+
+def _shown(value: object) -> str:
+    """A summary value as a person reads it: no Python dict or list syntax."""
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    if isinstance(value, dict):
+        return ", ".join(f"{k} {_shown(v)}" for k, v in value.items()) or "none"
+    if isinstance(value, list | tuple):
+        return ", ".join(_shown(v) for v in value) or "none"
+    return str(value)
+
+
 def _show(result: ImportResult, json: bool, data: Path) -> None:
     if json:
         emit_json(result.to_dict())
         return
-    fields = [(key, f"{value:.6g}" if isinstance(value, float) else str(value))
+    fields = [(_label(key), _shown(value))
               for key, value in result.to_dict().items() if key not in ("skipped_lines", "run_dir")]
     fields.append(("skipped lines", str(len(result.skipped_lines))))
     print_fields(fields, title=f"imported {result.kind}")

@@ -18,8 +18,8 @@ from pianobot.cli.common import (
     say_written,
 )
 from pianobot.errors import InputError
+from pianobot.physics.linear import frequency_response, peak_response
 from pianobot.physics.model import KeystrokeModel, load_model
-from pianobot.physics.msd import frequency_response, peak_response
 from pianobot.physics.trajectory import Press, press_timing
 from pianobot.physics.world import World, WorldKeystroke
 

@@ -1,7 +1,8 @@
-"""Command `play`: play a MIDI song on the rig with the model-based (or naive) planner, score it.
+"""Command `play`: warm up on the piano, play a MIDI song at a tempo the finger keeps, score it.
 
-Warnings (chords reduced to a melody, notes that cannot be played in time, clipped loudness)
-go to stderr, one line each; the score (or with `--dry-run` the plan) to stdout.
+Warnings (the tempo chosen and why, chords reduced to a melody, notes that cannot be played in
+time, clipped loudness) go to stderr, one line each; the score (or with `--dry-run` the plan,
+its feasible tempo and limiting notes) to stdout.
 """
 
 from __future__ import annotations
@@ -18,6 +19,8 @@ from pianobot.cli.common import (
     Column,
     DataDir,
     JsonFlag,
+    NoProgressFlag,
+    command_progress,
     emit_json,
     print_fields,
     print_table,
@@ -25,22 +28,23 @@ from pianobot.cli.common import (
     say_written,
 )
 from pianobot.play import PlayResult, play_song
+from pianobot.play.warmup import WarmUpFailed
 
 # (column, heading with unit, scale, format, priority): priority 0 always shows, the highest
-# number is dropped first on a narrow terminal (`--json` keeps every column).
+# number is dropped first on a narrow terminal (`--json` keeps every column, plan_notes).
 PLAN_COLUMNS: tuple[tuple[str, str, float, str, int], ...] = (
     ("note_index", "#", 1.0, "d", 0),
     ("pitch", "pitch", 1.0, "d", 0),
     ("onset_s", "onset (s)", 1.0, ".2f", 0),
     ("song_velocity", "song vel.", 1.0, ".0f", 3),
     ("target_velocity", "target vel.", 1.0, ".0f", 0),
-    ("vacuum_kpa", "vacuum (kPa)", 1.0, ".0f", 0),
+    ("vacuum_kpa", "vacuum (kPa)", 1.0, ".0f", 2),
     ("down_velocity_mps", "down (mm/s)", 1e3, ".1f", 0),
-    ("hold_s", "hold (ms)", 1e3, ".0f", 2),
+    ("hold_s", "hold (ms)", 1e3, ".0f", 3),
     ("predicted_velocity", "predicted vel.", 1.0, ".1f", 1),
-    ("predicted_lead_s", "lead (ms)", 1e3, ".0f", 3),
+    ("predicted_lead_s", "lead (ms)", 1e3, ".0f", 1),
     ("start_s", "motion start (s)", 1.0, ".3f", 2),
-    ("move_s", "move (ms)", 1e3, ".0f", 4),
+    ("tempo_limit_bpm", "limit (bpm)", 1.0, ".0f", 0),
     ("status", "status", 1.0, "", 0),
     ("reason", "reason", 1.0, "", 0),
 )
@@ -58,6 +62,17 @@ def _fmt(value: Any, scale: float = 1.0, spec: str = ".3g") -> str:
     return str(value)
 
 
+def _tempo_line(result: PlayResult) -> str:
+    tempo = result.plan.tempo
+    if tempo is None:
+        return ""
+    feasible = "unknown (no model)" if math.isnan(tempo.feasible_bpm) else (
+        "unbounded" if math.isinf(tempo.feasible_bpm) else f"{tempo.feasible_bpm:.4g} bpm")
+    limiting = ", ".join(str(i) for i in tempo.limiting_notes) or "-"
+    return (f"tempo: written {tempo.written_bpm:.4g} bpm, fastest feasible {feasible} "
+            f"(limiting notes: {limiting}), playing at {tempo.played_bpm:.4g} bpm ({tempo.request.describe()})")
+
+
 def _print_plan(result: PlayResult) -> None:
     notes = result.plan.notes
     specs = [c for c in PLAN_COLUMNS if c[0] in notes.columns]
@@ -73,39 +88,66 @@ def _print_plan(result: PlayResult) -> None:
         f"stroke: hover {geometry.get('distance_m', float('nan')) * 1e3:.0f} mm, "
         f"{geometry.get('acceleration_mps2', float('nan')):g} m/s², "
         f"up {geometry.get('up_velocity_mps', float('nan')) * 1e3:.0f} mm/s")
+    say(_tempo_line(result))
 
 
 def _print_score(result: PlayResult) -> None:
     assert result.score is not None and result.performance is not None
-    fields: list[tuple[str, Any]] = [(key, _fmt(value)) for key, value in result.score.to_dict().items()]
+    fields: list[tuple[str, Any]] = []
+    for key, value in result.score.to_dict().items():
+        if isinstance(value, dict):
+            fields.extend((f"{key}.{sub}", _fmt(inner)) for sub, inner in value.items())
+        else:
+            fields.append((key, _fmt(value)))
     mapping = result.plan.summary()["dynamics"]
     fields.append(("mapping", mapping["text"] if mapping else "none (velocity → speed)"))
     print_fields(fields, title=f"{result.plan.planner} planner on {result.song.source}")
+    if result.warmup is not None:
+        w = result.warmup.summary()
+        say(f"warm-up: {w['strokes']} keystrokes ({w['sounded']} sounded) in {w['lab_time_s']:.1f} s of lab time; "
+            f"fit on strokes held out: velocity MAE {w.get('velocity_mae_held_out', float('nan')):.2f}, "
+            f"lead RMSE {w.get('lead_rmse_ms_held_out', float('nan')):.1f} ms")
+    say(_tempo_line(result))
     say(f"run {result.performance.run_id}: {result.performance.status}")
     for what, path in result.files.items():
-        say_written(what, path)
+        say_written(what.replace("_", " "), path)
 
 
 def play(
     song: Annotated[Path, typer.Argument(help="A type-0 or type-1 MIDI file.")],
     data: DataDir = DEFAULT_DATA,
     json_out: JsonFlag = False,
-    model: Annotated[Path | None, typer.Option("--model", help="Model or predictor file (default: the published physics model).")] = None,
+    no_progress: NoProgressFlag = False,
+    model: Annotated[Path | None, typer.Option("--model", help="Model or predictor file to start from (default: the published physics model).")] = None,
     planner: Annotated[str, typer.Option("--planner", help="model | naive (the study's demo logic).")] = "model",
-    adapt: Annotated[bool, typer.Option("--adapt", help="Correct the model online from the piano's MIDI.")] = False,
-    dry_run: Annotated[bool, typer.Option("--dry-run", help="Print the plan; do not play.")] = False,
-    tempo_scale: Annotated[float, typer.Option("--tempo-scale", help="Multiply the tempo (0.5 = half speed).")] = 1.0,
+    adapt: Annotated[bool, typer.Option("--adapt", help="Keep correcting the model from the piano's MIDI during the song.")] = False,
+    dry_run: Annotated[bool, typer.Option("--dry-run", help="Print the plan, the fastest feasible tempo and the notes that limit it; move nothing.")] = False,
+    tempo: Annotated[str | None, typer.Option("--tempo", help="auto (default: the fastest tempo at which every note can be struck in time, never above the written one) | written (skips what cannot keep up) | beats per minute.")] = None,
+    tempo_scale: Annotated[float, typer.Option("--tempo-scale", help="Multiply the written tempo (0.5 = half speed); alone, plays at that tempo.")] = 1.0,
+    warmup: Annotated[int | None, typer.Option("--warmup", help="Warm-up keystrokes per vacuum level before the song (default 12).")] = None,
+    no_warmup: Annotated[bool, typer.Option("--no-warmup", help="Play with the starting model as it is.")] = False,
+    finger: Annotated[str | None, typer.Option("--finger", help="soft (default) | rigid: the safety envelope and stroke defaults.")] = None,
     transpose: Annotated[int, typer.Option("--transpose", help="Semitones to add to every note.")] = 0,
     track: Annotated[int | None, typer.Option("--track", help="Play only this track (0-based).")] = None,
     dynamics: Annotated[str, typer.Option("--dynamics", help="mapped (song range → reachable range) | absolute (clip).")] = "mapped",
-    rig: Annotated[str, typer.Option("--rig", help="sim (the built-in rig: sweep-like moves between keys), or a rig file such as experiments/rigs/sim-play.yaml (a player's moves).")] = "sim",
+    rig: Annotated[str, typer.Option("--rig", help="sim (the built-in simulated rig with a player's moves between keys) or a rig file.")] = "sim",
     seed: Annotated[int | None, typer.Option("--seed", help="Seed of the simulated world.")] = None,
     plot: Annotated[Path | None, typer.Option("--plot", help="Also write the piano roll here (PNG).")] = None,
 ) -> None:
-    """Play a MIDI song with feedforward control from the internal model, and score it."""
-    result = play_song(song, data_dir=data, model=model, planner=planner, adapt=adapt, dry_run=dry_run,
-                       tempo_scale=tempo_scale, transpose=transpose, track=track, dynamics=dynamics,
-                       rig=rig, seed=seed, plot=plot)
+    """Warm up on the piano, play a MIDI song at a tempo the finger can keep, and score it."""
+    if no_warmup and warmup not in (None, 0):
+        from pianobot.errors import InputError
+
+        raise InputError("give either --warmup N or --no-warmup", "--no-warmup")
+    try:
+        result = play_song(song, data_dir=data, model=model, planner=planner, adapt=adapt, dry_run=dry_run,
+                           tempo=tempo, tempo_scale=tempo_scale, transpose=transpose, track=track,
+                           dynamics=dynamics, rig=rig, finger=finger, warmup=0 if no_warmup else warmup, seed=seed,
+                           plot=plot, progress=command_progress(json_out, no_progress),
+                           on_warning=lambda line: print(f"warning: rig: {line}", file=sys.stderr))
+    except WarmUpFailed as exc:  # the run is stored (status failed) with the warm-up's keystrokes
+        print(f"error: warm-up: {exc}", file=sys.stderr)
+        raise typer.Exit(1) from None
     for line in result.warnings:
         print(f"warning: {line}", file=sys.stderr)
     if json_out:

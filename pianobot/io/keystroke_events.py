@@ -2,11 +2,12 @@
 
 A *press* is the note events of one physical keystroke: a note-on while no note is held starts
 one; further note-ons while a note is held (a double strike: the Kawai sends a second note-on
-when the key bounces at the bottom) and the note-offs that release them join it. So does a
-note-on of the same key within `BOUNCE_S` of the press's last event (the key re-triggered on its
-way up), and a surplus note-off within `REGRIP_GAP_S` of it (a second release message). A note-on
-more than `REGRIP_GAP_S` after the press's latest event starts a new press even if a note-off was
-lost. A note-off with no press to join is a press of its own (its note-on was never logged).
+when the key bounces at the bottom) and the note-offs that release them join it, and so does a
+surplus note-off within `REGRIP_GAP_S` of it (a second release message). A note-on after the
+key was released always starts a new press, however soon: the next keystroke may follow a late
+release closely. A note-on more than `REGRIP_GAP_S` after the press's latest event starts a new
+press even if a note-off was lost. A note-off with no press to join is a press of its own (its
+note-on was never logged).
 
 Events are arrays (one row per event, in time order within a session) so that logs with hundreds
 of thousands of lines group in one pass without an object per event.
@@ -22,7 +23,6 @@ IntArray = npt.NDArray[np.int64]
 NOTE_ON = 0x90
 NOTE_OFF = 0x80
 REGRIP_GAP_S = 1.0  # a held note "re-pressed" after this long means its note-off was lost
-BOUNCE_S = 0.15  # a re-trigger this soon after the press's last event is the same keystroke
 KIND_OTHER, KIND_OFF, KIND_ON = 0, 1, 2
 KIND_NAMES = {KIND_OTHER: "other", KIND_OFF: "note_off", KIND_ON: "note_on"}
 
@@ -41,7 +41,7 @@ def group_presses(t_ms: IntArray, kind: IntArray, note: IntArray) -> IntArray:
     held: dict[int, int] = {}
     current = -1
     last_ms = 0
-    regrip_ms, bounce_ms = REGRIP_GAP_S * 1000.0, BOUNCE_S * 1000.0
+    regrip_ms = REGRIP_GAP_S * 1000.0
     for j in range(t_ms.size):
         k, t, n = int(kind[j]), int(t_ms[j]), int(note[j])
         if k == KIND_OTHER:
@@ -49,11 +49,7 @@ def group_presses(t_ms: IntArray, kind: IntArray, note: IntArray) -> IntArray:
         gap = t - last_ms
         if k == KIND_ON:
             holding = any(held.values())
-            if (
-                current < 0
-                or gap > regrip_ms
-                or (not holding and not (gap <= bounce_ms and n in held))
-            ):
+            if current < 0 or gap > regrip_ms or not holding:
                 current += 1
                 held = {}
             held[n] = held.get(n, 0) + 1

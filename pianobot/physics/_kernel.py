@@ -186,8 +186,18 @@ def _record(w: FloatArray, b0: int, nb: int, k: int, outs: tuple[FloatArray, ...
             out_fc[b0 + jj, k] = w[S_FC, jj]
 
 
-def _make_integrate(block: int) -> Any:
-    """The kernel compiled for blocks of `block` keystrokes (a compile-time constant)."""
+def _make_integrate(block: int, linear: bool) -> Any:
+    """The kernel compiled for blocks of `block` keystrokes and one model class.
+
+    Both arguments are compile-time constants: numba freezes a closure's values into the
+    compiled code, so `if linear:` below is settled at compile time and each (block, linear)
+    pair runs a loop with no trace of the other branch; its disk cache keys each compiled kernel
+    on those values (the closure's cell contents), so the four kernels are cached side by side.
+
+    linear=True is for models without finger- or key-side effects (the study's bilateral spring):
+    the same scheme, arm input and outputs, but the key's step is a handful of multiply-adds and
+    one select, several times faster than the full step with every effect switched off.
+    """
 
     @njit(cache=True, fastmath=True, error_model="numpy")
     def integrate(
@@ -216,6 +226,7 @@ def _make_integrate(block: int) -> Any:
         n = kp.shape[0]
         n_out = out_x1.shape[1]
         outs = (out_x0, out_x1, out_x2, out_v2, out_fc)
+        # The effects' switches and values (unused by the linear step, which has none).
         contact = ep[E_CONTACT] != 0.0
         bed_on = 1.0 if ep[E_BED_ON] != 0.0 else 0.0
         bed_hc = ep[E_BED_HC] != 0.0
@@ -261,63 +272,70 @@ def _make_integrate(block: int) -> Any:
                     v2_j = w[S_V2, jj]
                     v1e = w[S_V1, jj] + half_h * w[S_A1, jj]
                     v2e = v2_j + half_h * w[S_A2, jj]
-                    k1 = w[K1, jj]
-
                     pen = x1_j - x2_j - w[DIST, jj]
-                    pos = max(pen, 0.0)
-                    # Stiffening: cubic k1·δ·(1 + (βδ)²) or exponential k1·(e^{βδ} − 1)/β for δ > 0
-                    # (same slope k1 at touch, then stiffer); both vanish for β = 0.
-                    bp = beta * pos
-                    spring = k1 * pen + k1 * pos * (cubic_on * bp * bp)
-                    spring += exp_on * k1 * ((_exp(bp) - 1.0) * inv_beta - pos)
-                    raw = spring + w[C1, jj] * (v1e - v2e)
-                    # Unilateral (pushes only; an adhesive skin pulls until the pull-off force) ...
-                    touching = pen > 0.0
-                    holds = min(w[S_ATT, jj], 1.0 if raw >= -pull_off else 0.0)
-                    fc_uni = max(raw, -pull_off) if touching else holds * raw
-                    w[S_ATT, jj] = glued if touching else holds
-                    # ... or the study's bilateral spring, engaged at first touch (then it also pulls).
+                    # The study's bilateral spring engages at first touch (then it also pulls).
                     eng = max(w[S_ENG, jj], 1.0 if pen >= 0.0 else 0.0)
                     w[S_ENG, jj] = eng
-                    fc = fc_uni if contact else eng * raw
+
+                    if linear:
+                        fc = eng * (w[K1, jj] * pen + w[C1, jj] * (v1e - v2e))
+                        a2_j = (fc - w[K2, jj] * x2_j - w[C2, jj] * v2e) * w[M2, jj]
+                        v2_new = v2_j + h * a2_j
+                        x2_new = x2_j + h * v2_new
+                    else:
+                        k1 = w[K1, jj]
+                        pos = max(pen, 0.0)
+                        # Stiffening: cubic k1·δ·(1 + (βδ)²) or exponential k1·(e^{βδ} − 1)/β for
+                        # δ > 0 (same slope k1 at touch, then stiffer); both vanish for β = 0.
+                        bp = beta * pos
+                        spring = k1 * pen + k1 * pos * (cubic_on * bp * bp)
+                        spring += exp_on * k1 * ((_exp(bp) - 1.0) * inv_beta - pos)
+                        raw = spring + w[C1, jj] * (v1e - v2e)
+                        # Unilateral (pushes only; an adhesive skin pulls until the pull-off force)
+                        # or the bilateral spring.
+                        touching = pen > 0.0
+                        holds = min(w[S_ATT, jj], 1.0 if raw >= -pull_off else 0.0)
+                        fc_uni = max(raw, -pull_off) if touching else holds * raw
+                        w[S_ATT, jj] = glued if touching else holds
+                        fc = fc_uni if contact else eng * raw
+
+                        # The key's spring is preloaded against its rest stop: the down-weight always
+                        # acts, and the stop (below) holds the key at rest until the finger pushes harder.
+                        f2 = fc - w[K2, jj] * x2_j - w[C2, jj] * v2e - preload
+                        # Keybed: a felt stop, linear spring-damper or Hunt–Crossley (force and damping
+                        # grow with indentation, so there is no force jump on impact); it never pulls.
+                        pen_bed = max(x2_j - x_bed, 0.0)
+                        fb = k_bed * pen_bed + c_bed * v2e
+                        fb *= math.sqrt(pen_bed * (1.0 / _HC_REF_M)) if bed_hc else 1.0
+                        f2 -= bed_on * max(fb, 0.0) if pen_bed > 0.0 else 0.0
+                        # Let-off: a bump that resists the key on its way down only.
+                        z = (x2_j - x_let) * inv_w_let
+                        f2 -= f_let * _exp(-z * z) if v2e > 0.0 else 0.0
+
+                        v2_free = v2_j + h * f2 * w[M2, jj]
+                        # Dry friction as an impulse bounded by h·F/m: if it can stop the key within
+                        # the step the key sticks (exact Coulomb), else it slides against the motion.
+                        r = v2_j * inv_vs
+                        f_fric = f_c + (f_s - f_c) * _exp(-r * r)
+                        dv = h * f_fric * w[M2, jj]
+                        v2_new = math.copysign(max(abs(v2_free) - dv, 0.0), v2_free)
+                        x2_new = x2_j + h * v2_new
+                        # A preloaded key cannot rise above its rest stop (a plastic felt rail).
+                        at_stop = rest_stop and x2_new <= 0.0
+                        v2_new = 0.0 if at_stop else v2_new
+                        x2_new = 0.0 if at_stop else x2_new
+                        a2_j = (v2_new - v2_j) * inv_h
+
+                    a1_j = (w[K0, jj] * (x0_j - x1_j) + w[C0, jj] * (v0 - v1e) - fc) * w[M1, jj]
+                    v1_j = w[S_V1, jj] + h * a1_j
                     w[S_FC, jj] = fc
                     w[S_V2E, jj] = v2e
-
-                    f1 = w[K0, jj] * (x0_j - x1_j) + w[C0, jj] * (v0 - v1e) - fc
-                    # The key's spring is preloaded against its rest stop: the down-weight always
-                    # acts, and the stop (below) holds the key at rest until the finger pushes harder.
-                    f2 = fc - w[K2, jj] * x2_j - w[C2, jj] * v2e - preload
-                    # Keybed: a felt stop, linear spring-damper or Hunt–Crossley (force and damping
-                    # grow with indentation, so there is no force jump on impact); it never pulls.
-                    pen_bed = max(x2_j - x_bed, 0.0)
-                    fb = k_bed * pen_bed + c_bed * v2e
-                    fb *= math.sqrt(pen_bed * (1.0 / _HC_REF_M)) if bed_hc else 1.0
-                    f2 -= bed_on * max(fb, 0.0) if pen_bed > 0.0 else 0.0
-                    # Let-off: a bump that resists the key on its way down only.
-                    z = (x2_j - x_let) * inv_w_let
-                    f2 -= f_let * _exp(-z * z) if v2e > 0.0 else 0.0
-
-                    a1_j = f1 * w[M1, jj]
-                    v1_j = w[S_V1, jj] + h * a1_j
-                    v2_free = v2_j + h * f2 * w[M2, jj]
-                    # Dry friction as an impulse bounded by h·F/m: if it can stop the key within the
-                    # step the key sticks (exact Coulomb), else it slides against the motion.
-                    r = v2_j * inv_vs
-                    f_fric = f_c + (f_s - f_c) * _exp(-r * r)
-                    dv = h * f_fric * w[M2, jj]
-                    v2_new = math.copysign(max(abs(v2_free) - dv, 0.0), v2_free)
-                    x1_j += h * v1_j
-                    x2_j += h * v2_new
-                    # A preloaded key cannot rise above its rest stop (a plastic felt rail).
-                    at_stop = rest_stop and x2_j <= 0.0
-                    v2_new = 0.0 if at_stop else v2_new
-                    x2_j = 0.0 if at_stop else x2_j
-                    w[S_A2, jj] = (v2_new - v2_j) * inv_h
                     w[S_A1, jj] = a1_j
-                    w[S_X1, jj] = x1_j
-                    w[S_X2, jj] = x2_j
+                    w[S_A2, jj] = a2_j
                     w[S_V1, jj] = v1_j
                     w[S_V2, jj] = v2_new
+                    w[S_X1, jj] = x1_j + h * v1_j
+                    w[S_X2, jj] = x2_new
                     w[S_X0P, jj] = x0_j
                     w[S_X0, jj] = x0_n
                 if record:
@@ -325,83 +343,6 @@ def _make_integrate(block: int) -> Any:
                     k_out += 1
 
     return integrate
-
-
-def _make_integrate_linear(block: int) -> Any:
-    """The kernel compiled for blocks of `block` keystrokes (a compile-time constant)."""
-
-    @njit(cache=True, fastmath=True, error_model="numpy")
-    def integrate_linear(
-        kp: FloatArray,
-        ep: FloatArray,
-        mode: int,
-        trace_t: FloatArray,
-        trace_x0: FloatArray,
-        t_start: float,
-        h: float,
-        n_steps: int,
-        out_every: int,
-        out_x0: FloatArray,
-        out_x1: FloatArray,
-        out_x2: FloatArray,
-        out_v2: FloatArray,
-        out_fc: FloatArray,
-    ) -> None:
-        """`integrate` for models without finger- or key-side effects (the bilateral spring).
-
-        Same scheme, arm input and outputs, but the step is a handful of multiply-adds and one
-        select, which the compiler vectorises across the block: several times faster.
-        """
-        n = kp.shape[0]
-        n_out = out_x1.shape[1]
-        outs = (out_x0, out_x1, out_x2, out_v2, out_fc)
-        delay, alpha = arm_lag(ep[E_LAG_FORM], ep[E_LAG_S], h)
-        half_h = 0.5 * h
-        inv_2h = 0.5 / h
-        # `block` is a compile-time constant (one compiled kernel per block size):
-        # with constant row strides the compiler can prove that the rows of `w` do not overlap,
-        # and vectorises the step across the lanes.
-        w = np.zeros((N_W, block))
-        for b0 in range(0, n, block):
-            nb = min(block, n - b0)
-            _load_block(w, kp, b0, nb, mode, trace_t, trace_x0, t_start - delay)
-            k_out = 0
-            for i in range(n_steps + 1):
-                record = k_out < n_out and i == k_out * out_every
-                if record:
-                    _record(w, b0, nb, k_out, outs, 0)
-                _arm_positions(mode, w, S_X0N, trace_t, trace_x0, b0, nb, t_start + (i + 1) * h - delay)
-                for jj in range(block):
-                    x0_j = w[S_X0, jj]
-                    x0_n = x0_j + alpha * (w[S_X0N, jj] - x0_j)
-                    v0 = (x0_n - w[S_X0P, jj]) * inv_2h
-                    x1_j = w[S_X1, jj]
-                    x2_j = w[S_X2, jj]
-                    v1e = w[S_V1, jj] + half_h * w[S_A1, jj]
-                    v2e = w[S_V2, jj] + half_h * w[S_A2, jj]
-                    pen = x1_j - x2_j - w[DIST, jj]
-                    eng = max(w[S_ENG, jj], 1.0 if pen >= 0.0 else 0.0)
-                    fc = eng * (w[K1, jj] * pen + w[C1, jj] * (v1e - v2e))
-                    a1 = (w[K0, jj] * (x0_j - x1_j) + w[C0, jj] * (v0 - v1e) - fc) * w[M1, jj]
-                    a2 = (fc - w[K2, jj] * x2_j - w[C2, jj] * v2e) * w[M2, jj]
-                    v1 = w[S_V1, jj] + h * a1
-                    v2 = w[S_V2, jj] + h * a2
-                    w[S_ENG, jj] = eng
-                    w[S_FC, jj] = fc
-                    w[S_V2E, jj] = v2e
-                    w[S_A1, jj] = a1
-                    w[S_A2, jj] = a2
-                    w[S_V1, jj] = v1
-                    w[S_V2, jj] = v2
-                    w[S_X1, jj] = x1_j + h * v1
-                    w[S_X2, jj] = x2_j + h * v2
-                    w[S_X0P, jj] = x0_j
-                    w[S_X0, jj] = x0_n
-                if record:
-                    _record(w, b0, nb, k_out, outs, 1)
-                    k_out += 1
-
-    return integrate_linear
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
@@ -415,5 +356,5 @@ def arm_lag(form: float, lag_s: float, h: float) -> tuple[float, float]:
 
 
 # One compiled kernel per block size and model class (numba caches each on disk).
-integrate = {b: _make_integrate(b) for b in (SMALL_BLOCK, BLOCK)}
-integrate_linear = {b: _make_integrate_linear(b) for b in (SMALL_BLOCK, BLOCK)}
+integrate = {b: _make_integrate(b, linear=False) for b in (SMALL_BLOCK, BLOCK)}
+integrate_linear = {b: _make_integrate(b, linear=True) for b in (SMALL_BLOCK, BLOCK)}

@@ -4,15 +4,11 @@ desired trajectory, as a cascade of two stable first-order filters (see `inverse
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 import numpy.typing as npt
 
 from pianobot.physics.linear import StateSpace, lsim_uniform
-
-if TYPE_CHECKING:  # msd.py re-exports this module's names, so import it for typing only
-    from pianobot.physics.msd import LinearParams
+from pianobot.physics.msd import LinearParams
 
 FloatArray = npt.NDArray[np.float64]
 

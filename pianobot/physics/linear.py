@@ -12,14 +12,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 from scipy import linalg
 
-if TYPE_CHECKING:  # msd.py re-exports this module's names, so import it for typing only
-    from pianobot.physics.msd import LinearParams
+from pianobot.physics.msd import LinearParams
 
 FloatArray = npt.NDArray[np.float64]
 

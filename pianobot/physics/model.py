@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from pianobot.errors import InputError
-from pianobot.output import write_output
+from pianobot.output import write_output_text
 from pianobot.physics.effects import Effects
 from pianobot.physics.msd import MSDParams
 from pianobot.physics.piano import PianoParams
@@ -113,7 +113,11 @@ def save_model(
     intervals: Mapping[str, Any] | None = None,
     provenance: Mapping[str, Any] | None = None,
 ) -> Path:
-    """Write a model file (JSON, schema `pianobot.model/1`) atomically; returns the path."""
+    """Write a model file (JSON, schema `pianobot.model/1`) atomically; returns the path.
+
+    Through `pianobot.atomic_files`: a temp file beside `path`, fsync'd and renamed over it, so a
+    crash or a full disk leaves the old model file whole (or none), never half a new one.
+    """
     target = Path(path)
     payload = {
         "schema": MODEL_SCHEMA,
@@ -122,8 +126,8 @@ def save_model(
         "intervals": _finite(dict(intervals)) if intervals is not None else None,
         "provenance": _finite(dict(provenance)) if provenance is not None else None,
     }
-    text = json.dumps(payload, indent=2, default=str) + "\n"
-    return write_output(target, lambda tmp: tmp.write_text(text, encoding="utf-8"))
+    # Checked first (a folder, a read-only place: one line), then written atomically.
+    return write_output_text(target, json.dumps(payload, indent=2, default=str) + "\n")
 
 
 def read_model_file(path: str | Path) -> ModelFile:

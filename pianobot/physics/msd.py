@@ -7,10 +7,10 @@ Equations of motion in contact (downward positive, x0 arm, x1 fingertip, x2 key)
 
 Parameters (the soft finger's stiffness grows with vacuum, k1 = 75.41 + 1.19·|p| N/m) live in
 `MSDParams`; `MSDParams.at(vacuum_kpa)` resolves them to the numbers of one vacuum level
-(`LinearParams`). The model as a linear system (state space, exact simulation, frequency
-response) is in `linear.py`, its inverse (key trajectory in, arm trajectory out) in
-`inverse.py`; both are re-exported here, so `from pianobot.physics.msd import state_space`
-keeps working.
+(`LinearParams`). This module holds the parameters only (and the static ratio they imply);
+what is computed with them lives above it: the model as a linear system (state space, exact
+simulation, frequency response) in `linear.py`, its inverse (key trajectory in, arm trajectory
+out) in `inverse.py`.
 """
 
 from __future__ import annotations
@@ -23,34 +23,11 @@ from typing import Any, overload
 import numpy as np
 import numpy.typing as npt
 
-from pianobot.physics.inverse import (
-    inverse_arm_trajectory,
-    inverse_state_space,
-    inverse_trajectories,
-)
-from pianobot.physics.linear import (
-    StateSpace,
-    frequency_response,
-    lsim_uniform,
-    peak_response,
-    simulate_linear,
-    state_space,
-)
-
 __all__ = [
     "LinearParams",
     "MSDParams",
-    "StateSpace",
     "deformation_ratio",
     "error_rate",
-    "frequency_response",
-    "inverse_arm_trajectory",
-    "inverse_state_space",
-    "inverse_trajectories",
-    "lsim_uniform",
-    "peak_response",
-    "simulate_linear",
-    "state_space",
     "static_deformation_ratio",
 ]
 

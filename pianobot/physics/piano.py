@@ -14,7 +14,7 @@ import dataclasses
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, overload
+from typing import Any, Literal, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -85,27 +85,57 @@ class PianoParams:
 
 
 @overload
-def on_velocity_from_speed(speed_mps: float, params: PianoParams) -> int: ...
+def on_velocity_from_speed(
+    speed_mps: float, params: PianoParams, *, rounded: Literal[True] = ..., clipped: bool = ...
+) -> int: ...
 
 
 @overload
-def on_velocity_from_speed(speed_mps: FloatArray, params: PianoParams) -> npt.NDArray[np.int64]: ...
+def on_velocity_from_speed(
+    speed_mps: FloatArray, params: PianoParams, *, rounded: Literal[True] = ..., clipped: bool = ...
+) -> npt.NDArray[np.int64]: ...
+
+
+@overload
+def on_velocity_from_speed(
+    speed_mps: float, params: PianoParams, *, rounded: Literal[False], clipped: bool = ...
+) -> float: ...
+
+
+@overload
+def on_velocity_from_speed(
+    speed_mps: FloatArray, params: PianoParams, *, rounded: Literal[False], clipped: bool = ...
+) -> FloatArray: ...
 
 
 def on_velocity_from_speed(
-    speed_mps: float | FloatArray, params: PianoParams
-) -> int | npt.NDArray[np.int64]:
-    """MIDI velocity (1–127) for a key speed between the sensors (monotone, saturating)."""
+    speed_mps: float | FloatArray, params: PianoParams, *, rounded: bool = True, clipped: bool = True
+) -> int | float | npt.NDArray[np.int64] | FloatArray:
+    """The piano's velocity curve: MIDI velocity for a key speed between the sensors.
+
+    This is the one implementation of the curve (see `PianoParams`); it is monotone in speed
+    and saturating. What the piano sends is the default: rounded to an integer and clipped to
+    1–127. `rounded=False` gives the curve before rounding, a smooth function of speed for fits
+    and for inverting it (still clipped to [1, 127]); `clipped=False` (with `rounded=False`)
+    also drops the clip, for a fit that needs the slope beyond the MIDI range.
+    """
+    if rounded and not clipped:
+        raise ValueError("a rounded MIDI velocity is always clipped to 1-127; pass rounded=False.")
     s = np.asarray(speed_mps, dtype=np.float64)
     u = np.maximum(s, 0.0) / params.full_scale_speed_mps
     g = u**params.curve_exponent
     beta = params.curve_saturation
     if beta > 0.0:
         g = np.tanh(beta * g) / math.tanh(beta)
-    vel = np.clip(np.rint(127.0 * g), 1, 127).astype(np.int64)
-    if np.ndim(speed_mps) == 0:
-        return int(vel)
-    return vel
+    velocity = 127.0 * g
+    if rounded:
+        velocity = np.rint(velocity)
+    if clipped:
+        velocity = np.clip(velocity, 1.0, 127.0)
+    if rounded:
+        whole = velocity.astype(np.int64)
+        return int(whole) if np.ndim(speed_mps) == 0 else whole
+    return float(velocity) if np.ndim(speed_mps) == 0 else np.asarray(velocity, dtype=np.float64)
 
 
 def _crossings(x: FloatArray, level: float, downward: bool) -> tuple[npt.NDArray[np.intp], FloatArray]:

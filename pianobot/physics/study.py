@@ -26,7 +26,8 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
-from pianobot.physics.msd import MSDParams, StateSpace, lsim_uniform, state_space
+from pianobot.physics.linear import StateSpace, lsim_uniform, state_space
+from pianobot.physics.msd import MSDParams
 from pianobot.physics.trajectory import Press, sample_presses
 
 FloatArray = npt.NDArray[np.float64]

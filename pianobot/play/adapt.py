@@ -25,16 +25,20 @@ Every update is recorded (`history`).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
 
 from pianobot.play.corrections import RLS2, LocalCorrection
 
+if TYPE_CHECKING:  # the plan imports nothing from here; annotations only
+    from pianobot.play.plan import Plan
+
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
 
+FEASIBILITY_GRID = 200  # down velocities checked for an on-time start when adapting
 # Observations kept per vacuum level for the local layer: bounds the cost per note (a Cholesky
 # of this size) over a long song; with forgetting, older notes weigh little anyway.
 LOCAL_WINDOW = 120
@@ -170,3 +174,43 @@ class OnlineAdapter:
     def _at_level(self, vacuum_kpa: float) -> list[Observation]:
         same = [o for o in self.observations if abs(o.vacuum_kpa - float(vacuum_kpa)) < 1e-6]
         return same[-LOCAL_WINDOW:]
+
+
+def adapted_stroke(adapter: OnlineAdapter, plan: Plan, row: Any, earliest_s: float, origin_s: float,
+                   following: Any | None) -> tuple[float, float, float, float]:
+    """Down velocity, hold, expected on-velocity and lead of a note under the corrected model.
+
+    The stroke is the one with the least expected loudness error among those that can still
+    start by `earliest_s` (+ the allowed lateness). The hold is then cut, as the planner does
+    (shorten the previous hold before playing a note louder): so the arm is free when the plan
+    expects it, and early enough for the stroke the corrected model wants for the following
+    note — a model that learned the piano is louder asks for slower strokes, whose longer lead
+    needs an earlier start than planned. `row`/`following` are plan rows (attribute access).
+    """
+    table = plan.tables[float(row.vacuum_kpa)]
+    forecast = _forecast(adapter, plan, row)
+    onset = origin_s + float(row.onset_s)
+    # As the planner does: lateness (up to max_late_s) only where no stroke starts on time.
+    on_time = onset - forecast.lead_s >= earliest_s
+    if not on_time.any():
+        on_time = onset - forecast.lead_s >= earliest_s - plan.settings.max_late_s
+    k = adapter.choose(forecast, float(row.target_velocity), on_time)
+    speed, lead = float(forecast.speeds_mps[k]), float(forecast.lead_s[k])
+    free_by = origin_s + float(row.start_s) + float(row.busy_s)
+    if following is not None:
+        ahead = _forecast(adapter, plan, following)
+        j = adapter.choose(ahead, float(following.target_velocity))
+        between = float(following.move_s) if int(following.pitch) != int(row.pitch) else 0.0
+        if abs(float(following.vacuum_kpa) - float(row.vacuum_kpa)) > 1e-9:
+            between += float(following.vacuum_change_s)
+        free_by = min(free_by, origin_s + float(following.onset_s) - float(ahead.lead_s[j]) - between)
+    room = free_by - (onset - lead) - table.busy_s(speed, 0.0)
+    hold = float(min(float(row.hold_s), max(0.0, room)))
+    return speed, hold, float(forecast.velocity[k]), lead
+
+
+def _forecast(adapter: OnlineAdapter, plan: Plan, row: Any) -> Forecast:
+    """The adapter's corrected model over a fine grid of down velocities at the row's vacuum."""
+    table = plan.tables[float(row.vacuum_kpa)]
+    grid = np.linspace(table.speeds_mps[0], table.speeds_mps[-1], FEASIBILITY_GRID)
+    return adapter.forecast(float(row.vacuum_kpa), grid, table.predict_velocity(grid), table.lead(grid))

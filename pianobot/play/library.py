@@ -19,8 +19,11 @@ from dataclasses import dataclass
 
 from pianobot.io.midifile import Note
 
+G3 = 55
 C4, D4, E4, F4, G4, A4, B4, C5 = 60, 62, 64, 65, 67, 69, 71, 72
+D5, E5, F5, G5 = 74, 76, 77, 79
 ROBOT_BEAT = 4.0  # quarter notes per syllable in robot notation (a whole note)
+PP, FF = 33, 112  # MIDI velocities of pianissimo and fortissimo (the usual convention)
 
 
 @dataclass(frozen=True)
@@ -110,4 +113,70 @@ def etude(n_notes: int = 60, tempo_bpm: float = 90.0, beat: float = 2.0, seed_pi
     return SongSpec(f"etude{n_notes}", tempo_bpm, tuple(notes))
 
 
+def ode(tempo_bpm: float = 100.0) -> SongSpec:
+    """Ode to Joy (Beethoven, 17 + 15 notes), crescendo pp → ff and back, an octave-leap close.
+
+    Each half ends with its dotted rhythm (dotted quarter, eighth); the coda leaps C4 → C5.
+    """
+    first = [E4, E4, F4, G4, G4, F4, E4, D4, C4, C4, D4, E4, E4, D4, D4]
+    second = [E4, E4, F4, G4, G4, F4, E4, D4, C4, C4, D4, E4, D4, C4, C4]
+    beats = [1.0] * 12 + [1.5, 0.5, 2.0]
+    notes = (_phrase(first, beats, _ramp(PP, 90, 15)) + _phrase(second, beats, _ramp(FF, 45, 15))
+             + _phrase([C4, C5], [1.0, 2.0], [PP, 40]))
+    return SongSpec("ode", tempo_bpm, tuple(notes))
+
+
+def frere(tempo_bpm: float = 110.0) -> SongSpec:
+    """Frère Jacques (30 notes) rising from pp to ff, dotted "morning bells", an octave leap C4 → C5."""
+    pitches = [C4, D4, E4, C4, C4, D4, E4, C4, E4, F4, G4, E4, F4, G4,
+               G4, A4, G4, F4, E4, C4, G4, A4, G4, F4, E4, C4, C5, G4, C4, C4]
+    beats = [1.0] * 10 + [2.0, 1.0, 1.0, 2.0] + [1.5, 0.5, 1.0, 1.0, 1.0, 1.0] * 2 + [1.0, 1.0, 1.0, 2.0]
+    return SongSpec("frere", tempo_bpm, tuple(_phrase(pitches, beats, _ramp(PP, FF, len(pitches)))))
+
+
+def arpeggio(tempo_bpm: float = 80.0) -> SongSpec:
+    """A broken-chord study (24 notes): dotted halves and quarters, octave leaps C4–C5 and
+    G4–G5, repeated notes; pp swelling to ff in the middle and back to pp."""
+    pitches = [C4, C5, E4, G4, G4, C5, G4, G5, D5, B4, B4, G4,
+               A4, E5, C5, A4, A4, F4, F4, F5, D5, C5, C4, C4]
+    beats = [3.0, 1.0, 1.0, 1.0, 1.0, 1.0] * 4
+    velocities = _ramp(PP, FF, 12) + _ramp(FF, PP, 12)
+    return SongSpec("arpeggio", tempo_bpm, tuple(_phrase(pitches, beats, velocities)))
+
+
+def march(tempo_bpm: float = 120.0) -> SongSpec:
+    """A march (24 notes) of dotted figures: a loud call, its soft echo an octave higher, a loud
+    close; repeated notes throughout."""
+    call = [G4, G4, C5, C5, E5, D5, C5, G4]
+    beats = [1.5, 0.5, 1.0, 1.0, 1.5, 0.5, 2.0, 2.0]
+    echo = [G5, G5, C5, C5, E5, D5, C5, C5]
+    close = [G4, G4, C5, E5, G5, E5, C5, C4]
+    notes = (_phrase(call, beats, _ramp(96, FF, 8)) + _phrase(echo, beats, _ramp(48, PP, 8))
+             + _phrase(close, [1.0, 1.0, 1.0, 1.0, 1.5, 0.5, 2.0, 2.0], _ramp(70, FF, 8)))
+    return SongSpec("march", tempo_bpm, tuple(notes))
+
+
+def waltz(tempo_bpm: float = 90.0) -> SongSpec:
+    """A waltz tune in 3/4 (24 notes): pickup quarters onto dotted halves, octave leaps D4–D5,
+    repeated notes; a long crescendo from pp to ff."""
+    pitches = [D4, D5, D5, B4, G4, G4, A4, B4, C5, C5, A4, F4,
+               E4, E5, E5, C5, A4, A4, B4, C5, D5, D5, D4, G4]
+    beats = [1.0, 3.0, 1.0, 1.0, 1.0, 3.0, 1.0, 1.0, 1.0, 3.0, 1.0, 2.0] * 2
+    return SongSpec("waltz", tempo_bpm, tuple(_phrase(pitches, beats, _ramp(PP, FF, len(pitches)))))
+
+
+def rise_and_fall(tempo_bpm: float = 100.0) -> SongSpec:
+    """Thirty quarter notes: repeated notes, dotted rhythms, an octave leap, loudness rising
+    from 40 to 88 and falling again (the kind of melody the play issue was measured on)."""
+    pitches = [C4, C4, D4, E4, E4, F4, G4, G4, A4, G4, F4, E4, D4, D4, C4,
+               E4, E4, F4, G4, G5, F5, E5, D5, D5, C5, B4, A4, G4, G4, C4]
+    beats = [1.0, 1.0, 1.0, 1.5, 0.5, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 2.0] * 2
+    velocities = _ramp(40, 88, 16) + _ramp(85, 40, 14)
+    return SongSpec("rise_and_fall", tempo_bpm, tuple(_phrase(pitches, beats, velocities)))
+
+
 SONGS = {"scale_crescendo": scale_crescendo, "twinkle": twinkle, "mary": mary}
+#: The play test songs (issue 11): 80–120 bpm, each with repeated notes, an octave leap, dynamics
+#: from pp to ff and dotted rhythms.
+TEST_SONGS = {"ode": ode, "frere": frere, "arpeggio": arpeggio, "march": march, "waltz": waltz,
+              "rise_and_fall": rise_and_fall}

@@ -1,13 +1,19 @@
-"""Executing a plan on the rig, note by note, on the rig's clock; the performance is a run.
+"""Executing a play run on the rig: the warm-up, then the song note by note, on the rig's clock.
 
-Each planned note becomes one timed keystroke through the rig's public API: the loop waits on
-the rig clock (virtual for the sim) until a phrase's vacuum change is due (`Rig.set_vacuum`),
-moves to the key as soon as the arm is back up from the previous press (`Rig.move_to_key`; the
-released key keeps returning meanwhile) and has the press start at its planned time
-(`Rig.press_at`, no settle pause). The MIDI the piano sends is collected by contiguous time
-windows (each keystroke's, and the gaps between), so no event is lost or counted twice. The run
-(kind "play") holds the plan, one trials row per note (with the target and the prediction beside
-the outcome), samples including the sim's truth trace, key features and MIDI, like a sweep.
+`Performer` owns the run (kind "play") and the open rig for both stages, so the warm-up and the
+song share one run folder, one clock and one journal of MIDI:
+
+- `warm_up(trials)`: the warm-up keystrokes back to back (vacuum per level, move to the key,
+  press, a short pause so the note-off arrives), returned as trials rows for the fit;
+- `play(plan)`: each planned note becomes one timed keystroke through the rig's public API. The
+  loop waits on the rig clock (virtual for the sim) until a phrase's vacuum change is due
+  (`Rig.set_vacuum`), moves to the key as soon as the arm is back up from the previous press
+  (`Rig.move_to_key`; the released key keeps returning meanwhile) and has the press start at its
+  planned time (`Rig.press_at`, no settle pause).
+
+The MIDI the piano sends is collected by contiguous time windows (each keystroke's, and the gaps
+between), so no event is lost or counted twice. Trials rows carry a `phase` column (warmup |
+song) and, for the song, the target and the prediction beside the outcome.
 """
 
 from __future__ import annotations
@@ -15,7 +21,9 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import math
-from collections.abc import Sequence
+import os
+from collections.abc import Callable, Sequence
+from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -24,10 +32,13 @@ import numpy as np
 import pandas as pd
 
 from pianobot.io.midifile import Note
-from pianobot.physics.trajectory import press_duration_s
+from pianobot.physics.trajectory import Press, press_duration_s
 from pianobot.plan import Trial
-from pianobot.play.adapt import Forecast, OnlineAdapter
+from pianobot.play.adapt import OnlineAdapter, adapted_stroke
+from pianobot.play.geometry import stroke_trial
 from pianobot.play.plan import Plan
+from pianobot.play.warmup import SETTLE_S as WARMUP_SETTLE_S
+from pianobot.progress import NO_PROGRESS, Progress
 from pianobot.rig import open_rig
 from pianobot.rig.errors import ConnectionLost, SafetyStop, SafetyViolation
 from pianobot.rig.protocols import MidiEvent
@@ -37,8 +48,10 @@ from pianobot.spec import RigSpec
 from pianobot.store import RunWriter
 
 BATCH_NOTES = 16
-FEASIBILITY_GRID = 200  # down velocities checked for an on-time start when adapting
 TAIL_S = 1.0  # listen this long after the last press for a late note-off
+# Columns every play trials row carries beyond a sweep's (NaN where they do not apply).
+PLAY_COLUMNS = ("phase", "note_index", "onset_target_s", "target_velocity", "predicted_velocity",
+                "predicted_lead_s", "motion_late_s")
 
 
 @dataclass(frozen=True)
@@ -62,177 +75,145 @@ def trial_id_for(song_key: str, note_index: int) -> str:
     return hashlib.sha256(f"{song_key}|{note_index}".encode()).hexdigest()[:16]
 
 
-def perform(
-    plan: Plan,
-    rig: RigSpec,
-    *,
-    data_dir: Path,
-    name: str,
-    song_key: str,
-    meta: dict[str, Any],
-    seed: int | None = None,
-    world: Any | None = None,
-    adapter: OnlineAdapter | None = None,
-) -> Performance:
-    """Play `plan` on the rig `rig` and store it as a run of kind "play" (see module doc)."""
-    frame = plan.notes.assign(trial_id=[trial_id_for(song_key, int(i)) for i in plan.notes["note_index"]])
-    chosen_seed = int(rig.seed if seed is None else seed)
-    with RunWriter.create(Path(data_dir), name=name, kind="play",
-                          meta={**meta, "seed": chosen_seed, "rig": {"spec": rig.model_dump(mode="json")}},
-                          plan=frame) as writer:
-        try:
-            with open_rig(rig, seed=chosen_seed, world=world) as device:
-                writer.update_meta(rig={"spec": rig.model_dump(mode="json"), "description": device.describe()})
-                loop = _Loop(plan, frame, rig, device, writer, adapter)
-                status, reason = loop.run()
-        except BaseException as exc:
-            writer.finish("failed", f"{type(exc).__name__}: {exc}")
-            raise
-        strokes = pd.DataFrame(loop.rows)
-        notes = pair_notes(loop.events, loop.origin_s)
-        recovery = float(pd.Series(loop.recoveries).median()) if loop.recoveries else math.nan
-        writer.update_meta(origin_s=loop.origin_s, observed_recovery_s=recovery, rig_warnings=loop.warnings,
-                           adaptation=None if adapter is None else adapter.history)
-        writer.finish(status, reason)
-        return Performance(tuple(notes), strokes, writer.run_id, writer.path, status, reason,
-                           loop.origin_s, [] if adapter is None else list(adapter.history), recovery,
-                           tuple(loop.warnings))
+class Performer:
+    """One play run on one open rig (a context manager; see the module doc)."""
 
-
-class _Loop:
-    """The note loop: timing, keystrokes, MIDI windows, adaptation, store batches."""
-
-    def __init__(self, plan: Plan, frame: pd.DataFrame, rig: RigSpec, device: Any,
-                 writer: RunWriter, adapter: OnlineAdapter | None) -> None:
-        self.plan, self.frame, self.rig, self.device, self.writer = plan, frame, rig, device, writer
-        self.adapter = adapter
-        self.clock = device.clock
+    def __init__(self, rig: RigSpec, *, data_dir: Path, name: str, song_key: str, meta: dict[str, Any],
+                 plan: pd.DataFrame, seed: int | None = None, world: Any | None = None,
+                 progress: Progress = NO_PROGRESS, on_warning: Callable[[str], None] | None = None) -> None:
+        self.on_warning = on_warning
+        self.rig_spec, self.data_dir, self.name, self.song_key = rig, Path(data_dir), name, song_key
+        self.seed = int(rig.seed if seed is None else seed)
+        self.meta, self.initial_plan, self.world, self.progress = meta, plan, world, progress
         self.events: list[MidiEvent] = []
-        self.rows: list[dict[str, Any]] = []
-        self.recoveries: list[float] = []
         self.warnings: list[str] = []
+        self.recoveries: list[float] = []
         self.batch: list[TrialData] = []
-        self.origin_s = 0.0
         self.collected_to_s = 0.0
         self.pitch: int | None = None
         self.vacuum_kpa: float | None = None
+        self._stack = ExitStack()
 
-    def run(self) -> tuple[str, str | None]:
-        played = self.frame[self.frame["status"] == "play"]
+    def __enter__(self) -> Performer:
+        spec = self.rig_spec.model_dump(mode="json")
+        self.writer = self._stack.enter_context(RunWriter.create(
+            self.data_dir, name=self.name, kind="play", plan=self.initial_plan,
+            meta={**self.meta, "seed": self.seed, "rig": {"spec": spec}}))
+        try:
+            self.device = self._stack.enter_context(open_rig(self.rig_spec, seed=self.seed, world=self.world))
+        except BaseException as exc:
+            self.writer.finish("failed", f"{type(exc).__name__}: {exc}")
+            self._stack.close()
+            raise
+        self.clock = self.device.clock
+        self.collected_to_s = self.started_s = self.clock.now()
+        rig_warnings = list(self.device.warnings)
+        self.writer.update_meta(rig={"spec": spec, "description": self.device.describe(),
+                                     **({"warnings": rig_warnings} if rig_warnings else {})})
+        for line in rig_warnings:  # before any motion: the user may want to stop here
+            if self.on_warning is not None:
+                self.on_warning(line)
+        self.warnings.extend(rig_warnings)
+        return self
+
+    def __exit__(self, kind: type[BaseException] | None, exc: BaseException | None, tb: object) -> None:
+        try:
+            if exc is not None and self.writer.meta.get("status") == "running":
+                self.writer.finish("failed", f"{type(exc).__name__}: {exc}")
+        finally:
+            self._stack.close()
+
+    def replan(self, plan: pd.DataFrame) -> None:
+        """Replace plan.parquet (before the song starts): the warm-up as played and the song as it
+        will be played, so the run's plan names every keystroke it holds."""
+        temp = self.writer.path / ".plan.parquet.tmp"
+        plan.to_parquet(temp, index=False)
+        os.replace(temp, self.writer.path / "plan.parquet")
+        self.writer.update_meta(trials_planned=len(plan))
+
+    @property
+    def run_id(self) -> str:
+        return self.writer.run_id
+
+    @property
+    def run_path(self) -> Path:
+        return self.writer.path
+
+    # -- the warm-up ------------------------------------------------------------------------
+
+    def warm_up(self, trials: Sequence[Trial]) -> tuple[pd.DataFrame, float]:
+        """Play the warm-up keystrokes back to back; their trials rows and the lab time (s)."""
+        rows: list[dict[str, Any]] = []
+        t0 = self.clock.now()
+        with self.progress.task("warm-up", total=len(trials)) as task:
+            for trial in trials:
+                self._set_vacuum(trial.vacuum_kpa)
+                self._move(trial.note, trial.distance_m)
+                data = self._keystroke(trial, None, settle_s=WARMUP_SETTLE_S)
+                data = dataclasses.replace(data, midi=tuple(self._collect_gap()) + data.midi)
+                data = dataclasses.replace(data, row={**data.row, **_play_fields("warmup")})
+                rows.append(data.row)
+                self._add(data)
+                velocity = data.row.get("on_velocity", math.nan)
+                task.advance(note=f"{trial.down_velocity_mps * 1e3:.0f} mm/s → "
+                                  f"{'silent' if not _finite(velocity) else f'velocity {velocity:.0f}'}")
+        self._flush()
+        lab_time = self.clock.now() - t0
+        self.writer.update_meta(warmup_lab_time_s=lab_time)
+        return pd.DataFrame(rows), lab_time
+
+    # -- the song ---------------------------------------------------------------------------
+
+    def play(self, plan: Plan, adapter: OnlineAdapter | None = None) -> Performance:
+        """Play `plan` note by note (see the module doc); the run is finished afterwards."""
+        frame = plan.notes.assign(trial_id=[trial_id_for(self.song_key, int(i)) for i in plan.notes["note_index"]])
+        played = frame[frame["status"] == "play"]
+        rows: list[dict[str, Any]] = []
+        status, reason, origin = "completed", None, self.clock.now()
         if played.empty:
-            return "completed", "no note of the plan can be played"
-        first = played.iloc[0]
-        self._set_vacuum(float(first.vacuum_kpa))
-        self._move(int(first.pitch), float(first.distance_m))
-        now = self.clock.now()
-        # Song time zero on the rig clock: the first motion starts lead_in after the setup.
-        self.origin_s = now + self.plan.settings.lead_in_s - min(0.0, float(played["start_s"].min()))
-        self.collected_to_s = now
-        status, reason = "completed", None
-        rows = [row for _, row in played.iterrows()]
-        for i, row in enumerate(rows):
-            try:
-                self._note(row, rows[i + 1] if i + 1 < len(rows) else None)
-            except SafetyStop as exc:
-                status, reason = "stopped", f"safety stop at note {int(row.note_index)}: {exc}"
-                break
+            reason = "no note of the plan can be played"
+        else:
+            first = played.iloc[0]
+            self._set_vacuum(float(first.vacuum_kpa))
+            self._move(int(first.pitch), float(first.distance_m))
+            now = self.clock.now()
+            # Song time zero on the rig clock: the first motion starts lead_in after the setup.
+            origin = now + plan.settings.lead_in_s - min(0.0, float(played["start_s"].min()))
+            loop = _SongLoop(self, plan, origin, adapter)
+            records: list[Any] = list(played.itertuples(index=False))
+            with self.progress.task("notes", total=len(records)) as task:
+                for i, row in enumerate(records):
+                    try:
+                        rows.append(loop.note(row, records[i + 1] if i + 1 < len(records) else None))
+                    except SafetyStop as exc:
+                        status, reason = "stopped", f"safety stop at note {int(row.note_index)}: {exc}"
+                        break
+                    task.advance(note=f"note {int(row.note_index)} (pitch {int(row.pitch)})")
         self.clock.sleep(TAIL_S)
         tail = self._collect_gap()
-        if self.batch:  # never empty here: batches are flushed before a note is added
+        if self.batch:
             self.batch[-1] = dataclasses.replace(self.batch[-1], midi=self.batch[-1].midi + tuple(tail))
         self._flush()
-        return status, reason
+        first_motion = origin + (float(played["start_s"].min()) if len(played) else 0.0)
+        song_events = [e for e in self.events if e.t_s >= first_motion - 1e-9]
+        notes = pair_notes(song_events, origin)
+        recovery = float(pd.Series(self.recoveries).median()) if self.recoveries else math.nan
+        history = [] if adapter is None else list(adapter.history)
+        self.writer.update_meta(origin_s=origin, observed_recovery_s=recovery, rig_warnings=self.warnings,
+                                adaptation=None if adapter is None else history,
+                                lab_time_s=self.clock.now() - self.started_s)
+        self.writer.finish(status, reason)
+        return Performance(tuple(notes), pd.DataFrame(rows), self.run_id, self.run_path, status, reason,
+                           origin, history, recovery, tuple(self.warnings))
 
-    def _note(self, row: pd.Series, following: pd.Series | None) -> None:
-        speed, predicted, lead = float(row.down_velocity_mps), float(row.predicted_velocity), float(row.predicted_lead_s)
-        hold = float(row.hold_s)
-        move = float(row.move_s) if self.pitch is not None and int(row.pitch) != self.pitch else 0.0
-        changes_vacuum = self.vacuum_kpa is None or abs(float(row.vacuum_kpa) - self.vacuum_kpa) > 1e-9
-        if self.adapter is not None:
-            earliest = self.clock.now() + move + (float(row.vacuum_change_s) if changes_vacuum else 0.0)
-            speed, hold, predicted, lead = self._adapted_stroke(row, earliest, following)
-        start = self.origin_s + float(row.onset_s) - lead
-        if changes_vacuum:
-            self._sleep_until(start - move - float(row.vacuum_change_s))
-            self._set_vacuum(float(row.vacuum_kpa))
-        # Move as soon as the arm is free: the plan left room for the move before `start`.
-        self._move(int(row.pitch), float(row.distance_m))
-        gap = self._collect_gap()
-        # A played note is a planned trial like any other (repeat 0), so the rig and store read it.
-        stroke = Trial(str(row.trial_id), int(row.note_index), 0, int(row.pitch), float(row.vacuum_kpa),
-                       speed, float(row.up_velocity_mps), float(row.acceleration_mps2), float(row.depth_m),
-                       float(row.distance_m), hold, 0.0)
-        data = self._keystroke(stroke, start)
-        data = dataclasses.replace(data, midi=tuple(gap) + data.midi)
-        on_velocity = data.row.get("on_velocity", math.nan)
-        played = None if not (isinstance(on_velocity, float) and math.isfinite(on_velocity)) else on_velocity
-        t_on = data.row.get("t_on_s", math.nan)
-        observed_lead = float(t_on) if isinstance(t_on, float) and math.isfinite(t_on) else None
-        extra = {
-            "note_index": int(row.note_index),
-            "onset_target_s": float(row.onset_s),
-            "target_velocity": float(row.target_velocity),
-            "predicted_velocity": predicted,
-            "predicted_lead_s": lead,
-            "motion_late_s": max(0.0, float(data.row.get("t_start_s", start)) - start),
-        }
-        data = dataclasses.replace(data, row={**data.row, **extra})
-        self.rows.append(data.row)
-        if len(self.batch) >= BATCH_NOTES:
-            self._flush()
-        self.batch.append(data)
-        if self.adapter is not None and data.status != "failed":
-            table = self.plan.tables[float(row.vacuum_kpa)]
-            self.adapter.observe(int(row.note_index), float(row.vacuum_kpa), speed,
-                                 float(table.predict_velocity(speed)), float(table.lead(speed)), played,
-                                 observed_lead, forecast_velocity=predicted, forecast_lead_s=lead)
+    # -- shared by both stages --------------------------------------------------------------
 
-    def _adapted_stroke(self, row: pd.Series, earliest_s: float,
-                        following: pd.Series | None) -> tuple[float, float, float, float]:
-        """Down velocity, hold, expected on-velocity and lead of a note under the corrected model.
-
-        The stroke is the one with the least expected loudness error among those that can still
-        start by `earliest_s` (+ the allowed lateness). The hold is then cut, as the planner
-        does (shorten the previous hold before playing a note louder): so the arm is free when
-        the plan expects it, and early enough for the stroke the corrected model wants for the
-        following note — a model that learned the piano is louder asks for slower strokes, whose
-        longer lead needs an earlier start than planned.
-        """
-        assert self.adapter is not None
-        table = self.plan.tables[float(row.vacuum_kpa)]
-        forecast = self._forecast(row)
-        onset = self.origin_s + float(row.onset_s)
-        # As the planner does: lateness (up to max_late_s) only where no stroke starts on time.
-        on_time = onset - forecast.lead_s >= earliest_s
-        if not on_time.any():
-            on_time = onset - forecast.lead_s >= earliest_s - self.plan.settings.max_late_s
-        k = self.adapter.choose(forecast, float(row.target_velocity), on_time)
-        speed, lead = float(forecast.speeds_mps[k]), float(forecast.lead_s[k])
-        free_by = self.origin_s + float(row.start_s) + float(row.busy_s)
-        if following is not None:
-            ahead = self._forecast(following)
-            j = self.adapter.choose(ahead, float(following.target_velocity))
-            between = float(following.move_s) if int(following.pitch) != int(row.pitch) else 0.0
-            if abs(float(following.vacuum_kpa) - float(row.vacuum_kpa)) > 1e-9:
-                between += float(following.vacuum_change_s)
-            free_by = min(free_by, self.origin_s + float(following.onset_s) - float(ahead.lead_s[j]) - between)
-        room = free_by - (onset - lead) - table.busy_s(speed, 0.0)
-        hold = float(min(float(row.hold_s), max(0.0, room)))
-        return speed, hold, float(forecast.velocity[k]), lead
-
-    def _forecast(self, row: pd.Series) -> Forecast:
-        """The adapter's corrected model over a fine grid of down velocities at the row's vacuum."""
-        assert self.adapter is not None
-        table = self.plan.tables[float(row.vacuum_kpa)]
-        grid = np.linspace(table.speeds_mps[0], table.speeds_mps[-1], FEASIBILITY_GRID)
-        return self.adapter.forecast(float(row.vacuum_kpa), grid, table.predict_velocity(grid), table.lead(grid))
-
-    def _keystroke(self, stroke: Trial, start_s: float) -> TrialData:
-        """One timed keystroke; a dropped link is re-opened and the note tried once more."""
+    def _keystroke(self, stroke: Trial, start_s: float | None, settle_s: float = 0.0) -> TrialData:
+        """One keystroke; a dropped link is re-opened and the stroke tried once more."""
         for attempt in (1, 2):
             t0 = self.clock.now()
             try:
-                result = self.device.press_at(stroke, attempt, start_at_s=start_s)
+                result = self.device.press_at(stroke, attempt, start_at_s=start_s, settle_s=settle_s)
             except ConnectionLost as exc:
                 if attempt == 2:
                     return failed_trial(stroke, attempt, f"connection lost: {exc}", t0)
@@ -257,12 +238,18 @@ class _Loop:
         self.events.extend(gap)
         return gap
 
+    def _add(self, data: TrialData) -> None:
+        if len(self.batch) >= BATCH_NOTES:
+            self._flush()
+        self.batch.append(data)
+
     def _sleep_until(self, t_s: float) -> None:
         self.clock.sleep(t_s - self.clock.now())
 
     def _set_vacuum(self, vacuum_kpa: float) -> None:
-        self.device.set_vacuum(vacuum_kpa)  # waits for the regulator and the particles
-        self.vacuum_kpa = vacuum_kpa
+        if self.vacuum_kpa is None or abs(vacuum_kpa - self.vacuum_kpa) > 1e-9:
+            self.device.set_vacuum(vacuum_kpa)  # waits for the regulator and the particles
+            self.vacuum_kpa = vacuum_kpa
 
     def _move(self, pitch: int, distance_m: float) -> None:
         if pitch != self.pitch:
@@ -274,6 +261,67 @@ class _Loop:
             return
         batch, self.batch = self.batch, []
         self.writer.append(trials_table(batch), samples_table(batch), midi_table(batch))
+
+
+class _SongLoop:
+    """The note loop of `Performer.play`: timing, keystrokes, adaptation."""
+
+    def __init__(self, performer: Performer, plan: Plan, origin_s: float, adapter: OnlineAdapter | None) -> None:
+        self.p, self.plan, self.origin_s, self.adapter = performer, plan, origin_s, adapter
+
+    def note(self, row: Any, following: Any | None) -> dict[str, Any]:
+        p = self.p
+        speed, predicted, lead = float(row.down_velocity_mps), float(row.predicted_velocity), float(row.predicted_lead_s)
+        hold = float(row.hold_s)
+        move = float(row.move_s) if p.pitch is not None and int(row.pitch) != p.pitch else 0.0
+        changes_vacuum = p.vacuum_kpa is None or abs(float(row.vacuum_kpa) - p.vacuum_kpa) > 1e-9
+        if self.adapter is not None:
+            earliest = p.clock.now() + move + (float(row.vacuum_change_s) if changes_vacuum else 0.0)
+            speed, hold, predicted, lead = adapted_stroke(self.adapter, self.plan, row, earliest, self.origin_s,
+                                                          following)
+        start = self.origin_s + float(row.onset_s) - lead
+        if changes_vacuum:
+            p._sleep_until(start - move - float(row.vacuum_change_s))
+            p._set_vacuum(float(row.vacuum_kpa))
+        # Move as soon as the arm is free: the plan left room for the move before `start`.
+        p._move(int(row.pitch), float(row.distance_m))
+        gap = p._collect_gap()
+        # A played note is a planned trial like any other (repeat 0), so the rig and store read it.
+        geometry = self.plan.geometry
+        press = geometry.press(speed, hold) if geometry is not None else Press(
+            float(row.distance_m), float(row.depth_m), speed, float(row.up_velocity_mps),
+            float(row.acceleration_mps2), hold)
+        stroke = stroke_trial(str(row.trial_id), int(row.note_index), int(row.pitch), float(row.vacuum_kpa), press)
+        data = p._keystroke(stroke, start)
+        data = dataclasses.replace(data, midi=tuple(gap) + data.midi)
+        on_velocity = data.row.get("on_velocity", math.nan)
+        played = float(on_velocity) if _finite(on_velocity) else None
+        t_on = data.row.get("t_on_s", math.nan)
+        observed_lead = float(t_on) if _finite(t_on) else None
+        extra = _play_fields("song", note_index=int(row.note_index), onset_target_s=float(row.onset_s),
+                             target_velocity=float(row.target_velocity), predicted_velocity=predicted,
+                             predicted_lead_s=lead,
+                             motion_late_s=max(0.0, float(data.row.get("t_start_s", start)) - start))
+        data = dataclasses.replace(data, row={**data.row, **extra})
+        p._add(data)
+        if self.adapter is not None and data.status != "failed":
+            table = self.plan.tables[float(row.vacuum_kpa)]
+            self.adapter.observe(int(row.note_index), float(row.vacuum_kpa), speed,
+                                 float(table.predict_velocity(speed)), float(table.lead(speed)), played,
+                                 observed_lead, forecast_velocity=predicted, forecast_lead_s=lead)
+        return data.row
+
+
+def _play_fields(phase: str, **values: float) -> dict[str, Any]:
+    out: dict[str, Any] = {name: np.nan for name in PLAY_COLUMNS}
+    out["phase"] = phase
+    out["note_index"] = -1
+    out.update(values)
+    return out
+
+
+def _finite(value: Any) -> bool:
+    return isinstance(value, float | int) and math.isfinite(float(value))
 
 
 def pair_notes(events: Sequence[MidiEvent], origin_s: float) -> list[Note]:

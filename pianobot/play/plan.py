@@ -1,27 +1,26 @@
-"""The model-based planner: melody notes in, one press per note out, with timing and flags.
+"""The model-based planner: melody notes in, one press per note out, at a tempo the finger keeps.
 
 Per note the planner chooses, from the model's tabulated strokes (`StrokeTable`):
 
 - loudness: the down velocity whose predicted on-velocity equals the note's target (the song's
   velocity mapped onto the reachable range, see `DynamicsMap`), at the phrase's vacuum level;
+  a note short of time may sound up to `loudness_tolerance` louder (a faster stroke sounds
+  sooner);
 - duration: the arm hold whose predicted note-on → note-off time equals the note's length;
 - timing: motion start = onset − predicted lead (motion start → note-on).
 
-The arm is free again once it is back up (`busy_s`); the lateral move to the next key starts
-then, while the released key is still returning, and a re-strike of the same key waits for the
-predicted note-off (the key back above its re-trigger depth). When a note cannot start on time
-the previous note's hold is shortened first, then the note is played with a faster (louder)
-stroke, whose lead is shorter; a note still later than `max_late_s` is skipped and reported with
-the reason, so the notes after it stay in time.
+Before anything is scheduled it works out, from the same strokes and the travel times, the
+fastest tempo at which every note can be struck in time and which notes limit it (`tempo`).
+`--tempo auto` (the default) plays at that tempo, never above the written one; a tempo the user
+asks for is played as asked, skipping and reporting what cannot keep up (`schedule`).
 
 The stroke geometry (hover distance, acceleration; depth and up velocity fixed) is chosen per
-song: every candidate in the settings is planned and the one playing the most notes, then the
-fewest forced louder, then the least late, then with the widest loudness range wins.
+song among the settings' candidates: the one allowing the fastest tempo (up to the one played),
+then the widest loudness range, then the shortest hover.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -32,20 +31,49 @@ import pandas as pd
 from pianobot.analysis.predictors import StrokePredictor
 from pianobot.errors import InputError
 from pianobot.io.midifile import Note
+from pianobot.plan import key_change_s
 from pianobot.play.dynamics import DynamicsMap, DynamicsMode
-from pianobot.play.schedule import LOUDER, PLAN_COLUMNS, VACUUM_BUDGET_FACTOR, note_row, schedule
+from pianobot.play.geometry import StrokeGeometry, geometries
+from pianobot.play.schedule import (
+    FASTER,
+    LATE,
+    LOUDER,
+    SKIPPED,
+    NoteTimes,
+    Scheduled,
+    need_s,
+    schedule,
+)
 from pianobot.play.settings import PlaySettings
-from pianobot.play.strokes import StrokeGeometry, StrokeTable
+from pianobot.play.strokes import StrokeTable, stroke_tables
+from pianobot.play.tempo import Feasibility, TempoChoice, TempoRequest, choose_tempo, tempo_limits
 from pianobot.spec import RigSpec
+
+# A phrase may change the vacuum only across a rest this many times the rig's settle time:
+# the regulator's real settling varies with the size of the step.
+VACUUM_BUDGET_FACTOR = 1.25
+LOUDER_TEXT = "louder than asked to keep time"
+# A target this close to a level's reachable range is not worth a warning (half a MIDI step).
+CLIP_TOLERANCE = 0.5
+
+PLAN_COLUMNS: tuple[str, ...] = (
+    "note_index", "pitch", "written_onset_s", "onset_s", "offset_s", "song_velocity", "target_velocity",
+    "vacuum_kpa", "down_velocity_mps", "up_velocity_mps", "acceleration_mps2", "depth_m",
+    "distance_m", "approach_m", "hold_s", "predicted_velocity", "predicted_lead_s", "predicted_midi_hold_s",
+    "predicted_release_s", "move_s", "vacuum_change_s", "start_s", "busy_s", "late_s",
+    "tempo_limit_bpm", "status", "reason",
+)
 
 
 @dataclass(frozen=True)
 class Plan:
-    """A performance plan: one row per melody note (`PLAN_COLUMNS`), song time in seconds.
+    """A performance plan: one row per melody note (`PLAN_COLUMNS`), times on the played song clock.
 
     `status` is "play" or "skip"; `reason` says why a note is skipped, late, louder or clipped.
-    `start_s` is the planned motion start in song time (it may be negative: the first press
-    starts before the song's time zero by its lead).
+    `start_s` is the planned motion start (it may be negative: the first press starts before the
+    song's time zero by its lead). `onset_s` is at the played tempo, `written_onset_s` at the
+    written one; `tempo_limit_bpm` is the fastest tempo at which the note can be struck in time
+    after the one before it.
     """
 
     planner: str  # "model" | "naive"
@@ -55,13 +83,14 @@ class Plan:
     tables: dict[float, StrokeTable] = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
     geometry: StrokeGeometry | None = None
+    tempo: TempoChoice | None = None
 
     @property
     def played(self) -> pd.DataFrame:
         return self.notes[self.notes["status"] == "play"]
 
     def summary(self) -> dict[str, Any]:
-        """Counts, geometry and the mapping, for JSON output and run.json."""
+        """Counts, tempo, geometry and the mapping, for JSON output and run.json."""
         frame = self.notes
         return {
             "planner": self.planner,
@@ -69,8 +98,9 @@ class Plan:
             "planned": int((frame["status"] == "play").sum()),
             "skipped": int((frame["status"] == "skip").sum()),
             "late": int((frame["late_s"] > 0).sum()),
-            "louder_to_keep_time": int(frame["reason"].str.contains(LOUDER).sum()),
-            "geometry": None if self.geometry is None else self.geometry.to_dict(),
+            "louder_to_keep_time": int(frame["reason"].str.contains(LOUDER_TEXT).sum()),
+            "tempo": None if self.tempo is None else self.tempo.to_dict(),
+            "geometry": None if self.geometry is None else self.geometry.describe(),
             "dynamics": None if self.dynamics is None else self.dynamics.to_dict(),
             "reachable_by_vacuum": {
                 f"{k:g}": list(t.velocity_range) for k, t in sorted(self.tables.items())
@@ -79,64 +109,9 @@ class Plan:
         }
 
 
-def geometries(settings: PlaySettings, rig: RigSpec) -> list[StrokeGeometry]:
-    """The candidate stroke geometries; InputError if a setting leaves the finger's envelope."""
-    env = rig.envelope_for(settings.finger)
-
-    def checked(name: str, value: float) -> float:
-        if name in env and not env[name].contains(value):
-            raise InputError(
-                f"{name} = {value:g} is outside the {settings.finger} finger's envelope "
-                f"[{env[name].low:g}, {env[name].high:g}]", f"play settings: {name}",
-            )
-        return float(value)
-
-    def top(name: str, fallback: float) -> float:
-        return float(env[name].high) if name in env else fallback
-
-    depth = checked("depth_m", settings.depth_m)
-    up = checked("up_velocity_mps", settings.up_velocity_mps or top("up_velocity_mps", 0.7))
-    accelerations = settings.accelerations_mps2 or (top("acceleration_mps2", 2.0),)
-    return [
-        StrokeGeometry(checked("distance_m", d), depth, checked("acceleration_mps2", a), up)
-        for a in accelerations for d in settings.distances_m
-    ]
-
-
-def fastest_geometry(settings: PlaySettings, rig: RigSpec) -> StrokeGeometry:
-    """The candidate with the shortest press cycle: shortest hover, highest acceleration."""
-    return min(geometries(settings, rig), key=lambda g: (g.distance_m, -g.acceleration_mps2))
-
-
-def envelope_limits(settings: PlaySettings, rig: RigSpec) -> dict[str, tuple[float, float]]:
-    """The finger's envelope on this rig as (low, high) per parameter (geometry checked too)."""
-    geometries(settings, rig)
-    return {name: (lim.low, lim.high) for name, lim in rig.envelope_for(settings.finger).items()}
-
-
-def stroke_tables(predictor: StrokePredictor, settings: PlaySettings, rig: RigSpec,
-                  geometry: StrokeGeometry | None = None) -> dict[float, StrokeTable]:
-    """One table per allowed vacuum level for a geometry (default: the fastest)."""
-    limits = envelope_limits(settings, rig)
-    geometry = geometry or fastest_geometry(settings, rig)
-    v_lo, v_hi = limits.get("vacuum_kpa", (-math.inf, math.inf))
-    levels = [p for p in settings.vacuum_levels_kpa if v_lo - 1e-9 <= p <= v_hi + 1e-9]
-    if not levels:
-        raise InputError(
-            f"no vacuum level of {list(settings.vacuum_levels_kpa)} lies in the envelope [{v_lo:g}, {v_hi:g}] kPa",
-            "play settings: vacuum_levels_kpa",
-        )
-    cap = limits.get("down_velocity_mps", (0.0, 0.06))[1]
-    return {float(p): StrokeTable.build(predictor, p, geometry, settings, cap) for p in levels}
-
-
-def _sounds(tables: dict[float, StrokeTable]) -> bool:
-    return any(t.sounding.sum() >= 2 for t in tables.values())
-
-
 def reachable_range(tables: dict[float, StrokeTable]) -> tuple[float, float]:
     """Quietest and loudest on-velocity over the vacuum levels, kept one step off silence."""
-    ranges = [t.velocity_range for t in tables.values() if t.sounding.sum() >= 2]
+    ranges = [t.velocity_range for t in tables.values() if t.sounds]
     lo = min(r[0] for r in ranges)
     hi = max(r[1] for r in ranges)
     # The quietest stroke a model predicts sits at the edge of silence: aim a little above it.
@@ -158,7 +133,7 @@ def _level_for(targets: np.ndarray, tables: dict[float, StrokeTable]) -> float:
     """The vacuum whose reachable range needs the least clipping; ties go to faster strokes."""
     best: tuple[float, float, float] | None = None
     for level, table in tables.items():
-        if table.sounding.sum() < 2:
+        if not table.sounds:
             continue
         lo, hi = table.velocity_range
         clip = float(np.sum(np.maximum(lo - targets, 0) + np.maximum(targets - hi, 0)))
@@ -170,6 +145,62 @@ def _level_for(targets: np.ndarray, tables: dict[float, StrokeTable]) -> float:
     return best[2]
 
 
+@dataclass(frozen=True)
+class _Prepared:
+    """One geometry's per-note choices that do not depend on the tempo, and its tempo limits."""
+
+    tables: dict[float, StrokeTable]
+    dynamics: DynamicsMap
+    targets: np.ndarray
+    times: NoteTimes  # at the written tempo
+    gap_s: np.ndarray  # move + vacuum change before each note (from the previous note)
+    feasibility: Feasibility
+
+    @property
+    def geometry(self) -> StrokeGeometry:
+        return next(iter(self.tables.values())).geometry
+
+
+class _Moves:
+    """Lateral move times between keys on a rig, cached per pair (a song reuses few pairs)."""
+
+    def __init__(self, rig: RigSpec) -> None:
+        self.rig = rig
+        self.cache: dict[tuple[int, int], float] = {}
+
+    def __call__(self, a: int, b: int) -> float:
+        key = (a, b)
+        if key not in self.cache:
+            self.cache[key] = key_change_s(a, b, self.rig)
+        return self.cache[key]
+
+
+def _prepare(notes: Sequence[Note], tables: dict[float, StrokeTable], settings: PlaySettings, rig: RigSpec,
+             dynamics: DynamicsMode, written_bpm: float, moves: _Moves) -> _Prepared:
+    velocities = np.array([n.velocity for n in notes], dtype=np.float64)
+    dmap = DynamicsMap.fit(velocities, reachable_range(tables), dynamics)
+    targets = dmap.apply(velocities)
+    budget = VACUUM_BUDGET_FACTOR * rig.settle_s.after_vacuum_change_s
+    phrase = np.asarray(phrases(notes, budget))
+    level_of = {int(k): _level_for(targets[phrase == k], tables) for k in np.unique(phrase)}
+    level = np.array([level_of[int(k)] for k in phrase], dtype=np.float64)
+    aim, fast = np.full(len(notes), np.nan), np.full(len(notes), np.nan)
+    for key, table in tables.items():
+        rows = level == key
+        if rows.any():
+            aim[rows] = table.inverse(targets[rows])
+            fast[rows] = np.maximum(table.fastest_within(targets[rows], settings.loudness_tolerance), aim[rows])
+    pitch = np.array([n.pitch for n in notes], dtype=np.int64)
+    onset = np.array([n.onset_s for n in notes], dtype=np.float64)
+    times = NoteTimes(onset, np.zeros(len(notes)), pitch, level, aim, fast)
+    gap = np.zeros(len(notes))
+    if len(notes) > 1:
+        gap[1:] = [0.0 if a == b else moves(int(a), int(b)) for a, b in zip(pitch[:-1], pitch[1:], strict=True)]
+        gap[1:] += np.where(level[1:] != level[:-1], budget, 0.0)
+    feasibility = tempo_limits(onset, need_s(times, tables, settings, gap), written_bpm)
+    return _Prepared(tables, dmap, targets, times, gap, feasibility)
+
+
 def plan_model(
     notes: Sequence[Note],
     predictor: StrokePredictor,
@@ -178,71 +209,125 @@ def plan_model(
     *,
     dynamics: DynamicsMode = "mapped",
     tables: dict[float, StrokeTable] | None = None,
+    tempo: TempoRequest | None = None,
+    written_bpm: float = 120.0,
 ) -> Plan:
-    """Plan a melody with the model's inverse (see the module doc).
+    """Plan a melody (on its written time axis at `written_bpm`) with the model's inverse.
 
-    `tables` fixes the stroke configuration (one geometry); otherwise every candidate geometry
-    of the settings is planned and the best kept.
+    `tables` fixes the stroke configuration (one geometry, its vacuum levels); otherwise every
+    candidate geometry of the settings is tabulated and the best kept (see the module doc).
     """
     if not notes:
         raise InputError("the song has no playable notes", "SONG")
+    request = tempo or TempoRequest()
     if tables is not None:
         candidates = [tables]
     else:
-        candidates = [t for g in geometries(settings, rig) if _sounds(t := stroke_tables(predictor, settings, rig, g))]
-    if not candidates or not all(_sounds(t) for t in candidates):
+        candidates = [stroke_tables(predictor, settings, rig, g) for g in geometries(settings, rig)]
+    candidates = [{k: t for k, t in c.items() if t.sounds} for c in candidates]
+    candidates = [c for c in candidates if c]
+    if not candidates:
         raise InputError("the model predicts no sounding stroke inside the finger's envelope", "--model")
-    plans = [_plan_with(notes, t, settings, rig, dynamics) for t in candidates]
-    return min(plans, key=_cost)
+    moves = _Moves(rig)
+    prepared = [_prepare(notes, c, settings, rig, dynamics, written_bpm, moves) for c in candidates]
+    wanted = written_bpm if request.mode != "bpm" or request.bpm is None else request.bpm
+
+    def rank(p: _Prepared) -> tuple[float, float, float]:
+        lo, hi = p.dynamics.target_range
+        return (-round(min(p.feasibility.fastest_bpm, wanted), 6), -round(hi - lo, 1), p.geometry.distance_m)
+
+    best = min(prepared, key=rank)
+    choice = choose_tempo(request, best.feasibility)
+    scheduled = _scheduled(notes, best, choice, settings, rig, moves)
+    frame = _frame(notes, best, choice, scheduled)
+    return Plan("model", frame, settings, best.dynamics, dict(best.tables), _warnings(frame, choice),
+                best.geometry, choice)
 
 
-def _cost(plan: Plan) -> tuple[float, ...]:
-    """Skipped notes, then notes forced louder, then lateness, then a narrower loudness range."""
-    frame = plan.notes
-    lo, hi = plan.dynamics.target_range if plan.dynamics is not None else (0.0, 0.0)
-    return (
-        float((frame["status"] == "skip").sum()),
-        float(frame["reason"].str.contains(LOUDER).sum()),
-        round(float(frame["late_s"].sum()), 3),
-        -round(hi - lo, 1),
-        plan.geometry.distance_m if plan.geometry is not None else 0.0,
-    )
-
-
-def _plan_with(notes: Sequence[Note], tables: dict[float, StrokeTable], settings: PlaySettings,
-               rig: RigSpec, dynamics: DynamicsMode) -> Plan:
-    """The plan for one stroke geometry (its tables, one per vacuum level)."""
-    dmap = DynamicsMap.fit([n.velocity for n in notes], reachable_range(tables), dynamics)
-    targets = dmap.apply([n.velocity for n in notes])
-    rest_s = VACUUM_BUDGET_FACTOR * rig.settle_s.after_vacuum_change_s
-    phrase = np.asarray(phrases(notes, rest_s))
-    level_of = {k: _level_for(targets[phrase == k], tables) for k in np.unique(phrase)}
+def _scheduled(notes: Sequence[Note], prepared: _Prepared, choice: TempoChoice, settings: PlaySettings,
+               rig: RigSpec, moves: _Moves) -> Scheduled:
+    """Schedule the notes at the chosen tempo (times stretched by its scale)."""
+    scale = choice.scale
+    times = prepared.times
     hold_cap = rig.envelope_for(settings.finger)["hold_s"].high
-    rows = []
-    for i, n in enumerate(notes):
-        table = tables[level_of[int(phrase[i])]]
-        speed = float(table.inverse(targets[i]))
-        lo, hi = table.velocity_range
-        reason = ""
-        if not lo - 1e-6 <= targets[i] <= hi + 1e-6:
-            reason = f"target {targets[i]:.1f} clipped to the reachable {lo:.1f}–{hi:.1f}"
-        rows.append(note_row(i, n, float(targets[i]), table, speed, hold_cap, reason))
-    frame = schedule(pd.DataFrame(rows, columns=list(PLAN_COLUMNS)), tables, settings, rig, hold_cap_s=hold_cap)
-    geometry = next(iter(tables.values())).geometry
-    return Plan("model", frame, settings, dmap, dict(tables), _warnings(frame), geometry)
+    durations = np.array([n.duration_s for n in notes], dtype=np.float64) * scale
+    wanted = np.zeros(len(notes))
+    for key, table in prepared.tables.items():
+        rows = times.level == key
+        wanted[rows] = np.minimum(table.arm_hold_for(times.aim_mps[rows], durations[rows]), hold_cap)
+    at_tempo = NoteTimes(times.onset_s * scale, wanted, times.pitch, times.level, times.aim_mps, times.fast_mps)
+    budget = VACUUM_BUDGET_FACTOR * rig.settle_s.after_vacuum_change_s
+    return schedule(at_tempo, prepared.tables, settings, moves, budget, allow_skip=True)
 
 
-def _warnings(frame: pd.DataFrame) -> tuple[str, ...]:
+def _frame(notes: Sequence[Note], prepared: _Prepared, choice: TempoChoice, s: Scheduled) -> pd.DataFrame:
+    """The plan table: the scheduler's choices with the model's predictions beside them."""
+    n = len(notes)
+    scale = choice.scale
+    times = prepared.times
+    skipped = (s.flags & SKIPPED) > 0
+    speed = np.where(skipped, times.aim_mps, s.speed_mps)
+    velocity, lead, hold0, slope, busy0 = (np.full(n, np.nan) for _ in range(5))
+    for key, table in prepared.tables.items():
+        rows = times.level == key
+        v = speed[rows]
+        velocity[rows], lead[rows] = table.predict_velocity(v), table.lead(v)
+        hold0[rows], slope[rows], busy0[rows] = table.hold0(v), table.slope(v), table.busy0(v)
+    onset = times.onset_s * scale
+    midi_hold = hold0 + slope * s.hold_s
+    g = prepared.geometry
+    frame = pd.DataFrame({
+        "note_index": np.arange(n), "pitch": times.pitch, "written_onset_s": times.onset_s,
+        "onset_s": onset, "offset_s": onset + np.array([x.duration_s for x in notes]) * scale,
+        "song_velocity": [x.velocity for x in notes], "target_velocity": prepared.targets,
+        "vacuum_kpa": times.level, "down_velocity_mps": speed, "up_velocity_mps": g.up_velocity_mps,
+        "acceleration_mps2": g.acceleration_mps2, "depth_m": g.depth_m, "distance_m": g.distance_m,
+        "approach_m": g.approach_m(speed), "hold_s": s.hold_s, "predicted_velocity": velocity, "predicted_lead_s": lead,
+        "predicted_midi_hold_s": midi_hold, "predicted_release_s": lead + midi_hold,
+        "move_s": s.move_s, "vacuum_change_s": s.vacuum_change_s,
+        "start_s": np.where(skipped, onset - lead, s.start_s), "busy_s": busy0 + s.hold_s,
+        "late_s": s.late_s, "tempo_limit_bpm": prepared.feasibility.tempo_limit_bpm,
+        "status": np.where(skipped, "skip", "play"), "reason": _reasons(prepared, s, velocity),
+    }, columns=list(PLAN_COLUMNS))
+    return frame
+
+
+def _reasons(prepared: _Prepared, s: Scheduled, velocity: np.ndarray) -> list[str]:
+    """Why a note is clipped, faster, louder, late or skipped (empty when played as planned)."""
     out = []
+    for i, (flag, target) in enumerate(zip(s.flags.tolist(), prepared.targets.tolist(), strict=True)):
+        parts = []
+        table = prepared.tables[float(prepared.times.level[i])]
+        t_lo, t_hi = table.velocity_range
+        if not t_lo - CLIP_TOLERANCE <= target <= t_hi + CLIP_TOLERANCE:
+            parts.append(f"target {target:.1f} clipped to the reachable {t_lo:.1f}–{t_hi:.1f}")
+        if flag & SKIPPED:
+            parts.append("no time to release and re-strike: the arm is not free when this note's "
+                         f"motion must start (its limit is {prepared.feasibility.tempo_limit_bpm[i]:.3g} bpm)")
+        elif flag & LOUDER:
+            parts.append(f"{LOUDER_TEXT} ({velocity[i]:.1f} for {target:.1f})")
+        elif flag & FASTER:
+            parts.append(f"a faster stroke within the loudness tolerance ({velocity[i]:.1f} for {target:.1f})")
+        if flag & LATE and not flag & SKIPPED:
+            parts.append(f"late by {s.late_s[i] * 1e3:.0f} ms")
+        out.append("; ".join(parts))
+    return out
+
+
+def _warnings(frame: pd.DataFrame, choice: TempoChoice) -> tuple[str, ...]:
+    out = []
+    message = choice.message()
+    if message:
+        out.append(message)
     skipped = frame[frame["status"] == "skip"]
     if len(skipped):
         out.append(
             f"{len(skipped)} of {len(frame)} note(s) cannot be played in time and are skipped "
             f"(first: note {int(skipped.iloc[0].note_index)}: {skipped.iloc[0].reason})"
         )
-    louder = int(frame["reason"].str.contains(LOUDER).sum())
+    louder = int(frame["reason"].str.contains(LOUDER_TEXT).sum())
     if louder:
-        out.append(f"{louder} note(s) are played {LOUDER} (a faster stroke sounds sooner)")
+        out.append(f"{louder} note(s) are played {LOUDER_TEXT} (a faster stroke sounds sooner)")
     late = int((frame["late_s"] > 0).sum())
     if late:
         out.append(f"{late} note(s) start up to {frame['late_s'].max() * 1e3:.0f} ms late")

@@ -1,28 +1,64 @@
-"""`pianobot play`: song file → melody → plan → rig → performance.mid + piano roll + score."""
+"""`pianobot play`: song → melody → (warm-up) → plan at a tempo the finger keeps → rig → score.
+
+The default is what a new user types (`pianobot play song.mid`): the built-in sim rig with a
+player's moves between keys, the published physics model as the starting point, a warm-up on
+the piano that fits the note-on delay and loudness maps (`warmup`), and the fastest tempo at
+which every note can be struck in time, never above the written one (`tempo`). A dry run plans
+with the starting model only (nothing moves, so nothing is learned) and says so.
+"""
 
 from __future__ import annotations
 
 import hashlib
 import json
+import os
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
+import pandas as pd
+
 from pianobot.analysis.predictors import PhysicsPredictor, StrokePredictor, load_predictor
 from pianobot.errors import InputError
-from pianobot.io.midifile import Melody, Song, melody, read_song, write_performance
+from pianobot.io.midifile import Melody, Note, Song, melody, read_song, write_performance
+from pianobot.physics.model import KeystrokeModel
 from pianobot.play.adapt import OnlineAdapter
 from pianobot.play.dynamics import DYNAMICS_MODES, DynamicsMode
-from pianobot.play.figure import piano_roll
+from pianobot.play.figure import piano_roll, warmup_figure
 from pianobot.play.naive import plan_naive
-from pianobot.play.perform import Performance, perform
+from pianobot.play.perform import Performance, Performer, trial_id_for
 from pianobot.play.plan import Plan, plan_model
+from pianobot.play.report import write_play_report
 from pianobot.play.score import Score, score_performance
-from pianobot.play.settings import PlaySettings
+from pianobot.play.settings import Finger, PlaySettings
+from pianobot.play.strokes import stroke_tables
+from pianobot.play.tempo import TempoRequest
+from pianobot.play.warmup import (
+    WarmUp,
+    design_warmup,
+    estimated_lab_time_s,
+    fit_warmup,
+    survey_size,
+)
+from pianobot.progress import NO_PROGRESS, Progress
 from pianobot.spec import RigSpec, load_rig
+from pianobot.spec.rig import Approach, Travel
 
 PlannerName = Literal["model", "naive"]
 PLANNERS: tuple[str, ...] = ("model", "naive")
+FINGERS: tuple[str, ...] = ("soft", "rigid")
+# A player's moves between keys (the built-in sim rig's travel settings are a sweep's: slow, with
+# a 50 mm lift): lift just clear of the black keys (~12 mm above the white ones) and move
+# briskly, half a UR5's top speed so the finger stays steady. One white key over: ~0.37 s.
+PLAYER_TRAVEL = Travel(velocity_mps=0.5, acceleration_mps2=4.0, lift_m=0.012)
+# A player's two-segment press: the fast approach at the travel moves' speed, stopping 1 mm above
+# the key (the sweeps' default keeps 5 mm and 1.5 s of the spec's motion before contact, to leave
+# the keystroke exactly as specified; a player instead warms up on the very strokes it plays).
+PLAYER_APPROACH = Approach(velocity_mps=0.5, acceleration_mps2=4.0, clearance_m=0.001, settle_s=0.0)
+# A rigid finger's stiffness for the starting model (the published model is the soft finger's):
+# stiff enough that the arm's travel reaches the key almost one to one.
+RIGID_FINGER_K1_NPM = 5000.0
 
 
 @dataclass(frozen=True)
@@ -37,6 +73,8 @@ class PlayResult:
     warnings: tuple[str, ...]
     files: dict[str, str] = field(default_factory=dict)
     model: str = "published physics model"
+    warmup: WarmUp | None = None
+    prior_plan: Plan | None = None  # the plan before the warm-up (its tempo is the dry run's)
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON `play --json` prints: the score keys at the top level."""
@@ -47,15 +85,19 @@ class PlayResult:
         out.update({
             "planner": self.plan.planner,
             "model": self.model,
+            "tempo": plan["tempo"],
             "dynamics": plan["dynamics"],
             "mapping": None if plan["dynamics"] is None else plan["dynamics"]["text"],
             "plan": plan,
+            "warmup": None if self.warmup is None else self.warmup.summary(),
             "song": {"source": self.song.source, "tempo_bpm": self.song.tempo_bpm,
                      "notes": len(self.song.notes), "melody_notes": len(self.melody.notes),
                      "unplayable": len(self.song.unplayable)},
             "warnings": list(self.warnings),
             "files": self.files,
         })
+        if self.prior_plan is not None and self.prior_plan.tempo is not None:
+            out["tempo_before_warmup"] = self.prior_plan.tempo.to_dict()
         if self.performance is not None:
             p = self.performance
             out.update({"run_id": p.run_id, "status": p.status, "reason": p.reason,
@@ -67,13 +109,22 @@ class PlayResult:
 
 
 def play_rig(rig: str | Path | RigSpec) -> RigSpec:
-    """The rig to play on: "sim" is the built-in sim rig exactly as documented, else a rig file.
+    """The rig to play on: "sim" (the built-in sim rig) or a rig file, with a player's moves.
 
-    Nothing is overridden: the built-in rig moves between keys like a sweep (slowly, with a
-    50 mm lift); `experiments/rigs/sim-play.yaml` holds the travel settings of a player.
+    The built-in travel and approach settings are a sweep's (slow, with a 50 mm lift between
+    keys; fast approaches that keep 5 mm and 1.5 s of the spec's motion). A simulated rig whose
+    file says nothing about `travel:` or `approach:` (the built-in one included) plays with a
+    player's moves instead (`PLAYER_TRAVEL`, `PLAYER_APPROACH`); sweeps keep theirs. Settings a
+    rig file writes, and every real rig's, are used as written: those are the lab's.
     """
-    if isinstance(rig, RigSpec):
-        return rig
+    spec = rig if isinstance(rig, RigSpec) else _load_rig(rig)
+    if spec.kind == "sim":
+        player = {"travel": PLAYER_TRAVEL, "approach": PLAYER_APPROACH}
+        spec = spec.model_copy(update={k: v for k, v in player.items() if k not in spec.model_fields_set})
+    return spec
+
+
+def _load_rig(rig: str | Path) -> RigSpec:
     if str(rig) == "sim":
         return load_rig("sim")
     if not Path(rig).is_file():
@@ -100,20 +151,28 @@ def play_song(
     planner: str = "model",
     adapt: bool = False,
     dry_run: bool = False,
+    tempo: str | TempoRequest | None = None,
     tempo_scale: float = 1.0,
     transpose: int = 0,
     track: int | None = None,
     dynamics: str = "mapped",
     rig: str | Path | RigSpec = "sim",
+    finger: str | None = None,
+    warmup: int | None = None,
     seed: int | None = None,
     plot: Path | None = None,
     settings: PlaySettings | None = None,
     world: Any | None = None,
+    progress: Progress = NO_PROGRESS,
+    on_warning: Callable[[str], None] | None = None,
 ) -> PlayResult:
-    """Plan (and unless `dry_run`, play and score) a song; see `pianobot play --help`.
+    """Plan (and unless `dry_run`, warm up, play and score) a song; see `pianobot play --help`.
 
     `model` is a model/predictor file, a StrokePredictor, or None for the published physics
-    model. `world` replaces the sim rig's physics World (tests).
+    model (the warm-up's starting point). `tempo`: None (auto unless `tempo_scale` is given),
+    "auto", "written" or bpm. `warmup`: keystrokes per vacuum level (None: the settings', 0: none).
+    `world` replaces the sim rig's physics World (tests). `on_warning` hears what the rig found when
+    it was opened (e.g. the UR's speed slider below 100 %), before any motion.
     """
     if planner not in PLANNERS:
         raise InputError(f"planner should be one of {', '.join(PLANNERS)}, got {planner!r}", "--planner")
@@ -121,60 +180,145 @@ def play_song(
         raise InputError(f"dynamics should be one of {', '.join(DYNAMICS_MODES)}, got {dynamics!r}", "--dynamics")
     if adapt and planner == "naive":
         raise InputError("--adapt corrects the model planner; the naive planner has no model", "--adapt")
+    if finger is not None and finger not in FINGERS:
+        raise InputError(f"finger should be one of {', '.join(FINGERS)}, got {finger!r}", "--finger")
+    if warmup is not None and not 0 <= warmup <= 200:
+        raise InputError(f"warm-up keystrokes should be in [0, 200], got {warmup}", "--warmup")
     settings = settings or PlaySettings()
+    if finger is not None:
+        settings = settings.model_copy(update={"finger": finger})
+    strokes = settings.warmup_strokes if warmup is None else warmup
+    request = tempo if isinstance(tempo, TempoRequest) else TempoRequest.parse(tempo)
+    if tempo is None and tempo_scale != 1.0:
+        request = TempoRequest("written", None, True)  # --tempo-scale alone asks for that tempo
     rig_spec = play_rig(rig)
     song, line = load_song(Path(song_path), tempo_scale=tempo_scale, transpose=transpose, track=track,
                            rule=settings.melody_rule)
+    mode: DynamicsMode = "absolute" if dynamics == "absolute" else "mapped"
     if planner == "naive":
-        plan, label = plan_naive(line.notes, settings, rig_spec), "none (naive: 0.001·v m/s)"
+        plan = plan_naive(line.notes, settings, rig_spec, tempo=request, written_bpm=song.tempo_bpm)
+        label, strokes = "none (naive: 0.001·v m/s)", 0
     else:
-        predictor, label = _predictor(model)
-        mode: DynamicsMode = "absolute" if dynamics == "absolute" else "mapped"
-        plan = plan_model(line.notes, predictor, settings, rig_spec, dynamics=mode)
-    warnings = (*song.warnings, *line.warnings, *plan.warnings)
+        predictor, label = starting_model(model, settings.finger)
+        plan = plan_model(line.notes, predictor, settings, rig_spec, dynamics=mode, tempo=request,
+                          written_bpm=song.tempo_bpm)
+    prior = plan
     if dry_run:
-        return PlayResult(song, line, plan, None, None, warnings, {}, label)
+        notes = list(plan.warnings)
+        if strokes:
+            notes.append(f"planned with the {label} (a dry run moves nothing); before playing, a warm-up of "
+                         f"{strokes} keystroke(s) per vacuum level fits this piano and the plan follows it")
+        return PlayResult(song, line, plan, None, None, (*song.warnings, *line.warnings, *notes), {}, label,
+                          prior_plan=prior)
     song_key = hashlib.sha256(Path(song_path).read_bytes()).hexdigest()[:16]
+    design: list[Any] = []
+    focus: list[Any] = []
+    levels: list[float] = []
+    if strokes and plan.geometry is not None:
+        levels = sorted({float(v) for v in plan.played["vacuum_kpa"]}) or sorted(plan.tables)
+        design = design_warmup([n.pitch for n in line.notes], plan.geometry, levels, settings, rig_spec,
+                               strokes_per_level=strokes, song_key=song_key)
     meta = {
         "song": {"path": str(Path(song_path).resolve()), "sha256": song_key, "tempo_scale": tempo_scale,
-                 "transpose": transpose, "track": track},
-        "planner": planner, "model": label, "adapt": adapt,
-        "settings": settings.model_dump(mode="json"), "plan_summary": plan.summary(),
-        "warnings": list(warnings),
+                 "transpose": transpose, "track": track, "written_bpm": song.tempo_bpm},
+        "planner": planner, "model": label, "adapt": adapt, "finger": settings.finger,
+        "settings": settings.model_dump(mode="json"), "tempo_request": request.describe(),
+        "plan_summary_before_warmup": plan.summary(),
+        "warmup_planned": {"strokes": len(design),
+                           "estimated_lab_time_s": estimated_lab_time_s(design, rig_spec, strokes)},
     }
+    initial = _initial_plan(design, plan, song_key)
     adapter = OnlineAdapter() if adapt else None
     name = f"play-{Path(song_path).stem}-{planner}{'-adapt' if adapt else ''}"
-    performance = perform(plan, rig_spec, data_dir=data_dir, name=name, song_key=song_key, meta=meta,
-                          seed=seed, world=world, adapter=adapter)
-    score = score_performance(line.notes, performance.notes, plan.notes["target_velocity"].to_numpy(float))
-    files = _write_outputs(performance, line, score, plan, plot, label)
-    return PlayResult(song, line, plan, performance, score, warnings, files, label)
+    warm: WarmUp | None = None
+    with Performer(rig_spec, data_dir=data_dir, name=name, song_key=song_key, meta=meta, plan=initial,
+                   seed=seed, world=world, progress=progress, on_warning=on_warning) as performer:
+        if design:
+            survey, survey_s = performer.warm_up(design)
+            focus = design_warmup([n.pitch for n in line.notes], plan.geometry, levels, settings,  # type: ignore[arg-type]
+                                  rig_spec, strokes_per_level=strokes, song_key=song_key, survey=survey)
+            mapped, mapped_s = performer.warm_up(focus) if focus else (survey.iloc[:0], 0.0)
+            rows = pd.concat([survey, mapped], ignore_index=True)
+            warm = fit_warmup(rows, plan.geometry, lab_time_s=survey_s + mapped_s, seed=performer.seed,  # type: ignore[arg-type]
+                              survey=survey_size(strokes))
+            tables = stroke_tables(warm.predictor, settings, rig_spec, warm.geometry, levels=warm.levels_kpa,
+                                   speed_ranges=warm.speed_ranges_mps)
+            plan = plan_model(line.notes, warm.predictor, settings, rig_spec, dynamics=mode, tables=tables,
+                              tempo=request, written_bpm=song.tempo_bpm)
+        song_plan = plan.notes.assign(trial_id=[trial_id_for(song_key, int(i)) for i in plan.notes["note_index"]])
+        _write_parquet(song_plan, performer.run_path / "song_plan.parquet")
+        if warm is not None:
+            performer.replan(_initial_plan(design + focus, plan, song_key))
+        performer.writer.update_meta(plan_summary=plan.summary(), warnings=list(plan.warnings),
+                                     warmup=None if warm is None else warm.summary())
+        performance = performer.play(plan, adapter)
+    assert plan.tempo is not None
+    target = _at_tempo(line.notes, plan.tempo.scale)
+    score = score_performance(target, performance.notes, plan.notes["target_velocity"].to_numpy(float),
+                              tempo_bpm=plan.tempo.played_bpm, skipped=list(plan.notes["status"] == "skip"))
+    files = _write_outputs(performance, target, score, plan, plot, label, warm)
+    warnings = (*song.warnings, *line.warnings, *plan.warnings)
+    return PlayResult(song, line, plan, performance, score, warnings, files, label, warm, prior)
 
 
-def _predictor(model: Path | StrokePredictor | None) -> tuple[StrokePredictor, str]:
+def starting_model(model: Path | StrokePredictor | None, finger: Finger) -> tuple[StrokePredictor, str]:
+    """The model the plan starts from and its label: a file, a predictor, or the published
+    physics model (with a rigid finger's stiffness for the rigid finger)."""
     if model is None:
+        if finger == "rigid":
+            study = KeystrokeModel.study()
+            msd = study.msd.replace(k1_a_npm=RIGID_FINGER_K1_NPM, k1_b_npm_per_kpa=0.0)
+            return PhysicsPredictor(study.replace(msd=msd)), "published physics model with a rigid finger"
         return PhysicsPredictor.published(), "published physics model"
     if isinstance(model, str | Path):
         return load_predictor(Path(model)), str(model)
     return model, type(model).__name__
 
 
-def _write_outputs(performance: Performance, line: Melody, score: Score, plan: Plan,
-                   plot: Path | None, label: str) -> dict[str, str]:
-    """performance.mid, the piano roll, score.json and the per-note table beside the run."""
+def _at_tempo(notes: tuple[Note, ...], scale: float) -> list[Note]:
+    """The melody on the song clock of the tempo played (times × scale)."""
+    return [Note(n.pitch, n.onset_s * scale, n.offset_s * scale, n.velocity, n.track, n.channel) for n in notes]
+
+
+def _initial_plan(design: list[Any], plan: Plan, song_key: str) -> pd.DataFrame:
+    """plan.parquet: the warm-up keystrokes and the song's notes (the plan before the warm-up
+    when the run is created; after the warm-up, its strokes and the song as it will be played)."""
+    warm = pd.DataFrame([{"trial_id": t.trial_id, "index": t.index, "phase": "warmup", "pitch": t.note,
+                          **t.parameters()} for t in design])
+    song = plan.notes.assign(trial_id=[trial_id_for(song_key, int(i)) for i in plan.notes["note_index"]],
+                             phase="song")
+    return pd.concat([warm, song], ignore_index=True) if len(warm) else song
+
+
+def _write_parquet(frame: pd.DataFrame, path: Path) -> None:
+    """Write atomically: a reader sees the whole file or none."""
+    temp = path.with_name(f".{path.name}.tmp")
+    frame.to_parquet(temp, index=False)
+    os.replace(temp, path)
+
+
+def _write_outputs(performance: Performance, target: list[Note], score: Score, plan: Plan,
+                   plot: Path | None, label: str, warm: WarmUp | None) -> dict[str, str]:
+    """performance.mid, the piano roll, the warm-up figure, report.html, score.json and the per-note table."""
     root = performance.run_path
     files = {"performance_mid": str(write_performance(root / "performance.mid", performance.notes))}
-    title = f"{plan.planner} planner: F1 {score.f1:.2f}, onset RMS {score.onset_rms_ms:.0f} ms, velocity MAE {score.velocity_mae:.1f}"
-    files["piano_roll"] = str(piano_roll(line.notes, performance.notes, root / "pianoroll.png", title=title))
+    tempo = f" at {plan.tempo.played_bpm:.4g} bpm" if plan.tempo is not None else ""
+    title = (f"{plan.planner} planner{tempo}: F1 {score.f1:.2f}, onset RMS {score.onset_rms_ms:.0f} ms, "
+             f"velocity MAE {score.velocity_mae:.1f}")
+    status = list(score.per_note["status"])
+    files["piano_roll"] = str(piano_roll(target, performance.notes, root / "pianoroll.png", title=title, status=status))
     if plot is not None:
-        files["plot"] = str(piano_roll(line.notes, performance.notes, Path(plot), title=title))
+        files["plot"] = str(piano_roll(target, performance.notes, Path(plot), title=title, status=status))
+    if warm is not None:
+        files["warmup_plot"] = str(warmup_figure(warm.trials, warm.predictor, root / "warmup.png"))
     score.per_note.to_parquet(root / "score_notes.parquet", index=False)
     if performance.adaptation:
-        import pandas as pd
-
         pd.DataFrame(performance.adaptation).to_parquet(root / "adaptation.parquet", index=False)
         files["adaptation"] = str(root / "adaptation.parquet")
-    payload = {**score.to_dict(), "planner": plan.planner, "model": label, "plan": plan.summary()}
+    files["report"] = str(write_play_report(root / "report.html", performance=performance, plan=plan, score=score,
+                                            target=target, warmup=warm, model=label, title=title))
+    payload = {**score.to_dict(), "planner": plan.planner, "model": label, "plan": plan.summary(),
+               "warmup": None if warm is None else warm.summary(), "per_note": score.per_note_records()}
     (root / "score.json").write_text(json.dumps(payload, indent=2, default=_json_default) + "\n", encoding="utf-8")
     files["score"] = str(root / "score.json")
     return files

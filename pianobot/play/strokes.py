@@ -3,12 +3,14 @@
 For one stroke configuration (vacuum and a `StrokeGeometry`: hover distance, depth,
 acceleration, up velocity) the planner asks the model once for on-velocity, silence, lead
 (motion start → note-on) and MIDI hold at a grid of down velocities and two holds, then answers
-every note by interpolation. The loudness curve is made monotone (running maximum over sounding
-speeds) so the inverse is single-valued and picks the slowest speed that reaches a loudness.
+every note by interpolation (vectorised: a 20,000-note song costs a few array operations). The
+loudness curve is made monotone (running maximum over sounding speeds) so the inverse is
+single-valued and picks the slowest speed that reaches a loudness.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -16,37 +18,15 @@ import numpy.typing as npt
 import pandas as pd
 
 from pianobot.analysis.predictors import StrokePredictor
-from pianobot.physics.trajectory import Press, press_duration_s
+from pianobot.play.geometry import StrokeGeometry, envelope_limits, fastest_geometry, vacuum_levels
 from pianobot.play.settings import PlaySettings
+from pianobot.spec import RigSpec
 
 FloatArray = npt.NDArray[np.float64]
 
 # When the model's hold does not respond to the commanded hold (a learned model trained at one
 # hold), holding the arm down longer keeps the key down just as much longer.
 FALLBACK_HOLD_SLOPE = 1.0
-
-
-@dataclass(frozen=True)
-class StrokeGeometry:
-    """The part of a press fixed for a song: hover distance, depth, acceleration, up velocity.
-
-    Per note only the down velocity (loudness) and the hold (length) change. A short hover and
-    a high acceleration and up velocity make the press cycle short, which a fast tempo needs.
-    """
-
-    distance_m: float
-    depth_m: float
-    acceleration_mps2: float
-    up_velocity_mps: float
-
-    def press(self, down_velocity_mps: float, hold_s: float) -> Press:
-        """The press of one note with this geometry."""
-        return Press(self.distance_m, self.depth_m, float(down_velocity_mps), self.up_velocity_mps,
-                     self.acceleration_mps2, float(hold_s))
-
-    def to_dict(self) -> dict[str, float]:
-        return {"distance_m": self.distance_m, "depth_m": self.depth_m,
-                "acceleration_mps2": self.acceleration_mps2, "up_velocity_mps": self.up_velocity_mps}
 
 
 @dataclass(frozen=True)
@@ -61,12 +41,16 @@ class StrokeTable:
     lead_s: FloatArray
     hold0_s: FloatArray  # MIDI hold at zero arm hold
     hold_slope: FloatArray  # d(MIDI hold)/d(arm hold)
+    busy0_s: FloatArray  # motion start → free for the next move at zero hold (press + recovery)
 
     @classmethod
     def build(cls, predictor: StrokePredictor, vacuum_kpa: float, geometry: StrokeGeometry,
-              settings: PlaySettings, max_down_velocity_mps: float) -> StrokeTable:
-        """Ask `predictor` for the outcomes at `settings.speeds` down velocities up to the cap."""
-        lo = min(settings.min_down_velocity_mps, max_down_velocity_mps)
+              settings: PlaySettings, max_down_velocity_mps: float,
+              min_down_velocity_mps: float | None = None) -> StrokeTable:
+        """Ask `predictor` for the outcomes at `settings.speeds` down velocities up to the cap
+        (from `min_down_velocity_mps`, default the settings' slowest)."""
+        floor = settings.min_down_velocity_mps if min_down_velocity_mps is None else min_down_velocity_mps
+        lo = min(floor, max_down_velocity_mps)
         speeds = np.linspace(lo, max_down_velocity_mps, settings.speeds)
         h1 = settings.tabulate_hold_s
         frame = pd.DataFrame({
@@ -84,12 +68,18 @@ class StrokeTable:
         hold = out["midi_hold_s"].to_numpy(float)
         slope = (hold[n:] - hold[:n]) / h1
         slope = np.where(np.isfinite(slope) & (slope > 0.2) & (slope < 3.0), slope, FALLBACK_HOLD_SLOPE)
-        velocity = _monotone(on)
-        return cls(float(vacuum_kpa), geometry, settings, speeds, velocity, _filled(lead), _filled(hold[:n]), slope)
+        busy = geometry.durations_s(speeds) + settings.recovery_s
+        return cls(float(vacuum_kpa), geometry, settings, speeds, _monotone(on), _filled(lead),
+                   _filled(hold[:n]), slope, busy)
 
     @property
     def sounding(self) -> npt.NDArray[np.bool_]:
         return np.isfinite(self.velocity)
+
+    @property
+    def sounds(self) -> bool:
+        """At least two sounding speeds: a loudness range to invert."""
+        return int(self.sounding.sum()) >= 2
 
     @property
     def velocity_range(self) -> tuple[float, float]:
@@ -107,6 +97,21 @@ class StrokeTable:
         keep = np.r_[True, np.diff(v) > 1e-9]
         return np.asarray(np.interp(t, v[keep], s[keep]), dtype=np.float64)
 
+    def fastest_within(self, target: npt.ArrayLike, tolerance: float) -> FloatArray:
+        """The fastest down velocity predicted at most `tolerance` louder than each target.
+
+        Louder is faster here: the loudness curve rises with speed. A target above the
+        loudest stroke gets the fastest speed that still sounds loudest.
+        """
+        t = np.asarray(target, dtype=np.float64)
+        ok = self.sounding
+        if ok.sum() < 2:
+            return np.full(t.shape, np.nan)
+        v, s = self.velocity[ok], self.speeds_mps[ok]
+        # The last speed reaching each loudness: np.interp over the reversed flat stretches.
+        keep = np.r_[np.diff(v) > 1e-9, True]
+        return np.asarray(np.interp(t + tolerance, v[keep], s[keep]), dtype=np.float64)
+
     def predict_velocity(self, speed_mps: npt.ArrayLike) -> FloatArray:
         """Predicted on-velocity at down velocities (the monotone envelope)."""
         ok = self.sounding
@@ -115,17 +120,26 @@ class StrokeTable:
     def lead(self, speed_mps: npt.ArrayLike) -> FloatArray:
         return np.asarray(np.interp(_f(speed_mps), self.speeds_mps, self.lead_s), dtype=np.float64)
 
+    def hold0(self, speed_mps: npt.ArrayLike) -> FloatArray:
+        """Predicted MIDI hold at zero arm hold."""
+        return np.asarray(np.interp(_f(speed_mps), self.speeds_mps, self.hold0_s), dtype=np.float64)
+
+    def slope(self, speed_mps: npt.ArrayLike) -> FloatArray:
+        """d(MIDI hold)/d(arm hold) at down velocities."""
+        return np.asarray(np.interp(_f(speed_mps), self.speeds_mps, self.hold_slope), dtype=np.float64)
+
+    def busy0(self, speed_mps: npt.ArrayLike) -> FloatArray:
+        """Motion start → free for the next move, at zero hold (a hold adds itself)."""
+        return np.asarray(np.interp(_f(speed_mps), self.speeds_mps, self.busy0_s), dtype=np.float64)
+
     def midi_hold(self, speed_mps: npt.ArrayLike, hold_s: npt.ArrayLike) -> FloatArray:
         """Predicted MIDI hold (note-on → note-off) for a down velocity and an arm hold."""
-        h0 = np.interp(_f(speed_mps), self.speeds_mps, self.hold0_s)
-        slope = np.interp(_f(speed_mps), self.speeds_mps, self.hold_slope)
-        return np.asarray(h0 + slope * np.asarray(hold_s, dtype=np.float64), dtype=np.float64)
+        return np.asarray(self.hold0(speed_mps) + self.slope(speed_mps) * _f(hold_s), dtype=np.float64)
 
     def arm_hold_for(self, speed_mps: npt.ArrayLike, midi_hold_s: npt.ArrayLike) -> FloatArray:
         """Arm hold so the predicted MIDI hold equals the wanted one (≥ 0, uncapped)."""
-        h0 = np.interp(_f(speed_mps), self.speeds_mps, self.hold0_s)
-        slope = np.interp(_f(speed_mps), self.speeds_mps, self.hold_slope)
-        return np.asarray(np.maximum(0.0, (np.asarray(midi_hold_s) - h0) / slope), dtype=np.float64)
+        wanted = (_f(midi_hold_s) - self.hold0(speed_mps)) / self.slope(speed_mps)
+        return np.asarray(np.maximum(0.0, wanted), dtype=np.float64)
 
     def release_s(self, speed_mps: float, hold_s: float) -> float:
         """Predicted motion start → note-off: the key is back above its re-trigger depth then."""
@@ -135,16 +149,10 @@ class StrokeTable:
         """Motion start → the next press or move may start: the press itself plus the recovery."""
         return busy_s(self.geometry, self.settings, speed_mps, hold_s)
 
-    def fastest_lead_for(self, max_lead_s: float, at_least_mps: float) -> float | None:
-        """Slowest down velocity ≥ `at_least_mps` whose predicted lead is at most `max_lead_s`."""
-        grid = np.linspace(max(at_least_mps, float(self.speeds_mps[0])), float(self.speeds_mps[-1]), 4 * self.speeds_mps.size)
-        ok = self.lead(grid) <= max_lead_s
-        return float(grid[np.argmax(ok)]) if ok.any() else None
-
 
 def busy_s(geometry: StrokeGeometry, settings: PlaySettings, speed_mps: float, hold_s: float) -> float:
     """Motion start → the arm is back up and recovered: the press itself plus `recovery_s`."""
-    return press_duration_s(geometry.press(speed_mps, hold_s)) + settings.recovery_s
+    return float(geometry.durations_s(np.array([speed_mps]), hold_s)[0]) + settings.recovery_s
 
 
 def _f(values: npt.ArrayLike) -> FloatArray:
@@ -154,11 +162,9 @@ def _f(values: npt.ArrayLike) -> FloatArray:
 def _monotone(velocity: FloatArray) -> FloatArray:
     """Running maximum over the sounding part; NaN stays NaN (silent speeds)."""
     out = np.full(velocity.shape, np.nan)
-    best = -np.inf
-    for i, v in enumerate(velocity):
-        if np.isfinite(v):
-            best = max(best, float(v))
-            out[i] = best
+    ok = np.isfinite(velocity)
+    if ok.any():
+        out[ok] = np.maximum.accumulate(velocity[ok])
     return out
 
 
@@ -169,3 +175,21 @@ def _filled(values: FloatArray) -> FloatArray:
         return np.full(values.shape, np.nan)
     idx = np.arange(values.size)
     return np.asarray(np.interp(idx, idx[ok], values[ok]), dtype=np.float64)
+
+
+def stroke_tables(predictor: StrokePredictor, settings: PlaySettings, rig: RigSpec,
+                  geometry: StrokeGeometry | None = None, levels: Sequence[float] | None = None,
+                  speed_ranges: dict[float, tuple[float, float]] | None = None) -> dict[float, StrokeTable]:
+    """One table per allowed vacuum level (or `levels`) for a geometry (default: the fastest).
+
+    `speed_ranges` per level limits the down velocities to where the model is trusted (a
+    warm-up's mapped range), inside the envelope.
+    """
+    geometry = geometry or fastest_geometry(settings, rig)
+    chosen = vacuum_levels(settings, rig) if levels is None else [float(p) for p in levels]
+    cap = envelope_limits(settings, rig).get("down_velocity_mps", (0.0, 0.06))[1]
+    out = {}
+    for p in chosen:
+        lo, hi = (speed_ranges or {}).get(p, (settings.min_down_velocity_mps, cap))
+        out[p] = StrokeTable.build(predictor, p, geometry, settings, min(hi, cap), max(lo, 1e-4))
+    return out

@@ -7,7 +7,7 @@ Each figure is titled with what it shows and labelled with units (mm, mm/s), lik
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Protocol
 
@@ -19,7 +19,8 @@ from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
 
 from pianobot.errors import InputError
-from pianobot.physics.msd import MSDParams, frequency_response
+from pianobot.physics.linear import frequency_response
+from pianobot.physics.msd import MSDParams
 from pianobot.reports.style import (
     FULL_WIDTH_IN,
     label_axes,
@@ -144,6 +145,27 @@ def plot_mocap_run(run_id: str, data_dir: Path, path: Path) -> Path:
     if "source" in samples:
         samples = samples[samples["source"] == "mocap"]
     return save_png(mocap_take(samples, run.trials), path)
+
+
+class _Estimate(Protocol):
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def value(self) -> float: ...
+
+    @property
+    def ci95(self) -> tuple[float, float]: ...
+
+
+def k1_by_level(estimates: Iterable[_Estimate]) -> dict[float, tuple[float, float, float]]:
+    """The per-level finger stiffness estimates (`k1_npm@-40kPa`) as {kPa: (k1, low, high)}."""
+    found = {}
+    for e in estimates:
+        base, _, where = e.name.partition("@")
+        if base == "k1_npm" and where.endswith("kPa"):
+            found[float(where.removesuffix("kPa"))] = (e.value, *e.ci95)
+    return found
 
 
 def identified_model(params: MSDParams, k1_by_level: Mapping[float, tuple[float, float, float]],

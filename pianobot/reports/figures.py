@@ -14,7 +14,8 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 
 from pianobot.analysis.segment import STAGE_NAMES
-from pianobot.physics.msd import MSDParams, frequency_response
+from pianobot.physics.linear import frequency_response
+from pianobot.physics.msd import MSDParams
 from pianobot.reports.stage_residuals import StageResiduals, stage_edges
 from pianobot.reports.style import (
     FULL_WIDTH_IN,

@@ -20,7 +20,8 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from pianobot.analysis.plausibility import local_resonance_hz
-from pianobot.physics.msd import LinearParams, frequency_response, peak_response
+from pianobot.physics.linear import frequency_response, peak_response
+from pianobot.physics.msd import LinearParams
 
 #: Width of a report figure that spans the page, inches (pages are about 1,000 px at 100 dpi).
 FULL_WIDTH_IN = 8.0

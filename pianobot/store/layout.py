@@ -1,4 +1,4 @@
-"""Where a run's files live, how run ids are made and found, and atomic file writes.
+"""Where a run's files live, how run ids are made and found, and how its Parquet files are written.
 
     <data>/runs/<run_id>/
       run.json  plan.parquet  journal.jsonl  parts/{trials,samples,midi}-NNNNNN.parquet
@@ -24,6 +24,12 @@ from typing import Any
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+# The atomic writers live in a bottom-layer module (physics writes model files with them too);
+# the store's modules keep importing them from here.
+from pianobot.atomic_files import fsync_dir as fsync_dir
+from pianobot.atomic_files import temp_name as _temp_name
+from pianobot.atomic_files import write_bytes_atomic as write_bytes_atomic
+from pianobot.atomic_files import write_json_atomic as write_json_atomic
 from pianobot.errors import InputError
 
 RUNS_FOLDER = "runs"
@@ -149,26 +155,6 @@ def glob_escape(text: str) -> str:
     return re.sub(r"([\[\]*?])", r"[\1]", text)
 
 
-def fsync_dir(path: Path) -> None:
-    """Make a rename or a new file in `path` durable (POSIX; a no-op where unsupported)."""
-    try:
-        fd = os.open(path, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
-
-
-def _temp_name(path: Path) -> Path:
-    # A dot-prefixed name in the same folder: same file system (so os.replace is atomic) and
-    # invisible to readers, which only match finished names.
-    return path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(3)}.tmp")
-
-
 def write_parquet_atomic(path: Path, table: pa.Table) -> None:
     """Write a Parquet file so readers see either nothing or the whole file, never a torn one."""
     write_bytes_atomic(path, encode_parquet(table))
@@ -183,20 +169,6 @@ def encode_parquet(table: pa.Table) -> bytes:
     pq.write_table(table, sink, **parquet_options(table.schema))
     data: bytes = sink.getvalue().to_pybytes()
     return data
-
-
-def write_bytes_atomic(path: Path, data: bytes) -> None:
-    """Write a file so readers see either nothing or all of `data` (temp file, fsync, rename)."""
-    temp = _temp_name(path)
-    try:
-        with open(temp, "wb") as handle:
-            handle.write(data)
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(temp, path)
-    finally:
-        temp.unlink(missing_ok=True)
-    fsync_dir(path.parent)
 
 
 def sha256_file(path: Path) -> str:
@@ -239,21 +211,6 @@ def parquet_options(schema: pa.Schema) -> dict[str, Any]:
     """
     strings = [f.name for f in schema if pa.types.is_string(f.type) or pa.types.is_large_string(f.type)]
     return {"compression": "zstd", "use_dictionary": strings}
-
-
-def write_json_atomic(path: Path, payload: dict[str, Any]) -> None:
-    """Write a JSON file atomically (temp file, fsync, rename)."""
-    temp = _temp_name(path)
-    try:
-        with open(temp, "w", encoding="utf-8") as handle:
-            json.dump(payload, handle, indent=2, default=str, allow_nan=True)
-            handle.write("\n")
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(temp, path)
-    finally:
-        temp.unlink(missing_ok=True)
-    fsync_dir(path.parent)
 
 
 def read_json(path: Path) -> dict[str, Any]:

@@ -7,7 +7,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pianobot.physics.msd import MSDParams, simulate_linear
+from pianobot.physics.linear import simulate_linear
+from pianobot.physics.msd import MSDParams
 from pianobot.physics.trajectory import Press, sample_presses
 from pianobot.store import RunWriter
 

@@ -21,7 +21,8 @@ from pianobot.analysis.identify_run import identify_runs, load_batch_trials
 from pianobot.analysis.keystroke_batch import keystroke_batch
 from pianobot.analysis.static_stiffness import force_log_levels, static_stiffness_from_logs
 from pianobot.errors import InputError
-from pianobot.physics.msd import MSDParams, peak_response
+from pianobot.physics.linear import peak_response
+from pianobot.physics.msd import MSDParams
 
 TRUTH = MSDParams(k1_a_npm=70.0, k1_b_npm_per_kpa=1.4, c1_nspm=0.45, k2_npm=330.0, c2_nspm=0.33)
 

@@ -19,6 +19,7 @@ from pianobot.analysis.plausibility import (
     damping_ratios,
     few_keystrokes,
     fit_findings,
+    identify_findings,
     local_resonance_hz,
     no_resonance,
     stiffness_slope,
@@ -126,3 +127,21 @@ def test_fit_prints_and_stores_the_findings(data_dir: Path, tmp_path: Path, caps
     code, out, _ = invoke_cli(["fit", writer.run_id, "--data", str(data_dir), "--model", "poly", "--folds", "2",
                                "--out-dir", str(tmp_path), "--json"], capsys, monkeypatch)
     assert {w["check"] for w in json.loads(out)["warnings"]} == {w["check"] for w in stored}
+
+
+def test_identify_findings_give_unbounded_fits_a_plausible_range() -> None:
+    study = MSDParams()
+    estimates = [Interval("k1_npm@-40kPa", 123.0, "N/m", (110.0, 140.0)),
+                 Interval("c0_nspm", 0.0004, "N·s/m", (0.0, math.inf)),  # collapsed to zero
+                 Interval("k2_npm", 300.0, "N/m", (20.0, 900.0)),  # wider than its value
+                 Interval("c2_over_m2_per_s", 8.8, "1/s", (0.1, 40.0)),  # derived: not checked
+                 Interval("k1_b_npm_per_kpa", 1.19, "N/m/kPa", (1.19, 1.19))]
+    found = {f.check: f for f in identify_findings(study, estimates, {-40.0: 24})}
+    assert set(found) == {"at_bound", "wide_interval"}  # one level: the slope is held, not checked
+    assert found["at_bound"].subject == "c0_nspm" and "plausible range" in found["at_bound"].message
+    assert "--coupling tied" in found["at_bound"].cause
+    assert found["wide_interval"].subject == "k2_npm"
+    assert identify_findings(study, estimates[:1], {-40.0: 24}) == []
+    falling = [Interval("k1_b_npm_per_kpa", -0.66, "N/m/kPa", (-0.85, -0.48))]
+    checks = [f.check for f in identify_findings(study, falling, {-40.0: 12, -80.0: 3})]
+    assert checks == ["stiffness_slope", "few_keystrokes"]

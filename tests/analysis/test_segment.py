@@ -6,7 +6,8 @@ import numpy as np
 
 from pianobot.analysis.features import keystroke_features
 from pianobot.analysis.segment import STAGE_NAMES, segment_keystroke
-from pianobot.physics.msd import MSDParams, simulate_linear
+from pianobot.physics.linear import simulate_linear
+from pianobot.physics.msd import MSDParams
 from pianobot.physics.trajectory import Press, sample_presses
 
 

@@ -86,3 +86,27 @@ def test_empty_run_is_one_line_error(cli: Callable[..., _Result], data_dir: Path
         assert proc.returncode == 2, (command, proc.stderr)
         assert proc.stderr.startswith("error:") and proc.stderr.count("\n") == 1 and "no trials" in proc.stderr
     assert not (tmp_path / "r.html").exists() and not (tmp_path / "m.json").exists()
+
+
+def test_identify_warns_on_implausible_keys_and_stores_the_warnings(
+        cli: Callable[..., _Result], data_dir: Path, tmp_path: Path) -> None:
+    # A key damped past resonance, a finger that softens with vacuum, two keystrokes per level.
+    odd = MSDParams(c2_nspm=40.0, k1_a_npm=200.0, k1_b_npm_per_kpa=-1.5)
+    trials, samples = linear_keystrokes(odd, seed=2, levels_kpa=(-20.0, -80.0), speeds_mps=(0.02, 0.05))
+    run = write_run(data_dir, trials, samples, name="odd")
+    out, plot = tmp_path / "model.json", tmp_path / "identified.png"
+    proc = cli("identify", run, "--data", str(data_dir), "--bootstrap", "3", "--out", str(out), "--plot", str(plot))
+    assert proc.returncode == 0, proc.stderr
+    warnings = [line for line in proc.stderr.splitlines() if line.startswith("warning: ")]
+    stored = json.loads(out.read_text())["warnings"]
+    assert {"no_resonance", "stiffness_slope", "few_keystrokes"} <= {w["check"] for w in stored}
+    assert len(warnings) == len(stored) and all("likely cause" in w for w in warnings)
+    assert any("falls with vacuum" in w for w in warnings)
+    assert f"figure written to {plot}" in " ".join(proc.stdout.split()) and plot.stat().st_size > 10_000
+    # The study's own keys, five speeds at each of two levels: nothing to warn about.
+    trials, samples = linear_keystrokes(MSDParams(), seed=3, speeds_mps=(0.015, 0.025, 0.035, 0.045, 0.055),
+                                        levels_kpa=(-20.0, -80.0))
+    plain = write_run(data_dir, trials, samples, name="plain")
+    proc = cli("identify", plain, "--data", str(data_dir), "--bootstrap", "3", "--out", str(out), "--json")
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads(proc.stdout)["warnings"] == json.loads(out.read_text())["warnings"] == []

@@ -15,8 +15,6 @@ SONGS = Path(__file__).resolve().parents[2] / "experiments" / "songs"
 PLAY_RIG = Path(__file__).resolve().parents[2] / "experiments" / "rigs" / "sim-play.yaml"
 
 
-
-
 def _type2(path: Path) -> Path:
     mid = mido.MidiFile(type=2)
     for note in (60, 62):
@@ -65,20 +63,59 @@ def test_naive_play_prints_the_score_keys(tmp_path: Path, capsys: pytest.Capture
     assert Path(payload["files"]["performance_mid"]).is_file()
 
 
-def test_dry_run_prints_the_plan(tmp_path: Path, capsys: pytest.CaptureFixture[str],
-                                 monkeypatch: pytest.MonkeyPatch) -> None:
-    code, out, err = cli(["play", str(SONGS / "twinkle.mid"), "--dry-run", "--json", "--data",
-                          str(tmp_path), "--rig", str(PLAY_RIG)], capsys, monkeypatch)
+def test_dry_run_prints_the_feasible_tempo_and_the_limiting_notes(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    code, out, err = cli(["play", str(SONGS / "twinkle.mid"), "--dry-run", "--json", "--data", str(tmp_path)],
+                         capsys, monkeypatch)
     assert code == 0
     payload = json.loads(out)
     assert len(payload["plan_notes"]) == 42
     assert payload["mapping"].startswith("linear 40–110")
-    assert payload["plan"]["geometry"]["distance_m"] == 0.002
-    assert "cannot be played in time" in err
-    # The built-in rig moves between keys like a sweep (50 mm lift, slowly): more notes drop.
-    code, out, _ = cli(["play", str(SONGS / "twinkle.mid"), "--dry-run", "--json", "--data", str(tmp_path)],
-                       capsys, monkeypatch)
-    assert code == 0 and json.loads(out)["plan"]["skipped"] > payload["plan"]["skipped"]
+    tempo = payload["tempo"]
+    assert tempo["request"] == "auto" and tempo["played_bpm"] < tempo["written_bpm"]
+    assert tempo["played_bpm"] <= tempo["feasible_bpm"] and len(tempo["limiting_notes"]) == 3
+    assert payload["plan"]["skipped"] == 0
+    # One line says the written tempo is too fast and what is played instead; one that a warm-up comes.
+    too_fast = [line for line in err.splitlines() if "too fast for this finger" in line]
+    assert len(too_fast) == 1 and f"{tempo['played_bpm']:.4g} bpm" in too_fast[0]
+    assert any("warm-up" in line for line in err.splitlines())
     code, out, _ = cli(["play", str(SONGS / "mary.mid"), "--dry-run", "--data", str(tmp_path)], capsys, monkeypatch)
-    assert code == 0 and "mapping:" in out
+    assert code == 0 and "mapping:" in out and "fastest feasible" in out and "limiting notes" in out
+    # At the written tempo, asked for: notes are skipped and reported, nothing is slowed down.
+    code, out, err = cli(["play", str(SONGS / "twinkle.mid"), "--dry-run", "--json", "--tempo", "written",
+                          "--data", str(tmp_path)], capsys, monkeypatch)
+    assert code == 0
+    written = json.loads(out)
+    assert written["tempo"]["played_bpm"] == pytest.approx(written["tempo"]["written_bpm"])
+    assert written["plan"]["skipped"] > 0 and "cannot be played in time" in err
     assert not (tmp_path / "runs").exists()
+
+
+@pytest.mark.parametrize(("args", "where"), [
+    (["--tempo", "fast"], "--tempo"), (["--tempo", "0"], "--tempo"), (["--finger", "steel"], "--finger"),
+    (["--warmup", "5", "--no-warmup"], "--no-warmup"), (["--warmup", "500"], "--warmup"),
+])
+def test_bad_play_options_are_one_line_and_exit_2(args: list[str], where: str, tmp_path: Path,
+                                                  capsys: pytest.CaptureFixture[str],
+                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    code, out, err = cli(["play", str(SONGS / "mary.mid"), "--dry-run", "--data", str(tmp_path), *args],
+                         capsys, monkeypatch)
+    lines = [line for line in err.splitlines() if not line.startswith("warning:")]
+    assert code == 2 and out == "" and len(lines) == 1 and where in lines[0]
+
+
+def test_play_prints_the_score_the_tempo_and_the_warm_up(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    from pianobot.rig.station import Rig
+
+    # What the rig finds when it opens (a UR's speed slider below 100 %) is said before the song.
+    monkeypatch.setattr(Rig, "warnings", property(lambda self: ("speed slider at 50 %",)))
+    code, out, err = cli(["play", str(SONGS / "scale_crescendo.mid"), "--data", str(tmp_path), "--warmup", "8"],
+                         capsys, monkeypatch)
+    assert code == 0
+    assert "warm-up: 8 keystrokes" in out and "playing at" in out and "f1" in out
+    assert "too fast for this finger" in err
+    assert err.splitlines()[0] == "warning: rig: speed slider at 50 %"
+    assert "report written to" in out
+    run = json.loads(next((tmp_path / "runs").glob("*/run.json")).read_text())
+    assert run["rig"]["warnings"] == ["speed slider at 50 %"]

@@ -144,3 +144,19 @@ def test_commands_that_write_a_file_say_where(capsys: pytest.CaptureFixture[str]
         assert png.is_file() and f"figure written to {png}" in " ".join(out.split())
         code, out, _ = cli([*args, "--plot", str(png), "--json"], capsys, monkeypatch)
         assert json.loads(out)["plot"] == str(png)
+
+
+def test_help_paragraphs_are_reflowed_not_cut_at_the_source_line_breaks(
+        capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    from pianobot.cli.common import reflow
+
+    assert reflow("One line\n\nA paragraph wrapped\nat 100 columns.\n\n- a list\n- stays") == (
+        "One line\n\nA paragraph wrapped at 100 columns.\n\n- a list\n- stays")
+    monkeypatch.setenv("COLUMNS", "80")
+    code, out, _ = cli(["import", "mocap", "--help"], capsys, monkeypatch)
+    assert code == 0
+    # The docstring's second paragraph breaks after "when" in the source: the terminal wraps it.
+    text = " ".join(out.split())
+    assert "inferred only when the evidence is clear" in text
+    lines = [line.strip() for line in out.splitlines()]
+    assert not any(0 < len(line) < 25 and line.endswith("when") for line in lines)

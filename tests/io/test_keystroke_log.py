@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from pianobot.errors import InputError
+from pianobot.io.keystroke_events import KIND_OFF, KIND_ON, group_presses
 from pianobot.io.keystroke_layouts import round_grid
 from pianobot.io.keystroke_log import read_keystroke_log
 
@@ -104,6 +105,15 @@ def test_double_notes_and_spills_assigned_by_timestamp(tmp_path: Path) -> None:
     assert ok["n_note_on"].tolist() == [2, 2]
     assert ok["midi_hold_s"].round(3).tolist() == [1.401, 1.401]
     assert log.midi.groupby("index").size().tolist() == [4, 4]
+
+
+def test_a_note_on_after_the_release_is_a_new_keystroke_however_soon() -> None:
+    """Repeated notes (sequences, a late release) can follow a note-off within 100 ms: a new
+    press. A second note-on while the key is held (double strike) and a surplus note-off stay."""
+    t_ms = np.array([0, 40, 900, 1000, 1100, 1900, 1950, 1960], dtype=np.int64)
+    kind = np.array([KIND_ON, KIND_ON, KIND_OFF, KIND_OFF, KIND_ON, KIND_OFF, KIND_OFF, KIND_ON])
+    note = np.full(t_ms.size, 60, dtype=np.int64)
+    assert group_presses(t_ms, kind.astype(np.int64), note).tolist() == [0, 0, 0, 0, 1, 1, 1, 2]
 
 
 def test_timestamp_restart_starts_a_new_clock(tmp_path: Path) -> None:

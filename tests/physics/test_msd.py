@@ -8,18 +8,17 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
+from pianobot.physics.inverse import (
+    inverse_arm_trajectory,
+    inverse_state_space,
+    inverse_trajectories,
+)
+from pianobot.physics.linear import frequency_response, peak_response, simulate_linear, state_space
 from pianobot.physics.msd import (
     LinearParams,
     MSDParams,
     deformation_ratio,
     error_rate,
-    frequency_response,
-    inverse_arm_trajectory,
-    inverse_state_space,
-    inverse_trajectories,
-    peak_response,
-    simulate_linear,
-    state_space,
     static_deformation_ratio,
 )
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from pianobot.physics.piano import PianoParams, on_velocity_from_speed, piano_events
 
@@ -58,3 +59,34 @@ def test_jitter_only_with_an_rng_and_never_early() -> None:
     assert len(exact) == len(jittered) == 2
     for a, b in zip(exact, jittered, strict=True):
         assert 0.0 <= b.t_s - a.t_s <= 1e-3 + 1e-9
+
+
+def test_one_velocity_curve_rounded_or_continuous() -> None:
+    """The curve before rounding is smooth, hits the curve's fixed points, and rounds to the MIDI value."""
+    for p in (PianoParams(), PianoParams(curve_exponent=2.0, curve_saturation=1.0),
+              PianoParams(full_scale_speed_mps=0.2, curve_exponent=0.7, curve_saturation=3.0)):
+        fs = p.full_scale_speed_mps
+        s = np.linspace(0.0, 2.0 * fs, 1001)
+        smooth = on_velocity_from_speed(s, p, rounded=False)
+        raw = on_velocity_from_speed(s, p, rounded=False, clipped=False)
+        midi = on_velocity_from_speed(s, p)
+        assert smooth.dtype == np.float64 and midi.dtype == np.int64
+        assert np.array_equal(midi, np.clip(np.rint(raw), 1, 127).astype(np.int64))
+        assert np.array_equal(smooth, np.clip(raw, 1.0, 127.0))
+        assert np.all(np.diff(raw) > 0.0)  # strictly increasing: invertible
+        assert np.any((smooth != np.rint(smooth)) & (smooth > 1.0) & (smooth < 127.0))
+        # Full-scale speed is velocity 127 for every exponent and saturation.
+        assert abs(on_velocity_from_speed(fs, p, rounded=False) - 127.0) < 1e-9
+        # Scalars give scalars of the same value.
+        assert on_velocity_from_speed(float(s[300]), p, rounded=False) == smooth[300]
+        assert on_velocity_from_speed(float(s[300]), p) == midi[300]
+    linear = PianoParams()
+    assert on_velocity_from_speed(linear.full_scale_speed_mps / 2, linear, rounded=False) == 63.5
+    # Beyond full scale the unclipped linear curve goes on (a fit's slope), the clipped one stops.
+    assert on_velocity_from_speed(0.09, linear, rounded=False, clipped=False) > 190.0
+    assert on_velocity_from_speed(0.09, linear, rounded=False) == 127.0
+
+
+def test_a_rounded_velocity_is_always_clipped() -> None:
+    with pytest.raises(ValueError, match="rounded"):
+        on_velocity_from_speed(0.05, PianoParams(), clipped=False)

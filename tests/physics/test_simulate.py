@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from pianobot.physics.effects import Effects
+from pianobot.physics.linear import simulate_linear
 from pianobot.physics.model import KeystrokeModel
-from pianobot.physics.msd import MSDParams, simulate_linear
+from pianobot.physics.msd import MSDParams
 from pianobot.physics.piano import PianoParams, piano_events
 from pianobot.physics.simulate import SimBatch, simulate_arm, simulate_presses
 from pianobot.physics.trajectory import Press, sample_presses
