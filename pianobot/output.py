@@ -60,7 +60,3 @@ def write_output(path: Path | str, write: Callable[[Path], object], option: str 
         temp.unlink(missing_ok=True)
     return target
 
-
-def write_output_text(path: Path | str, text: str, option: str = "--out") -> Path:
-    """`write_output` of a text file (UTF-8)."""
-    return write_output(path, lambda temp: temp.write_text(text, encoding="utf-8"), option)

@@ -17,8 +17,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from pianobot.atomic_files import write_text_atomic
 from pianobot.errors import InputError
-from pianobot.output import write_output_text
+from pianobot.output import check_output_path
 from pianobot.physics.effects import Effects
 from pianobot.physics.msd import MSDParams
 from pianobot.physics.piano import PianoParams
@@ -127,7 +128,10 @@ def save_model(
         "provenance": _finite(dict(provenance)) if provenance is not None else None,
     }
     # Checked first (a folder, a read-only place: one line), then written atomically.
-    return write_output_text(target, json.dumps(payload, indent=2, default=str) + "\n")
+    check_output_path(target, "--out")
+    target.parent.mkdir(parents=True, exist_ok=True)
+    write_text_atomic(target, json.dumps(payload, indent=2, default=str) + "\n")
+    return target
 
 
 def read_model_file(path: str | Path) -> ModelFile:

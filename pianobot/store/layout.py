@@ -27,7 +27,6 @@ import pyarrow.parquet as pq
 # The atomic writers live in a bottom-layer module (physics writes model files with them too);
 # the store's modules keep importing them from here.
 from pianobot.atomic_files import fsync_dir as fsync_dir
-from pianobot.atomic_files import temp_name as _temp_name
 from pianobot.atomic_files import write_bytes_atomic as write_bytes_atomic
 from pianobot.atomic_files import write_json_atomic as write_json_atomic
 from pianobot.errors import InputError

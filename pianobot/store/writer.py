@@ -233,6 +233,17 @@ class RunWriter:
         self._journal.write(PART, part_record(batch, files, parts["trials"]))
         return batch
 
+    def replace_plan(self, plan: pd.DataFrame) -> None:
+        """Write a new plan.parquet (atomically) and record it: its rows and SHA-256 in run.json
+        (`plan_file`, journalled), `trials_planned` = its rows. For a run whose plan is only known
+        once it started (`play`: the warm-up as played, then the song)."""
+        self._lock.verify()
+        table = pa.Table.from_pandas(plan, preserve_index=False)
+        data = encode_parquet(with_metadata(table, "plan"))
+        write_bytes_atomic(self.paths.plan, data)
+        record = FileRecord.of_bytes("plan.parquet", data, table.num_rows)
+        self.update_meta(trials_planned=table.num_rows, plan_file=record.to_dict())
+
     def journal(self, event: str, **fields: Any) -> None:
         """Append one event to journal.jsonl (fsync'd)."""
         self._journal.write(event, fields)
