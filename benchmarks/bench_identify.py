@@ -25,8 +25,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "analysis"))
 from _synthetic_runs import linear_sweep  # noqa: E402
 
-from pianobot.analysis.identify import identify_trajectories  # noqa: E402
-from pianobot.analysis.identify_run import load_batch  # noqa: E402
+from pianobot.analysis.greybox.load import load_batch  # noqa: E402
+from pianobot.analysis.identify.fit import identify_trajectories  # noqa: E402
 from pianobot.physics.msd import MSDParams  # noqa: E402
 
 TRUTH = MSDParams(k1_a_npm=70.0, k1_b_npm_per_kpa=1.4, c1_nspm=0.45, k2_npm=330.0, c2_nspm=0.33)

@@ -37,7 +37,7 @@ def _records(cv: Any) -> list[dict[str, Any]]:
 
 
 def study_log(ks: tuple[int, ...]) -> dict[str, Any]:
-    from pianobot.analysis.fit_run import load_trials
+    from pianobot.analysis.learn.run import load_trials
     from pianobot.analysis.sequence.evaluate import _per_note, cross_validate_sequence
     from pianobot.analysis.sequence.model import SequenceModel
     from pianobot.analysis.sequence.strokes import stroke_table

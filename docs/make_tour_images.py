@@ -20,7 +20,7 @@ from pathlib import Path
 
 from PIL import Image, ImageChops
 
-from pianobot.analysis.fit_run import fit_runs, load_trials
+from pianobot.analysis.learn.run import fit_runs, load_trials
 from pianobot.reports.command_figures import learned_maps, save_png
 from pianobot.reports.run_report import build_run_report
 from pianobot.run import run_sweep
@@ -69,7 +69,7 @@ def main() -> None:
                        check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=120)
         _small_png(shot, DOCS / "tour-report-stages.png")
         result = fit_runs([run_id], data, kinds=["gp", "poly"], out_dir=tmp / "models")
-        from pianobot.analysis.predictors import load_predictor
+        from pianobot.analysis.learn.predictors import load_predictor
 
         predictors = {kind: load_predictor(path) for kind, path in result.saved.items()}
         figure = save_png(learned_maps(load_trials([run_id], data), predictors), tmp / "fit.png", dpi=90)

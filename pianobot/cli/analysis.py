@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, cast
 
 import pandas as pd
 import typer
 
-from pianobot.analysis.static_stiffness import (
+from pianobot.analysis.identify.static_stiffness import (
     STUDY_COMPRESSION_M,
     force_log_levels,
     static_stiffness_from_logs,
@@ -29,6 +29,7 @@ from pianobot.cli.common import (
     writable,
 )
 from pianobot.errors import InputError
+from pianobot.executor import ExecutorSettings
 from pianobot.output import check_output_path
 from pianobot.store import load_run
 
@@ -69,6 +70,14 @@ def register(app: typer.Typer) -> None:
         force_log: Annotated[list[str] | None, typer.Option(help="P=FILE or a folder of P.txt force logs.")] = None,
         compression_m: Annotated[float, typer.Option(help="Compression of the force-log presses.")] = STUDY_COMPRESSION_M,
         plot: PlotOption = None,
+        presses: Annotated[Path | None, typer.Option(
+            "--presses", help="CSV of the commanded presses (t_start_s, speeds, acceleration, depth, distance, "
+                              "hold) for runs that do not record them, e.g. an imported Motive take.")] = None,
+        workers: Annotated[int | None, typer.Option(
+            "--workers", min=1, help="Processes for the bootstrap refits (default: the machine's cores; "
+                                     "small work stays in this process).")] = None,
+        scheduler: Annotated[str | None, typer.Option(
+            "--scheduler", help="Dask scheduler address (tcp://HOST:PORT) for the bootstrap refits.")] = None,
         no_progress: NoProgressFlag = False,
     ) -> None:
         """Identify the keystroke model from mocap trajectories; write a model file with intervals."""
@@ -78,20 +87,22 @@ def register(app: typer.Typer) -> None:
         writable(plot, "--plot")
         levels = force_log_levels(force_log or [])
         static = static_stiffness_from_logs(levels, compression_m=compression_m) if levels else None
-        progress = command_progress(json_out, no_progress)
-        # identify_runs reports no steps yet: an elapsed-time spinner shows the fits are alive.
-        with progress.task(f"identify: fits and {bootstrap} bootstrap refits"):
-            from pianobot.analysis.identify_run import identify_runs
-            from pianobot.analysis.plausibility import (
-                Interval,
-                as_dicts,
-                identify_findings,
-                store_findings,
-            )
-            from pianobot.reports.command_figures import identified_model, k1_by_level, save_png
+        from pianobot.analysis.identify.fit import Coupling
+        from pianobot.analysis.identify.run import identify_runs
+        from pianobot.analysis.plausibility import (
+            Interval,
+            as_dicts,
+            identify_findings,
+            store_findings,
+        )
+        from pianobot.reports.command_figures import identified_model, k1_by_level, save_png
 
-            result = identify_runs(runs, data, out=out, coupling=coupling, bootstrap=bootstrap, seed=seed,
-                                   x0_source=x0_source, vacuum_kpa=vacuum_kpa, static=static)
+        # identify_runs reports its own steps (held-out fit, full fit, bootstrap refits).
+        result = identify_runs(runs, data, out=out, coupling=cast(Coupling, coupling), bootstrap=bootstrap, seed=seed,
+                               x0_source=x0_source, vacuum_kpa=vacuum_kpa, static=static,
+                               progress=command_progress(json_out, no_progress),
+                               executor=ExecutorSettings.resolve(workers=workers, scheduler=scheduler),
+                               schedule=presses)
         findings = identify_findings(result.fit.params, [Interval(e.name, e.value, e.unit, e.ci95)
                                                          for e in result.fit.estimates],
                                      keystrokes_per_level(runs, data, vacuum_kpa, result.fit.n_keystrokes))
@@ -158,9 +169,9 @@ def register(app: typer.Typer) -> None:
         writable(plot, "--plot")
         progress = command_progress(json_out, no_progress)
         with progress.task("fit: loading scikit-learn"):
-            from pianobot.analysis.fit_run import fit_runs, load_trials
+            from pianobot.analysis.learn.predictors import PhysicsPredictor, load_predictor
+            from pianobot.analysis.learn.run import fit_runs, load_trials
             from pianobot.analysis.plausibility import as_dicts
-            from pianobot.analysis.predictors import PhysicsPredictor, load_predictor
             from pianobot.reports.command_figures import learned_maps, save_png
         result = fit_runs(runs, data, kinds=kinds, out_dir=out_dir, folds=folds,
                           physics_model=physics_model, progress=progress)
@@ -200,7 +211,7 @@ def register(app: typer.Typer) -> None:
             from pianobot.reports.run_report import build_run_report
 
             if compare:
-                from pianobot.analysis.fit_run import fit_runs
+                from pianobot.analysis.learn.run import fit_runs
         cv = fit_runs(runs, data, kinds=["poly", "spline"], out_dir=None, progress=progress).cv if compare else None
         path = build_run_report(runs, data, out, model_file=model, cv_table=cv, progress=progress)
         if json_out:

@@ -2,24 +2,31 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.console import Console
 
-from pianobot.analysis.discover import discover_runs
-from pianobot.analysis.discover_result import DiscoveryResult
+from pianobot.analysis.discover.result import DiscoveryResult
+from pianobot.analysis.discover.run import discover_runs
 from pianobot.cli.common import (
     DEFAULT_DATA,
     Column,
     DataDir,
     JsonFlag,
+    NoProgressFlag,
+    command_progress,
     emit_json,
+    output_console,
     print_table,
+    print_warning,
+    say,
     say_written,
+    writable,
 )
-from pianobot.reports.discover_report import build_discover_report
+from pianobot.executor import ExecutorSettings
+from pianobot.reports.discover_report import build_discover_report, gap_cell
 
 RunIds = Annotated[
     list[str], typer.Argument(help="Run ids (or unique prefixes) with mocap and/or MIDI.")
@@ -27,17 +34,25 @@ RunIds = Annotated[
 
 
 def _print(result: DiscoveryResult, report: Path | None, model_out: Path | None) -> None:
-    console = Console()
+    console = output_console()
     for line in result.decision_line.splitlines():
         console.print(f"[bold]{line}[/bold]")
     console.print(f"Verdict: {result.verdict}")
+    for finding in result.findings:
+        console.print(f"Measured: {finding.text}")
+    if result.base_on_bounds:
+        print_warning(f"base parameters on a bound (not pinned by the data): {', '.join(result.base_on_bounds)}")
     for note in result.notes:
-        console.print(f"[dim]Assumed: {note}[/dim]")
+        console.print(f"[dim]Data: {note}[/dim]")
     for it in result.iterations:
-        rows = [[c.effect, f"{c.delta_bic:.1f}", f"{c.gap_before:.3g}", f"{c.gap_after:.3g}", c.status]
-                for c in it.candidates]
+        rows = []
+        for v in it.verdicts[:12]:
+            ratio = "∞" if not math.isfinite(v.ratio) else f"{v.ratio:.2g}×"
+            rows.append([v.label, f"{v.delta_ic:.1f}", gap_cell(v.gap_after), f"{100 * v.shrink:.0f} % ({ratio})",
+                         f"{100 * v.consistency:.0f} %", v.status, "; ".join(v.reasons)])
         print_table(CANDIDATE_COLUMNS, rows,
-                    title=f"Iteration {it.index + 1} (ΔBIC threshold {it.threshold:.1f})")
+                    title=f"Iteration {it.index + 1}: held-out gap of the current model {it.gap_before.text()}")
+    say(f"{result.n_train} training / {result.n_held_out} held-out keystrokes, {result.seconds:.1f} s")
     if model_out is not None:
         say_written("model", model_out)
     if report is not None:
@@ -45,8 +60,9 @@ def _print(result: DiscoveryResult, report: Path | None, model_out: Path | None)
 
 
 CANDIDATE_COLUMNS = (
-    Column("effect"), Column("ΔBIC", justify="right"), Column("gap before", justify="right"),
-    Column("gap after", justify="right"), Column("status"),
+    Column("candidate"), Column("ΔIC", justify="right"), Column("held-out gap after", justify="right"),
+    Column("shrink", 2, justify="right"), Column("consistent", 3, justify="right"), Column("status"),
+    Column("why not", 1, wrap=True),
 )
 
 
@@ -66,18 +82,29 @@ def register(app: typer.Typer) -> None:
             Path | None, typer.Option("--model-out", help="Where to write the updated model file.")
         ] = None,
         seed: Annotated[
-            int, typer.Option("--seed", help="Seed of the split and the bootstrap.")
+            int, typer.Option("--seed", help="Seed of the held-out split.")
         ] = 0,
         vacuum_kpa: Annotated[
             float | None, typer.Option("--vacuum-kpa", help="Vacuum of runs that do not record it.")
         ] = None,
+        presses: Annotated[Path | None, typer.Option(
+            "--presses", help="CSV of the commanded presses (t_start_s, speeds, acceleration, depth, distance, "
+                              "hold) for runs that do not record them, e.g. an imported Motive take.")] = None,
+        workers: Annotated[int | None, typer.Option(
+            "--workers", min=1, help="Processes for the candidate fits (default: the machine's cores; "
+                                     "small work stays in this process).")] = None,
+        scheduler: Annotated[str | None, typer.Option(
+            "--scheduler", help="Dask scheduler address (tcp://HOST:PORT) to run the candidate fits on.")] = None,
+        no_progress: NoProgressFlag = False,
     ) -> None:
         """Localise where the model and the measurements disagree, name the missing effect, refit."""
+        out = writable(out, "--out")
         if model_out is None and out is not None:
             model_out = out.with_suffix(".model.json")
-        result = discover_runs(
-            runs, data, model, seed=seed, model_out=model_out, vacuum_kpa=vacuum_kpa
-        )
+        model_out = writable(model_out, "--model-out")
+        result = discover_runs(runs, data, model, seed=seed, model_out=model_out, vacuum_kpa=vacuum_kpa,
+                               schedule=presses, progress=command_progress(json_out, no_progress),
+                               executor=ExecutorSettings.resolve(workers=workers, scheduler=scheduler))
         if out is not None:
             build_discover_report(result, out, model_path=model_out)
         if json_out:

@@ -55,7 +55,8 @@ class MSDParams:
     k1 follows the law k1 = k1_a + k1_b·|p| (p vacuum in kPa) unless `k1_table` gives identified
     values `(vacuum_kpa, k1_npm)`: at and between those levels k1 is interpolated linearly
     (levels are matched on |p|), outside them the law applies. k0 and c0 (arm–fingertip
-    coupling) default to k1 and c1, as in the study's scripts.
+    coupling) default to k1 and c1, as in the study's scripts; `k0_over_k1` and `c0_over_c1`
+    scale them (the same finger on both sides), `k0_npm`/`c0_nspm` fix them outright.
     """
 
     m1_kg: float = 0.070
@@ -65,18 +66,25 @@ class MSDParams:
     c1_nspm: float = 0.50
     k2_npm: float = 300.0  # 0.30 N/mm
     c2_nspm: float = 0.30
-    k0_npm: float | None = None  # None: k0 = k1 at the same vacuum
-    c0_nspm: float | None = None  # None: c0 = c1
+    k0_npm: float | None = None  # None: k0 = k0_over_k1 · k1 at the same vacuum
+    c0_nspm: float | None = None  # None: c0 = c0_over_c1 · c1
+    # The arm-fingertip coupling as a fixed ratio to the fingertip-key one (the same soft finger
+    # stiffens with vacuum on both sides); 1 is the study's k0 = k1, c0 = c1.
+    k0_over_k1: float = 1.0
+    c0_over_c1: float = 1.0
     k1_table: tuple[tuple[float, float], ...] = ()
 
     def __post_init__(self) -> None:
         for name in ("m1_kg", "m2_kg"):
             if not getattr(self, name) > 0.0:
                 raise ValueError(f"{name} should be > 0, got {getattr(self, name)}.")
-        for name in ("c1_nspm", "k2_npm", "c2_nspm", "k0_npm", "c0_nspm"):
+        for name in ("c1_nspm", "k2_npm", "c2_nspm", "k0_npm", "c0_nspm", "k0_over_k1", "c0_over_c1"):
             value = getattr(self, name)
             if value is not None and not value >= 0.0:
                 raise ValueError(f"{name} should be >= 0, got {value}.")
+        for name in ("k0_over_k1", "c0_over_c1"):
+            if not getattr(self, name) > 0.0:
+                raise ValueError(f"{name} should be > 0, got {getattr(self, name)}.")
         table = tuple(sorted((abs(float(p)), float(k)) for p, k in self.k1_table))
         if any(k <= 0.0 for _, k in table):
             raise ValueError(f"k1_table stiffnesses should be > 0 N/m, got {self.k1_table}.")
@@ -109,8 +117,8 @@ class MSDParams:
         return LinearParams(
             m1_kg=self.m1_kg,
             m2_kg=self.m2_kg,
-            k0_npm=k1 if self.k0_npm is None else self.k0_npm,
-            c0_nspm=self.c1_nspm if self.c0_nspm is None else self.c0_nspm,
+            k0_npm=self.k0_over_k1 * k1 if self.k0_npm is None else self.k0_npm,
+            c0_nspm=self.c0_over_c1 * self.c1_nspm if self.c0_nspm is None else self.c0_nspm,
             k1_npm=k1,
             c1_nspm=self.c1_nspm,
             k2_npm=self.k2_npm,

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from pianobot.analysis.predictors import StrokePredictor
+from pianobot.analysis.learn.predictors import StrokePredictor
 from pianobot.errors import InputError
 from pianobot.io.midifile import Note
 from pianobot.plan import key_change_s

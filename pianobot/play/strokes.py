@@ -17,7 +17,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
-from pianobot.analysis.predictors import StrokePredictor
+from pianobot.analysis.learn.predictors import StrokePredictor
 from pianobot.play.geometry import StrokeGeometry, envelope_limits, fastest_geometry, vacuum_levels
 from pianobot.play.settings import PlaySettings
 from pianobot.spec import RigSpec

@@ -14,13 +14,13 @@ import numpy.typing as npt
 import pandas as pd
 from sklearn.model_selection import GroupKFold
 
-from pianobot.analysis.learn import LearnedPredictor, training_set
-from pianobot.analysis.predictors import (
+from pianobot.analysis.learn.predictors import (
     OUTPUT_COLUMNS,
     FloatArray,
     grid_inverse,
     grid_velocity_range,
 )
+from pianobot.analysis.learn.training import LearnedPredictor, training_set
 from pianobot.errors import InputError
 
 FIT_KINDS = ("gp", "poly", "spline")  # `pianobot fit`'s smooth kinds; the held-out error picks

@@ -1,159 +1,188 @@
-"""The discovery report: decision line, candidate tables, residual by phase, worst overlays."""
+"""The discovery report: decision, measured checks, candidate tables, localisation, overlays.
+
+Every length in text and tables is in mm; every information criterion is the one of
+`greybox.criterion` (a ΔIC above 10 is strong evidence); parameters that ended on a bound are
+flagged; overlay legends name what each line is.
+"""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
-from pianobot.analysis.discover_data import SIGNALS
-from pianobot.analysis.discover_result import DiscoveryResult
+from pianobot.analysis.discover.gap import Gap
+from pianobot.analysis.discover.result import DiscoveryResult
 from pianobot.reports.html import Section, figure_html, paragraph, table_html, write_page
 
 
+def gap_cell(gap: Gap) -> str:
+    """A held-out gap in a table cell (mm, or MIDI outcomes)."""
+    if math.isfinite(gap.position_m):
+        return f"{1e3 * gap.position_m:.3g} mm"
+    parts = []
+    if math.isfinite(gap.on_velocity):
+        parts.append(f"vel {gap.on_velocity:.2g}")
+    if math.isfinite(gap.hold_s):
+        parts.append(f"hold {1e3 * gap.hold_s:.3g} ms")
+    parts.append(f"{gap.sounded_mismatch} sound")
+    return ", ".join(parts)
+
+
 def candidate_frame(result: DiscoveryResult, index: int) -> pd.DataFrame:
-    """One iteration's candidate table (effect, parameters ± CI, ΔBIC, held-out gap, status)."""
+    """One iteration's candidate table."""
     rows = []
-    for c in result.iterations[index].candidates:
-        d = c.to_dict()
+    for v in result.iterations[index].verdicts:
         params = "; ".join(
-            f"{name.split('.', 1)[1]}={v['value']:.4g} [{v['ci95'][0]:.3g}, {v['ci95'][1]:.3g}]"
-            for name, v in d["params"].items()
-        )
-        rows.append(
-            {
-                "effect": c.effect,
-                "family": d["family"],
-                "parameters (95 % CI)": params or "(switch)",
-                "ΔBIC": c.delta_bic,
-                "held-out gap before": c.gap_before,
-                "after": c.gap_after,
-                "shrink %": 100 * c.gap_reduction,
-                "sparse": "yes" if c.proposed_by else "",
-                "status": c.status,
-                "why not": "; ".join(c.reasons),
-            }
-        )
+            f"{name.split('.', 1)[1]}={value:.4g}"
+            + (f" [{v.intervals[name][0]:.3g}, {v.intervals[name][1]:.3g}]" if name in v.intervals else "")
+            + (" (on bound)" if name in v.on_bounds else "")
+            for name, value in v.params.items())
+        rows.append({"candidate": v.label, "family": v.family, "parameters (SI, 95 % CI)": params or "(switch)",
+                     "ΔIC": round(v.delta_ic, 1), "held-out gap before": gap_cell(v.gap_before),
+                     "after": gap_cell(v.gap_after), "shrink %": round(100 * v.shrink),
+                     "consistent %": round(100 * v.consistency), "joint fit": "yes" if v.joint else "screened",
+                     "status": v.status, "why not": "; ".join(v.reasons)})
     return pd.DataFrame(rows)
 
 
-def phase_frame(result: DiscoveryResult) -> pd.DataFrame:
-    """Held-out systematic error per phase and signal, before (base model) and after (final)."""
+def stage_frame(result: DiscoveryResult) -> pd.DataFrame:
+    """Held-out systematic error per stage and signal, base model and final model (mm)."""
     first = result.iterations[0].before
-    last = result.iterations[-1].after or result.iterations[-1].before
-    after = {(r["phase"], r["signal"]): r for r in last.phases}
+    last = result.iterations[-1]
+    final = last.after if last.accepted and last.after is not None else last.before
+    after = {(r["stage"], r["signal"]): r for r in final.stages}
     rows = []
-    for r in first.phases:
-        a = after.get((r["phase"], r["signal"]), {})
-        rows.append(
-            {
-                "phase": r["phase"],
-                "signal": r["signal"],
-                "n": r["n"],
-                "systematic before mm": 1e3 * r["systematic_m"],
-                "after mm": 1e3 * a.get("systematic_m", float("nan")),
-                "bias before mm": 1e3 * r["bias_m"],
-                "lag-1 before": r["lag1"],
-                "lag-1 after": a.get("lag1", float("nan")),
-            }
-        )
+    for r in first.stages:
+        a = after.get((r["stage"], r["signal"]), {})
+        rows.append({"stage": r["stage"], "signal": r["signal"], "frames": r["n"],
+                     "systematic mm (base)": round(r["systematic_mm"], 4),
+                     "systematic mm (final)": round(a.get("systematic_mm", math.nan), 4),
+                     "bias mm (base)": round(r["bias_mm"], 4), "lag-1 (base)": round(r["lag1"], 2),
+                     "lag-1 (final)": round(a.get("lag1", math.nan), 2)})
     return pd.DataFrame(rows)
+
+
+def params_frame(result: DiscoveryResult) -> pd.DataFrame:
+    """The base model's fitted parameters (SI units), bounds flagged."""
+    return pd.DataFrame([{"parameter": k, "value": f"{v:.4g}", "on bound": "yes" if k in result.base_on_bounds else ""}
+                         for k, v in result.base_params.items()])
 
 
 def _overlay(result: DiscoveryResult, count: int = 3) -> str:
-    """The held-out keystrokes the base model fits worst, measured vs before vs after."""
-    ks, before, after = result.held_out, result.predictions_before, result.predictions_after
-    scores = [
-        float(np.nanmean((k.x_m - p.x_m) ** 2)) if k.has_motion else -1.0
-        for k, p in zip(ks, before, strict=True)
-    ]
-    order = [i for i in np.argsort(scores)[::-1][:count] if scores[i] >= 0]
+    """The held-out keystrokes the base model fits worst: measured, base model, final model."""
+    held, before, after = result.held_out, result.predictions_before, result.predictions_after
+    if not held.has_motion:
+        return _outcome_overlay(result)
+    err = np.nanmean((before.x2_m - held.x2_m) ** 2, axis=1)
+    order = [int(i) for i in np.argsort(np.where(np.isfinite(err), err, -1.0))[::-1][:count] if np.isfinite(err[i])]
     if not order:
-        return paragraph("No motion capture: overlays need measured trajectories.", note=True)
+        return paragraph("No modelled frames to overlay.", note=True)
+    final_name = "final model (" + (", ".join(v.label for v in result.accepted) or "= base") + ")"
     fig, axes = plt.subplots(len(order), 1, figsize=(9, 2.8 * len(order)), squeeze=False)
     for ax, i in zip(axes[:, 0], order, strict=True):
-        k = ks[i]
-        for s, colour in ((0, "tab:grey"), (1, "tab:blue"), (2, "tab:red")):
-            ax.plot(k.t_s, 1e3 * k.x_m[s], ".", ms=2, color=colour, label=f"measured {SIGNALS[s]}")
-            ax.plot(k.t_s, 1e3 * before[i].x_m[s], "--", lw=1, color=colour)
-            ax.plot(k.t_s, 1e3 * after[i].x_m[s], "-", lw=1, color=colour)
-        ax.set_title(
-            f"{k.key_id}: {k.vacuum_kpa:g} kPa, {1e3 * k.press.down_velocity_mps:.0f} mm/s"
-        )
-        ax.set_ylabel("mm (down +)")
-    axes[-1, 0].set_xlabel("t since motion start (s)")
-    axes[0, 0].legend(loc="upper right", fontsize=7, ncol=3)
+        t = held.row_times_s(i)
+        for signal, measured, base_pred, final_pred, colour in (
+                ("fingertip x1", held.x1_m[i], before.x1_m[i], after.x1_m[i], "tab:blue"),
+                ("key x2", held.x2_m[i], before.x2_m[i], after.x2_m[i], "tab:red")):
+            # Each trace with its rest offset removed, as the fit compares them.
+            ok = np.isfinite(base_pred) & np.isfinite(measured)
+            if not ok.any():
+                continue
+            off_b = float(np.mean(base_pred[ok] - measured[ok]))
+            off_f = float(np.nanmean(final_pred[ok] - measured[ok]))
+            ax.plot(t, 1e3 * measured, ".", ms=2, color=colour, label=f"measured {signal}")
+            ax.plot(t, 1e3 * (base_pred - off_b), "--", lw=1, color=colour, label=f"base model {signal}")
+            ax.plot(t, 1e3 * (final_pred - off_f), "-", lw=1, color=colour, label=f"{final_name} {signal}")
+        ax.set_title(f"{held.trial_id[i]}: {held.vacuum_kpa[i]:g} kPa, {1e3 * held.down_velocity_mps[i]:.0f} mm/s")
+        ax.set_ylabel("displacement, mm (down +)")
+    axes[-1, 0].set_xlabel("time since motion start (s)")
+    axes[0, 0].legend(loc="upper right", fontsize=7, ncol=2)
     fig.tight_layout()
-    return figure_html(
-        fig, "Worst held-out keystrokes: dots measured, dashed base model, solid final model"
-    )
+    return figure_html(fig, "Worst held-out keystrokes of the base model: dots measured, dashed base model, "
+                            "solid final model (each trace relative to its own rest level)")
+
+
+def _outcome_overlay(result: DiscoveryResult) -> str:
+    """MIDI only: on-velocity and hold against commanded speed, measured vs base vs final."""
+    held, before, after = result.held_out, result.predictions_before, result.predictions_after
+    speed = 1e3 * held.down_velocity_mps
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.5))
+    final_name = "final model (" + (", ".join(v.label for v in result.accepted) or "= base") + ")"
+    for ax, measured, b, a, label in ((axes[0], held.on_velocity, before.on_velocity, after.on_velocity, "on-velocity (MIDI)"),
+                                      (axes[1], 1e3 * held.hold_midi_s, 1e3 * before.hold_s, 1e3 * after.hold_s, "hold (ms)")):
+        ax.plot(speed, measured, "o", ms=4, color="black", label="measured")
+        ax.plot(speed, b, "x", ms=4, color="tab:grey", label="base model")
+        ax.plot(speed, a, "+", ms=5, color="tab:red", label=final_name)
+        ax.set_xlabel("commanded down speed (mm/s)")
+        ax.set_ylabel(label)
+    axes[0].legend(fontsize=7)
+    fig.tight_layout()
+    return figure_html(fig, "Held-out keystrokes: measured MIDI outcome against the base and final models")
 
 
 def _gap_figure(result: DiscoveryResult) -> str:
-    labels = ["base"] + [it.accepted.effect for it in result.iterations if it.accepted]
-    gaps = [result.iterations[0].before.gap.primary] + [
-        it.after.gap.primary for it in result.iterations if it.accepted and it.after
-    ]
-    name = result.iterations[0].before.gap.primary_name
-    scale, unit = (1e3, "mm") if name == "position_m" else (1.0, "MIDI velocity")
+    labels = ["base"] + [v.label for v in result.accepted]
+    gaps = [result.gap_before] + [v.gap_after for v in result.accepted]
+    position = math.isfinite(result.gap_before.position_m)
+    values = [1e3 * g.position_m if position else g.on_velocity for g in gaps]
     fig, ax = plt.subplots(figsize=(6, 3))
-    ax.bar(range(len(gaps)), [scale * g for g in gaps], color="tab:blue")
-    ax.set_xticks(range(len(gaps)), labels, rotation=20)
-    ax.set_ylabel(f"held-out systematic ({unit})")
-    return figure_html(fig, "Held-out gap after each accepted effect")
+    ax.bar(range(len(values)), values, color="tab:blue", label="held-out systematic error")
+    if position:
+        ax.axhline(1e3 * result.gap_before.sigma_m, color="tab:grey", ls=":", label="noise σ")
+    ax.set_xticks(range(len(values)), labels, rotation=20)
+    ax.set_ylabel("held-out systematic error (" + ("mm" if position else "MIDI velocity") + ")")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    return figure_html(fig, "Held-out gap of the base model and after each accepted effect")
 
 
-def build_discover_report(
-    result: DiscoveryResult, path: Path, *, model_path: Path | None = None
-) -> Path:
+def build_discover_report(result: DiscoveryResult, path: Path, *, model_path: Path | None = None) -> Path:
     """Write the HTML report of a discovery run."""
     summary = Section("Decision")
     for line in result.decision_line.splitlines():
         summary.add(paragraph(line))
     summary.add(paragraph(f"Verdict: {result.verdict}"))
-    summary.add(
-        paragraph(
-            f"{result.n_train} training and {result.n_held_out} held-out keystrokes (split by keystroke, "
-            "stratified by vacuum and speed). A candidate is accepted when its ΔBIC beats the threshold "
-            "(margin, raised by a parametric bootstrap of the fitted model), it shrinks the held-out "
-            "systematic error √(RMS² − σ²) by the stated fraction, and a parameter interval excludes 'off'.",
-            note=True,
-        )
-    )
+    drive = ("the measured arm trace drives the model" if result.mode == "trajectories"
+             else "the commanded presses drive the model (MIDI only)")
+    summary.add(paragraph(
+        f"{result.n_train} training and {result.n_held_out} held-out keystrokes (whole keystrokes, every third of "
+        f"each vacuum level by speed); {drive}. Acceptance: {result.rule.describe()}. ΔIC: Gaussian likelihood "
+        "with each channel's systematic-plus-noise error, on the effective number of independent samples "
+        "(residuals along a keystroke are correlated); above 10 is strong evidence.", note=True))
+    for finding in result.findings:
+        summary.add(paragraph(f"Measured: {finding.text}" + (" (in the model)" if finding.accepted else "")))
     for note in result.notes:
-        summary.add(paragraph(f"Assumed: {note}", note=True))
+        summary.add(paragraph(f"Data: {note}", note=True))
     if model_path is not None:
         summary.add(paragraph(f"Updated model file: {model_path.name}"))
-    sections = [summary, Section("Gap").add(_gap_figure(result))]
+    base = Section("Base model (fitted on the training keystrokes)").add(table_html(params_frame(result)))
+    if result.base_on_bounds:
+        base.add(paragraph("Parameters on a bound are not pinned by these data: " + ", ".join(result.base_on_bounds),
+                           note=True))
+    sections = [summary, base, Section("Held-out gap").add(_gap_figure(result))]
     for it in result.iterations:
-        sec = Section(
-            f"Iteration {it.index + 1}: {it.accepted.effect if it.accepted else 'nothing accepted'}"
-        )
-        sec.add(
-            paragraph(
-                f"ΔBIC threshold {it.threshold:.1f} (bootstrap null ΔBIC: {', '.join(f'{x:.1f}' for x in it.bootstrap_delta_bic) or 'not needed'})"
-            )
-        )
-        sec.add(table_html(candidate_frame(result, it.index), caption="Candidates"))
+        title = it.accepted.label if it.accepted else "nothing accepted"
+        sec = Section(f"Iteration {it.index + 1}: {title}")
+        sec.add(paragraph(f"Held-out gap of the current model: {it.gap_before.text()}."))
+        sec.add(table_html(candidate_frame(result, it.index), caption="Candidates (best ΔIC first)"))
         if it.proposals:
-            props = pd.DataFrame(
-                [{"term": p.term, "family": p.family, "share": p.share} for p in it.proposals]
-            )
-            sec.add(
-                table_html(
-                    props, caption="Sparse regression (STLSQ) on the residual key force: proposals"
-                )
-            )
+            props = pd.DataFrame([{"term": p.term, "family": p.family or "", "share": round(p.share, 3)}
+                                  for p in it.proposals])
+            sec.add(table_html(props, caption="Residual search (sparse regression): best-supported terms"))
         sections.append(sec)
-    phases = phase_frame(result)
-    if not phases.empty:
-        sections.append(Section("Residual by phase (held-out)").add(table_html(phases)))
+    stages = stage_frame(result)
+    if not stages.empty:
+        sections.append(Section("Residual by keystroke stage (held-out)").add(table_html(stages)))
     regions = pd.DataFrame(result.iterations[0].before.regions)
     if not regions.empty:
-        sections.append(
-            Section("Residual by region (held-out, base model)").add(table_html(regions))
-        )
-    sections.append(Section("Worst held-out keystrokes").add(_overlay(result)))
+        sections.append(Section("Residual by parameter region (held-out, base model)").add(table_html(regions)))
+    outcomes = result.iterations[0].before.outcomes
+    if outcomes:
+        sections.append(Section("MIDI outcomes (held-out, base model)").add(
+            table_html(pd.DataFrame([{"measure": k, "value": v} for k, v in outcomes.items()]))))
+    sections.append(Section("Held-out keystrokes").add(_overlay(result)))
     return write_page(path, "pianobot discover", sections, subtitle=result.verdict)

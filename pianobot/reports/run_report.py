@@ -16,8 +16,8 @@ import numpy as np
 import pandas as pd
 
 import pianobot
-from pianobot.analysis.identify import simulate_batch
-from pianobot.analysis.identify_run import load_batch
+from pianobot.analysis.greybox.load import load_batch
+from pianobot.analysis.identify.fit import simulate_batch
 from pianobot.errors import InputError
 from pianobot.physics.model import read_model_file
 from pianobot.physics.msd import MSDParams

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from pianobot.analysis.predictors import INPUT_COLUMNS
+from pianobot.analysis.learn.predictors import INPUT_COLUMNS
 from pianobot.durations import format_duration
 from pianobot.physics.msd import MSDParams
 from pianobot.reports.style import quantity

@@ -16,7 +16,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
-from pianobot.analysis.segment import STAGE_NAMES, segment_keystroke
+from pianobot.analysis.greybox.phases import STAGE_NAMES, segment_keystroke
 from pianobot.reports.style import percentile_band
 
 FloatArray = npt.NDArray[np.float64]

@@ -9,9 +9,10 @@ import pandas as pd
 import pytest
 from _synthetic_runs import linear_keystrokes
 
-from pianobot.analysis.damping import damping_check, log_decrement, model_modes
-from pianobot.analysis.keystroke_batch import KeystrokeBatch, keystroke_batch
-from pianobot.analysis.readout_fit import fit_readout
+from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
+from pianobot.analysis.greybox.trajectories import keystroke_batch
+from pianobot.analysis.identify.damping import damping_check, log_decrement, model_modes
+from pianobot.analysis.identify.readout import fit_readout
 from pianobot.physics.msd import MSDParams
 from pianobot.physics.piano import PianoParams
 
@@ -45,24 +46,31 @@ def test_no_ringing_gives_none() -> None:
 
 
 def test_readout_recovers_trigger_depth_and_curve() -> None:
-    """Key ramps at known speeds, velocities from a known power law read at 3 mm."""
+    """Keys accelerating at known rates, velocities from a known power law of the speed between
+    two sensors 2 mm apart with the lower one at 3 mm (a two-sensor digital action)."""
     rng = np.random.default_rng(0)
     t = np.arange(0.0, 0.6, 1 / 240)
     speeds = rng.uniform(0.01, 0.06, 40)
-    # The key accelerates: its speed depends on depth, so only the right depth explains the MIDI.
     depth_true, gamma, s_full = 0.003, 1.6, 0.08
-    x2 = np.minimum(np.outer(speeds, t) + 0.5 * np.outer(speeds / 0.05, t**2) * 0.4, 0.009)
-    speed_at_trigger = np.sqrt(speeds**2 + 2 * (speeds / 0.05) * 0.4 * depth_true)
-    velocity = np.clip(np.round(127 * (speed_at_trigger / s_full) ** gamma), 1, 127)
+    # The key accelerates, at a rate of its own: only the right sensors explain the MIDI.
+    accel = rng.uniform(0.05, 0.8, speeds.size)
+    x2 = np.minimum(np.outer(speeds, t) + 0.5 * np.outer(accel, t**2), 0.009)
+
+    def time_at(depth: float) -> np.ndarray:
+        return (-speeds + np.sqrt(speeds**2 + 2 * accel * depth)) / accel
+
+    transit = 0.002 / (time_at(depth_true) - time_at(depth_true - 0.002))
+    velocity = np.clip(np.round(127 * (transit / s_full) ** gamma), 1, 127)
     ids = tuple(f"k{i}" for i in range(speeds.size))
     batch = KeystrokeBatch(ids, np.zeros(speeds.size), t, np.zeros_like(x2), np.full_like(x2, np.nan), x2)
     fit = fit_readout(batch, pd.DataFrame({"trial_id": ids, "on_velocity": velocity}))
     assert fit is not None and fit.n_trials == 40
-    assert fit.trigger_depth_m == pytest.approx(depth_true, abs=0.0005)
-    assert fit.curve_exponent == pytest.approx(gamma, rel=0.1)
-    assert fit.full_scale_speed_mps == pytest.approx(s_full, rel=0.1)
+    assert fit.trigger_depth_m == pytest.approx(depth_true, abs=0.0003)
+    assert fit.curve_exponent == pytest.approx(gamma, rel=0.05)
+    assert fit.full_scale_speed_mps == pytest.approx(s_full, rel=0.05)
+    assert fit.linear_rmse_velocity > 2 * fit.rmse_velocity  # a straight line misreads the curve
     piano = fit.piano(PianoParams())
-    assert piano.upper_sensor_m < fit.trigger_depth_m < piano.lower_sensor_m
+    assert piano.lower_sensor_m == fit.trigger_depth_m and piano.upper_sensor_m < fit.trigger_depth_m
 
 
 def test_readout_needs_sounded_trials() -> None:

@@ -3,69 +3,62 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
+import own_world as ow
 import pytest
-from typer.testing import CliRunner
+from cli_runner import invoke_cli
 
-from pianobot.analysis import discover_scenarios as sc
-from pianobot.analysis.discover_decide import family_of
-from pianobot.cli import _register, app
-from pianobot.physics.model import load_model, save_model
+from pianobot.analysis.discover.candidates import family_of
+from pianobot.physics.model import load_model
 
-
-@pytest.fixture(scope="module")
-def cli() -> CliRunner:
-    _register()
-    return CliRunner()
+Run = tuple[pytest.CaptureFixture[str], pytest.MonkeyPatch]
 
 
-def test_discover_names_several_effects_one_by_one(cli: CliRunner, tmp_path: Path) -> None:
-    """Keybed + friction + mocap clock offset hidden at once: each iteration names one more."""
+@pytest.fixture
+def cli(capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> Run:
+    return capsys, monkeypatch
+
+
+def test_discover_names_two_effects_one_by_one(cli: Run, tmp_path: Path) -> None:
+    """An end stop and friction hidden at once: each iteration names one more, the gap shrinks
+    each time, and the report reads as evidence (mm, flagged bounds, named overlays)."""
     data = tmp_path / "data"
-    scenario = sc.reduced(sc.several(seed=61))
-    run_id = sc.write_run(sc.generate(scenario), data)
-    start = tmp_path / "start.json"
-    save_model(scenario.start, start)
+    run_id = ow.write_run(ow.reduced(ow.several(seed=61)), data)
     report = tmp_path / "discover.html"
-    result = cli.invoke(
-        app,
-        [
-            "discover",
-            run_id,
-            "--data",
-            str(data),
-            "--model",
-            str(start),
-            "--json",
-            "--out",
-            str(report),
-        ],
-    )
-    assert result.exit_code == 0, result.output
-    payload = json.loads(result.stdout)
-    assert set(payload) >= {"iterations", "verdict"}
+    code, out, err = invoke_cli(["discover", run_id, "--data", str(data), "--json", "--out", str(report)], *cli)
+    assert code == 0, err
+    payload = json.loads(out)
+    assert payload["mode"] == "trajectories"
     iterations = payload["iterations"]
-    assert all(
-        {"accepted_effect", "candidates", "gap_before", "gap_after"} <= set(it) for it in iterations
-    )
     named = [it["accepted_effect"] for it in iterations if it["accepted_effect"]]
-    assert len(named) >= 2 and len(set(named)) == len(named)
-    assert {family_of(e) for e in named} >= {family_of("keybed"), family_of("key_friction")}
+    assert {family_of(e) for e in named} == {"key_stop", "key_action"}
     assert iterations[-1]["accepted_effect"] is None  # the loop stops when nothing passes
     for it in iterations[:-1]:
-        assert it["gap_after"]["primary"] < it["gap_before"]["primary"]
-    total = iterations[0]["gap_before"]["primary"] / iterations[-1]["gap_after"]["primary"]
-    assert total > 5
+        assert it["gap_after"]["position_m"] < it["gap_before"]["position_m"]
+    # The criterion is on a readable scale, not 10¹⁰.
+    assert all(abs(c["delta_ic"]) < 1e6 for it in iterations for c in it["candidates"])
+    assert payload["measured_effects"] == ["arm_acceleration"]  # the arm log, not the key
     html = report.read_text()
-    assert all(f"Missing effect: {e}" in html for e in named)
+    assert "Missing effect:" in html and " mm" in html and "dashed base model" in html
     model = load_model(payload["model_file"])
-    assert set(named) <= set(model.effects.names)
+    assert set(named) <= set(model.effects.names) and "arm_acceleration" in model.effects
 
 
-def test_discover_bad_input_is_one_line_exit_2(cli: CliRunner, tmp_path: Path) -> None:
+def test_discover_bad_input_is_one_line_exit_2(cli: Run, tmp_path: Path) -> None:
     data = tmp_path / "data"
     data.mkdir()
-    result = cli.invoke(app, ["discover", "nope", "--data", str(data), "--json"])
-    assert result.exit_code != 0
-    assert result.exception is None or "Traceback" not in result.output
+    code, out, err = invoke_cli(["discover", "nope", "--data", str(data), "--json"], *cli)
+    assert code == 2 and len(err.strip().splitlines()) == 1
+    assert "Traceback" not in err
+
+
+def test_gap_json_has_metres_and_millimetres(cli: Run, tmp_path: Path) -> None:
+    data = tmp_path / "data"
+    run_id = ow.write_run(ow.reduced(ow.control("clean", seed=33), n_speeds=3), data)
+    code, out, err = invoke_cli(["discover", run_id, "--data", str(data), "--json"], *cli)
+    assert code == 0, err
+    gap = json.loads(out)["gap_before"]
+    assert math.isclose(gap["position_mm"], 1e3 * gap["position_m"])
+    assert json.loads(out)["accepted_effects"] == []

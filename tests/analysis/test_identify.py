@@ -10,16 +10,17 @@ import numpy as np
 import pytest
 from _synthetic_runs import linear_keystrokes, linear_sweep
 
-from pianobot.analysis.identify import (
+from pianobot.analysis.greybox.forward import model_window
+from pianobot.analysis.greybox.load import load_keystrokes
+from pianobot.analysis.greybox.trajectories import keystroke_batch
+from pianobot.analysis.identify.fit import (
     identify_trajectories,
     rms_x2_m,
     simulate_batch,
     split_holdout,
 )
-from pianobot.analysis.identify_forward import model_window
-from pianobot.analysis.identify_run import identify_runs, load_batch_trials
-from pianobot.analysis.keystroke_batch import keystroke_batch
-from pianobot.analysis.static_stiffness import force_log_levels, static_stiffness_from_logs
+from pianobot.analysis.identify.run import identify_runs
+from pianobot.analysis.identify.static_stiffness import force_log_levels, static_stiffness_from_logs
 from pianobot.errors import InputError
 from pianobot.physics.linear import peak_response
 from pianobot.physics.msd import MSDParams
@@ -74,7 +75,7 @@ def test_intervals_cover_the_truth_over_sweeps_with_hover(hover_sweep: tuple[Pat
     runs = [run] + [linear_sweep(data, seed=seed, truth=TRUTH) for seed in (21, 22, 23)]
     covered = []
     for r in runs:
-        for e in identify_trajectories(load_batch_trials([r], data)[0], coupling="tied").estimates:
+        for e in identify_trajectories(load_keystrokes([r], data).batch, coupling="tied").estimates:
             truth = _truth_value(e.name)
             if not math.isnan(truth):
                 covered.append(e.ci95[0] <= truth <= e.ci95[1])
@@ -85,7 +86,7 @@ def test_identify_a_finger_that_lets_go_of_the_key(data_dir: Path) -> None:
     """A real finger pushes and never pulls: after lift-off the key returns on its own while the
     study's bilateral spring would drag it up. Identification fits up to lift-off only."""
     run = linear_sweep(data_dir, seed=12, truth=TRUTH, effects=("contact",), speeds_mps=(0.04, 0.06), repeats=1)
-    batch, _, _ = load_batch_trials([run], data_dir)
+    batch = load_keystrokes([run], data_dir).batch
     window = model_window(batch)
     assert np.all(window < np.isfinite(batch.x2_m).sum(axis=1) - 10)  # the release is left out ...
     assert np.all(batch.x2_m[np.arange(batch.n), window] > 0.0)  # ... not the press
@@ -100,7 +101,7 @@ def test_identify_a_finger_that_lets_go_of_the_key(data_dir: Path) -> None:
 
 def test_forward_model_leaves_the_key_at_rest_until_the_finger_touches(hover_sweep: tuple[Path, str]) -> None:
     data, run = hover_sweep
-    batch, _, _ = load_batch_trials([run], data)
+    batch = load_keystrokes([run], data).batch
     assert np.all(batch.distance_m == 0.05)
     x1, x2 = simulate_batch(batch, TRUTH)
     for i in range(batch.n):
@@ -121,7 +122,7 @@ def test_batch_keeps_each_keystrokes_frames_and_its_gap(hover_sweep: tuple[Path,
 
     data, run = hover_sweep
     stored = load_run(run, data)
-    batch, _, _ = load_batch_trials([run], data)
+    batch = load_keystrokes([run], data).batch
     mocap = stored.samples[stored.samples["source"] == "mocap"]
     for i in (0, batch.n - 1):
         frames = mocap[mocap["trial_id"] == batch.trial_id[i].split("/", 1)[1]].sort_values("t_s")
@@ -248,18 +249,22 @@ def test_identify_writes_readout_and_damping_into_the_model_file(data_dir: Path,
 
     from _synthetic_runs import write_run
 
-    from pianobot.analysis.features import keystroke_features
+    from pianobot.analysis.greybox.phases import first_crossing_s
 
     trials, samples = linear_keystrokes(TRUTH, seed=4, speeds_mps=(0.01, 0.02, 0.03, 0.04, 0.05))
-    speed = {tid: keystroke_features(g.t_s.to_numpy(), g.x2_m.to_numpy(), trigger_depth_m=0.001).key_speed_at_trigger_mps
-             for tid, g in samples.groupby("trial_id")}
+    # A two-sensor piano: the key's time from 0.3 mm to its trigger at 1.2 mm sets the velocity
+    # (sensors this shallow keep the fit's 2 mm spacing at a quarter of the depth).
+    speed = {}
+    for tid, g in samples.groupby("trial_id"):
+        t, x2 = g.t_s.to_numpy(), g.x2_m.to_numpy() - g.x2_m.to_numpy()[0]
+        speed[tid] = 0.0009 / (first_crossing_s(t, x2, 0.0012) - first_crossing_s(t, x2, 0.0003))
     trials["on_velocity"] = [float(np.clip(np.round(127 * (speed[t] / 0.05) ** 1.5), 1, 127)) for t in trials.trial_id]
     run = write_run(data_dir, trials, samples)
     result = identify_runs([run], data_dir, out=tmp_path / "m.json", bootstrap=0, coupling="tied")
-    assert result.readout is not None and result.readout.trigger_depth_m == pytest.approx(0.001, abs=0.0004)
+    assert result.readout is not None and result.readout.trigger_depth_m == pytest.approx(0.0012, abs=0.0002)
     model = json.loads((tmp_path / "m.json").read_text())
     piano = model["model"]["piano"]
-    assert piano["upper_sensor_m"] < result.readout.trigger_depth_m < piano["lower_sensor_m"]
+    assert piano["upper_sensor_m"] < result.readout.trigger_depth_m == piano["lower_sensor_m"]
     assert model["model"]["effects"]["velocity_curve"]["curve_exponent"] == pytest.approx(1.5, rel=0.15)
     assert model["provenance"]["readout"]["n_trials"] == int(trials["on_velocity"].notna().sum()) >= 5
     assert "damping_check" in model["provenance"]
@@ -269,7 +274,7 @@ def test_arm_log_is_put_on_the_mocap_clock(data_dir: Path) -> None:
     """Motion capture lagging the arm's clock by 4 ms would read as a slow fingertip (0.24 mm at
     60 mm/s); the batch overlays the two arm traces and shifts the arm log onto the mocap clock."""
     run = linear_sweep(data_dir, seed=6, truth=TRUTH, mocap_lag_s=0.004, repeats=1)
-    batch = load_batch_trials([run], data_dir)[0]
+    batch = load_keystrokes([run], data_dir).batch
     assert batch.clock_offset_s == pytest.approx(0.004, abs=3e-6) and 0 < batch.clock_offset_se_s < 3e-6
     fit = identify_trajectories(batch, coupling="tied")
     assert fit.rms_m < 4.5e-6
@@ -278,13 +283,13 @@ def test_arm_log_is_put_on_the_mocap_clock(data_dir: Path) -> None:
 
 def test_damping_check_reads_the_key_ringing_during_a_hold(data_dir: Path) -> None:
     """With a finger that lets go, the key rings freely only while the arm holds at the bottom."""
-    from pianobot.analysis.damping import damping_check
+    from pianobot.analysis.identify.damping import damping_check
 
     run = linear_sweep(data_dir, seed=4, truth=TRUTH, effects=("contact",), hold_s=0.5, levels_kpa=(-40.0,),
                        repeats=1)
-    check = damping_check(load_batch_trials([run], data_dir)[0], TRUTH)
+    check = damping_check(load_keystrokes([run], data_dir).batch, TRUTH)
     assert check is not None and len(check.ringing) == 4
     assert check.frequency_hz == pytest.approx(check.model_frequency_hz, rel=0.05)
     assert check.zeta == pytest.approx(check.model_zeta, rel=0.15)
     no_hold = linear_sweep(data_dir, seed=5, truth=TRUTH, effects=("contact",), levels_kpa=(-40.0,), repeats=1)
-    assert damping_check(load_batch_trials([no_hold], data_dir)[0], TRUTH) is None  # the key just rests
+    assert damping_check(load_keystrokes([no_hold], data_dir).batch, TRUTH) is None  # the key just rests

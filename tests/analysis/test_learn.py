@@ -9,8 +9,13 @@ import pandas as pd
 import pytest
 from _synthetic_runs import sounded_trials
 
-from pianobot.analysis.learn import LearnedPredictor, cross_validate, save_predictor, training_set
-from pianobot.analysis.predictors import StrokePredictor, load_predictor
+from pianobot.analysis.learn.predictors import StrokePredictor, load_predictor
+from pianobot.analysis.learn.training import (
+    LearnedPredictor,
+    cross_validate,
+    save_predictor,
+    training_set,
+)
 from pianobot.errors import InputError
 
 
@@ -65,7 +70,7 @@ def test_wrong_schema_and_tampered_file(tmp_path: Path) -> None:
 
 
 def test_fit_on_study_soft_finger_logs(zhang2022: Path, data_dir: Path) -> None:
-    from pianobot.analysis.fit_run import fit_runs
+    from pianobot.analysis.learn.run import fit_runs
     from pianobot.io.importers import import_keystroke_log
 
     logs = sorted((zhang2022 / "data" / "soft" / "ctrl_midi").glob("*.txt"))

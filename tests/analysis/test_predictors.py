@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pianobot.analysis.predictors import (
+from pianobot.analysis.learn.predictors import (
     OUTPUT_COLUMNS,
     PhysicsPredictor,
     StrokePredictor,

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from pianobot.analysis.features import keystroke_features
-from pianobot.analysis.segment import STAGE_NAMES, segment_keystroke
+from pianobot.analysis.greybox.features import keystroke_features
+from pianobot.analysis.greybox.phases import STAGE_NAMES, segment_keystroke
 from pianobot.physics.linear import simulate_linear
 from pianobot.physics.msd import MSDParams
 from pianobot.physics.trajectory import Press, sample_presses

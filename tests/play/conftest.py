@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from play_reference import TruthTable, strokes, truth_table
 
-from pianobot.analysis.learn import LearnedPredictor, training_set
+from pianobot.analysis.learn.training import LearnedPredictor, training_set
 from pianobot.run import run_sweep
 from pianobot.store import load_run
 

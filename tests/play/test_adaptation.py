@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pianobot.analysis.learn import LearnedPredictor
+from pianobot.analysis.learn.training import LearnedPredictor
 from pianobot.io.midifile import write_song
 from pianobot.physics.msd import MSDParams
 from pianobot.physics.trajectory import Press, press_duration_s

@@ -4,7 +4,7 @@ Whole sequences are held out (`GroupKFold` on the sequence), so a model never se
 stroke's neighbours. On the same folds:
 
 - `per-note gp` (and any other per-note kind of `pianobot fit`): the per-note model, fitted on
-  the per-note inputs (`pianobot.analysis.predictors.INPUT_COLUMNS`) that vary;
+  the per-note inputs (`pianobot.analysis.learn.predictors.INPUT_COLUMNS`) that vary;
 - `sequence k=0`: the sequence model's own learner without context (the stroke's own
   controls, including a log's sideways move): the difference to k ≥ 1 is the value of context;
 - `sequence k=1…`: with the last k strokes.
@@ -25,8 +25,8 @@ import numpy.typing as npt
 import pandas as pd
 from sklearn.model_selection import GroupKFold
 
-from pianobot.analysis.learn_models import make_regressor
-from pianobot.analysis.predictors import INPUT_COLUMNS
+from pianobot.analysis.learn.models import make_regressor
+from pianobot.analysis.learn.predictors import INPUT_COLUMNS
 from pianobot.analysis.sequence.model import MIN_TARGET_ROWS, SequenceModel
 from pianobot.analysis.sequence.strokes import TARGETS, StrokeTable
 from pianobot.errors import InputError

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from pianobot.analysis.fit_run import load_trials
+from pianobot.analysis.learn.run import load_trials
 from pianobot.analysis.sequence.evaluate import DEFAULT_KS, cross_validate_sequence
 from pianobot.analysis.sequence.files import save_sequence_model
 from pianobot.analysis.sequence.model import SequenceModel

@@ -21,7 +21,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
-from pianobot.analysis.predictors import INPUT_COLUMNS
+from pianobot.analysis.learn.predictors import INPUT_COLUMNS
 from pianobot.errors import InputError
 
 FloatArray = npt.NDArray[np.float64]

@@ -1,0 +1,141 @@
+"""Which effects discovery tries, in which forms, from which starting points.
+
+A candidate is the base model plus one effect of `physics.effects` in one of its forms. Every
+form the vocabulary has is a candidate of its own, so a family is tried in shapes that bracket
+what a real mechanism may be: an end stop as a linear spring-damper and as a Hunt–Crossley
+(force ∝ indentation^1.5) contact, friction as Coulomb and as Stribeck (breakaway above the
+sliding force), a stiffening finger as cubic and as exponential. A stop of another power, a
+LuGre friction or a power-law finger sits between or near these, and the family is named by the
+form that explains it best.
+
+What the data can judge decides the list:
+
+- with the arm measured, the model is driven by the arm trace: arm-side effects (`arm_lag`,
+  `arm_acceleration`) are judged against that trace (`measured.py`), never inferred from the
+  key; the mocap clock offset is measured against the arm log, and the piano's velocity map
+  against the measured key speed;
+- with MIDI only, everything acts through the outcomes, arm-side and readout effects included;
+- `stiffness_drift` changes nothing a single model predicts (its drift is random per block).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
+from pianobot.analysis.greybox.layout import Layout, Param, effect_params
+from pianobot.physics.effects import EFFECT_NAMES, EFFECTS
+from pianobot.physics.model import KeystrokeModel
+
+#: Effects that act on the finger or the key (judged through the trajectories or the outcomes).
+KEY_SIDE: tuple[str, ...] = ("contact", "keybed", "key_preload", "key_friction", "finger_stiffening",
+                             "adhesion", "letoff")
+#: Effects on the arm's motion: judged against a measured arm trace when there is one.
+ARM_SIDE: tuple[str, ...] = ("arm_lag", "arm_acceleration")
+
+# Effects that are alternative explanations of the same observation; naming any member counts
+# as naming the family (e.g. a trapezoid input and a lagging arm both delay the key).
+FAMILIES: dict[str, str] = {
+    "contact": "contact", "adhesion": "contact", "keybed": "key_stop", "letoff": "key_stop",
+    "key_preload": "key_action", "key_friction": "key_action", "finger_stiffening": "finger",
+    "stiffness_drift": "finger", "arm_lag": "arm", "arm_acceleration": "arm", "velocity_curve": "piano",
+    "mocap_delay": "mocap",
+}
+
+
+def family_of(effect: str | None) -> str | None:
+    """The family an effect belongs to (itself when unlisted)."""
+    return None if effect is None else FAMILIES.get(effect, effect)
+
+
+@dataclass(frozen=True)
+class CandidateSpec:
+    """One effect in one form."""
+
+    effect: str
+    form: str
+
+    @property
+    def label(self) -> str:
+        """`effect` or `effect/form` when the effect has several forms."""
+        return self.effect if len(EFFECTS[self.effect].forms) == 1 else f"{self.effect}/{self.form}"
+
+    @property
+    def family(self) -> str | None:
+        return family_of(self.effect)
+
+
+def candidates(model: KeystrokeModel, batch: KeystrokeBatch) -> list[CandidateSpec]:
+    """Every (effect, form) the model lacks that these data can judge (module docstring)."""
+    trajectories = batch.has_motion
+    out = []
+    for effect in EFFECT_NAMES:
+        if effect in model.effects or effect in ("stiffness_drift", "mocap_delay"):
+            continue
+        if trajectories and (effect in ARM_SIDE or effect == "velocity_curve"):
+            continue  # judged against the measurement itself (measured.py)
+        if not trajectories and effect == "velocity_curve" and not batch.has_midi:
+            continue
+        if effect == "adhesion" and "contact" not in model.effects:
+            continue  # a pull-off force needs a contact that can open; contact comes first
+        for form in EFFECTS[effect].forms:
+            out.append(CandidateSpec(effect, form))
+    return out
+
+
+def candidate_params(spec: CandidateSpec, batch: KeystrokeBatch) -> list[Param]:
+    """The effect's free parameters; depths start inside the key travel the data show."""
+    start: dict[str, float] = {}
+    travel = _travel_m(batch)
+    if travel is not None:
+        start = {"bed_depth_m": 0.85 * travel, "letoff_depth_m": 0.7 * travel}
+    return effect_params(spec.effect, spec.form, start)
+
+
+def _travel_m(batch: KeystrokeBatch) -> float | None:
+    """A high quantile of the measured key travel (None without trajectories)."""
+    if not batch.has_motion:
+        return None
+    peaks = np.nanmax(np.where(np.isfinite(batch.x2_m), batch.x2_m, -np.inf), axis=1)
+    peaks = peaks[np.isfinite(peaks) & (peaks > 0)]
+    return float(np.quantile(peaks, 0.9)) if peaks.size else None
+
+
+def start_points(layout: Layout, spec: CandidateSpec, batch: KeystrokeBatch) -> list[dict[str, float]]:
+    """Starting values of the effect's parameters worth trying (each costs one simulation).
+
+    The effect's size (the parameter with an "off" value) is started across its range: a
+    stick/slip or stick/release switch makes the error jump, and a local fit from one start can
+    stall on the wrong step. An end stop or escapement the key never reaches has no gradient,
+    so their depths are also started across the key travel actually measured (or across their
+    bounds without trajectories).
+    """
+    params = [p for p in layout.params if p.group == spec.effect]
+    size = next((p for p in params if p.off is not None), None)
+    sizes: list[dict[str, float]] = [{}]
+    if size is not None:
+        lo, hi = size.to_internal(max(size.lower, 1e-9)), size.to_internal(size.upper)
+        for fraction in (0.05, 0.2, 0.45, 0.8):
+            value = size.from_internal(lo + fraction * (hi - lo))
+            if value != size.off:
+                sizes.append({size.name: value})
+    depth = next((p for p in params if p.name.endswith(("bed_depth_m", "letoff_depth_m"))), None)
+    if depth is None:
+        return sizes
+    travel = _travel_m(batch)
+    depths = ([f * travel for f in (0.5, 0.7, 0.85, 0.97)] if travel is not None
+              else list(np.linspace(depth.lower, depth.upper, 6)[1:-1]))
+    return [{depth.name: min(max(d, depth.lower), depth.upper), **s} for d in depths for s in sizes]
+
+
+def size_params(layout: Layout, effect: str) -> list[Param]:
+    """The parameters of `effect` with an "off" value (what its confidence interval is judged on)."""
+    return [p for p in layout.params if p.group == effect and p.off is not None]
+
+
+def describe(specs: Sequence[CandidateSpec]) -> str:
+    """A short list for progress notes."""
+    return ", ".join(s.label for s in specs)

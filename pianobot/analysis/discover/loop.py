@@ -1,0 +1,217 @@
+"""`pianobot discover`: find where simulation and measurement disagree, name the missing effect.
+
+The loop (DESIGN.md, "Discovery"):
+
+1. split the keystrokes into training and held-out ones (`greybox.split`);
+2. check what is measured directly (`measured.py`): the arm's acceleration and lag against the
+   arm trace, the mocap clock against the arm log, the piano's velocity map against the key;
+3. fit the base model on the training keystrokes as identification does (`search.base_fit`),
+   so that a wrong stiffness is never mistaken for missing physics;
+4. localise the disagreement on the held-out keystrokes (`localise.py`);
+5. fit every candidate effect the model lacks (`candidates.py`, `search.py`), judge each with
+   the calibrated rule (`decide.py`), accept the best that passes, and repeat with it in the
+   model until nothing passes;
+6. when nothing passes but the held-out error is above the noise, the sparse residual search
+   names the best-supported term and the discrepancy is reported as unexplained.
+
+Candidate fits are independent pieces of work, run through `mapper` (default: one after the
+other), which is what a parallel executor replaces.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from pianobot.analysis.discover import search
+from pianobot.analysis.discover.candidates import CandidateSpec, candidates, size_params
+from pianobot.analysis.discover.decide import Rule, Verdict, choose, something_to_explain, verdict
+from pianobot.analysis.discover.localise import localise
+from pianobot.analysis.discover.measured import Finding, arm_checks, clock_check, readout_check
+from pianobot.analysis.discover.result import DiscoveryResult, Iteration, verdict_text
+from pianobot.analysis.discover.search import Evaluated, Setting
+from pianobot.analysis.discover.sparse import Proposal, outcome_proposals, trajectory_proposals
+from pianobot.analysis.greybox.fitter import GreyBoxFit
+from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
+from pianobot.analysis.greybox.pieces import Mapper, serial_map
+from pianobot.analysis.greybox.split import holdout_indices
+from pianobot.analysis.identify.fit import rms_x2_m
+from pianobot.physics.model import KeystrokeModel
+from pianobot.progress import NO_PROGRESS, Progress
+
+Z95 = 1.959963984540054
+
+
+@dataclass(frozen=True)
+class Settings:
+    """Knobs of the discovery loop; the defaults are what the benchmark suites run."""
+
+    rule: Rule = field(default_factory=Rule)
+    holdout_every: int = 3  # every 3rd keystroke (per level, by speed) is held out
+    max_iterations: int = 3
+    joint_refits: int = 3  # candidates refitted jointly with the base after screening
+    seed: int = 0
+
+
+def _intervals(fit: GreyBoxFit, names: Sequence[str]) -> dict[str, tuple[float, float]]:
+    """95 % intervals of named parameters from the fitter's covariance."""
+    cov = fit.covariance()
+    out = {}
+    for name in names:
+        j = fit.layout.names.index(name)
+        p = fit.layout.params[j]
+        sd = math.sqrt(max(float(cov[j, j]), 0.0))
+        u = float(fit.theta_[j])
+        out[name] = (p.from_internal(u - Z95 * sd), p.from_internal(u + Z95 * sd)) if sd < 50 else (-math.inf, math.inf)
+    return out
+
+
+def _verdict(e: Evaluated, current: Evaluated, rule: Rule, with_intervals: bool) -> Verdict:
+    spec = e.spec
+    assert spec is not None
+    names = [p.name for p in e.fit.layout.params if p.group == spec.effect]
+    intervals = _intervals(e.fit, names) if with_intervals and names else {}
+    sizes = size_params(e.fit.layout, spec.effect)
+    excludes = True
+    if sizes and intervals:
+        excludes = any(not (intervals[p.name][0] <= (p.off or 0.0) <= intervals[p.name][1]) for p in sizes)
+    elif sizes:
+        excludes = False  # not computed: judged only when the other conditions hold
+    return verdict(spec.label, spec.effect, spec.form, {n: e.fit.params_[n] for n in names}, intervals,
+                   tuple(n for n in e.fit.on_bounds_ if n in names), current.ic - e.ic, current.gap, e.gap,
+                   excludes, e.joint)
+
+
+def _promising(v: Verdict, rule: Rule) -> bool:
+    return v.delta_ic > rule.ic_margin and v.shrink >= rule.min_shrink and v.consistency >= rule.min_consistency
+
+
+def _iterate(setting: Setting, current: GreyBoxFit, start: KeystrokeModel, settings: Settings, sigma_m: float,
+             index: int, progress: Progress, mapper: Mapper) -> tuple[Iteration, GreyBoxFit | None]:
+    rule = settings.rule
+    criterion = search.criterion_of(current)
+    reference = search.evaluate(setting, current, criterion, sigma_m, "current", None)
+    explainable = something_to_explain(reference.gap, rule)
+    held_fit = GreyBoxFit(setting.held_drive, current.layout, channels=current.channels,
+                          sigma=current.sigma).evaluate(current.theta_)
+    before = localise(held_fit, sigma_m)
+    specs = candidates(current.model_, setting.train)
+    total = len(specs) + min(settings.joint_refits, len(specs))
+    with progress.task(f"discover, iteration {index + 1}: candidate fits", total=total) as task:
+        def screen_one(spec: CandidateSpec) -> Evaluated:
+            screened = search.screen(setting, current, spec)
+            full = search.as_full(setting, current, spec, screened)
+            return search.evaluate(setting, full, criterion, sigma_m, spec.label, spec, joint=False)
+
+        evaluated = []
+        for e in mapper(screen_one, specs):  # progress advances here, as results come back
+            evaluated.append(e)
+            task.advance(note=e.label)
+        ranked = sorted(evaluated, key=lambda e: e.ic)[: settings.joint_refits]
+
+        def refit(e: Evaluated) -> Evaluated:
+            assert e.spec is not None
+            fit = search.joint(setting, current, e.spec, e.fit, start)
+            joint = search.evaluate(setting, fit, criterion, sigma_m, e.label, e.spec)
+            return joint if joint.ic <= e.ic else e
+
+        refitted = {}
+        for e in mapper(refit, ranked):
+            refitted[e.label] = e
+            task.advance(note=f"{e.label} (joint)")
+    final = [refitted.get(e.label, e) for e in evaluated]
+    verdicts = [_verdict(e, reference, rule, False) for e in final]
+    # Intervals (a central Jacobian and noise draws each) only where the rest of the rule holds.
+    verdicts = [_verdict(e, reference, rule, True) if _promising(v, rule) else v for e, v in zip(final, verdicts, strict=True)]
+    accepted, judged = choose(verdicts, rule, explainable)
+    chosen = next((e.fit for e in final if accepted is not None and e.label == accepted.label), None)
+    after = None
+    if chosen is not None:
+        after = localise(GreyBoxFit(setting.held_drive, chosen.layout, channels=chosen.channels,
+                                    sigma=chosen.sigma).evaluate(chosen.theta_), sigma_m)
+    return Iteration(index, reference.gap, before, tuple(judged), accepted, after, explainable), chosen
+
+
+def _residual_search(setting: Setting, fit: GreyBoxFit) -> tuple[Proposal, ...]:
+    """The sparse search over what the current model leaves in the training keystrokes."""
+    batch, pred = fit.batch, fit.prediction_
+    if setting.mode == "trajectories":
+        times = batch.t_s[None, :] + batch.t_offset_s[:, None]
+        return trajectory_proposals(times, batch.x0_m, batch.x1_m, batch.x2_m, batch.distance_m, pred.x1_m, pred.x2_m,
+                                    pred.v2_mps, pred.force_n, fit.model_.msd.m2_kg)
+    residual = np.full(batch.n, np.nan)
+    res = fit.residuals_
+    if "on_velocity" in res.values:
+        residual[res.keystroke["on_velocity"]] = res.values["on_velocity"]
+    return outcome_proposals(batch.down_velocity_mps, batch.acceleration_mps2, batch.depth_m, batch.vacuum_kpa, residual)
+
+
+def _with_findings(model: KeystrokeModel, findings: Sequence[Finding]) -> KeystrokeModel:
+    """The model with the effects measured on the set-up switched on (they do not change what the
+    measured-arm drive predicts, but a commanded press, as `play` sends, needs them)."""
+    for f in findings:
+        if f.accepted and f.effect not in model.effects:
+            model = model.replace(effects=model.effects.with_effect(f.effect, form=None, **f.params))
+    return model
+
+
+def discover(batch: KeystrokeBatch, start: KeystrokeModel | None = None, settings: Settings | None = None, *,
+             notes: Sequence[str] = (), progress: Progress = NO_PROGRESS, mapper: Mapper | None = None) -> DiscoveryResult:
+    """Run discovery on a batch (trajectories or MIDI only) from `start` (default: the study's
+    linear model)."""
+    t0 = time.perf_counter()
+    settings = settings or Settings()
+    start = start or KeystrokeModel.study()
+    mapper = mapper or serial_map
+    train_idx, held_idx = holdout_indices(batch, settings.holdout_every, settings.seed)
+    if held_idx.size == 0:
+        raise ValueError(f"cannot split {batch.n} keystrokes into training and held-out ones")
+    setting = Setting.of(batch.subset(train_idx), batch.subset(held_idx))
+    findings: list[Finding] = []
+    if setting.mode == "trajectories":
+        findings += arm_checks(batch)
+        findings += [f for f in (clock_check(batch), readout_check(batch)) if f is not None]
+    timings: dict[str, float] = {}
+    with progress.task("discover: base fit", total=None):
+        base = search.base_fit(setting, start)
+    timings["base_fit_s"] = time.perf_counter() - t0
+    sigma_m = search.held_noise_m(setting, base)
+    held_base = GreyBoxFit(setting.held_drive, base.layout, channels=base.channels, sigma=base.sigma).evaluate(base.theta_)
+    current = base
+    iterations: list[Iteration] = []
+    unexplained: Proposal | None = None
+    for index in range(settings.max_iterations):
+        iteration, chosen = _iterate(setting, current, start, settings, sigma_m, index, progress, mapper)
+        if chosen is None:
+            proposals = _residual_search(setting, current) if iteration.explainable else ()
+            iteration = Iteration(iteration.index, iteration.gap_before, iteration.before, iteration.verdicts,
+                                  None, None, iteration.explainable, proposals)
+            unexplained = next((p for p in proposals if p.family is not None), proposals[0] if proposals else None)
+        iterations.append(iteration)
+        if chosen is None:
+            break
+        current = chosen
+    timings["candidates_s"] = time.perf_counter() - t0 - timings["base_fit_s"]
+    held_final = GreyBoxFit(setting.held_drive, current.layout, channels=current.channels,
+                            sigma=current.sigma).evaluate(current.theta_)
+    last = iterations[-1]
+    final_gap = last.accepted.gap_after if last.accepted else last.gap_before
+    explainable = something_to_explain(final_gap, settings.rule)
+    final_loc = last.after if last.accepted and last.after is not None else last.before
+    text, explained = verdict_text(iterations, findings, final_gap, unexplained if explainable else None,
+                                   explainable, final_loc.worst_stages())
+    if not explainable:
+        unexplained = None
+    base_rms = rms_x2_m(setting.held, base.model_) if setting.mode == "trajectories" else math.nan
+    return DiscoveryResult(
+        mode=setting.mode, iterations=tuple(iterations), findings=tuple(findings), start_model=start,
+        base_model=base.model_, final_model=_with_findings(current.model_, findings), base_params=dict(base.params_),
+        base_on_bounds=base.on_bounds_, verdict=text, explained=explained, rule=settings.rule,
+        n_train=setting.train.n, n_held_out=setting.held.n, held_out=setting.held,
+        predictions_before=held_base.prediction_, predictions_after=held_final.prediction_,
+        base_holdout_rms_x2_m=base_rms, unexplained=unexplained, notes=tuple(notes),
+        seconds=time.perf_counter() - t0, timings=timings)

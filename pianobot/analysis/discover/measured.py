@@ -1,0 +1,217 @@
+"""Effects judged directly against a measurement, never inferred from the key's motion.
+
+When the arm is measured it drives the model, so the key cannot tell anything about the arm;
+instead the arm trace itself is compared with the commanded press:
+
+- `arm_acceleration`: is the measured down move a constant-speed ramp (the study's input) or a
+  trapezoid? One acceleration for every keystroke (the command's), each keystroke's speed,
+  travel and start free; the ramp is the limit a → ∞. Judged by the information criterion.
+- `arm_lag`: when the commanded timing is known (an arm log on the run clock, t = 0 at the
+  commanded motion start, or a lab script's schedule matched to the keystrokes), how late the
+  measured arm follows it; an imported Motive take alone defines t = 0 from the arm marker
+  itself, so there a lag cannot be seen.
+- `mocap_delay`: the motion-capture clock offset against the arm log, estimated when the batch
+  was built from the arm marker seen by both (`trajectories._clock_offset_s`).
+- `velocity_curve`: with the key tracked and MIDI recorded, the piano's key-speed → velocity
+  map is fitted against the measured key speed at the trigger depth (`identify.readout`): a
+  power law or a saturating curve against the straight line through the origin.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import pandas as pd
+from scipy.optimize import least_squares
+
+from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
+from pianobot.analysis.greybox.noise import (
+    VELOCITY_QUANTUM_SIGMA,
+    autocorrelation_time,
+    noise_sigma_m,
+)
+from pianobot.analysis.identify.readout import fit_readout
+
+FloatArray = npt.NDArray[np.float64]
+
+#: ΔIC a measured effect needs (strong evidence, as for candidates).
+MARGIN = 10.0
+#: Accelerations scanned for the arm's trapezoid (m/s²).
+_ACCELERATIONS = np.geomspace(0.03, 30.0, 41)
+#: A lag or clock offset below this is not worth a model effect.
+_MIN_DELAY_S = 1e-3
+
+
+@dataclass(frozen=True)
+class Finding:
+    """One measured check: what was measured, its value, the evidence, and whether it holds."""
+
+    effect: str
+    value: float  # the effect's size (m/s², s)
+    ci95: tuple[float, float]
+    delta_ic: float  # evidence against the effect being absent (ΔIC or value/se-based)
+    accepted: bool
+    text: str
+    params: dict[str, float]  # the effect's parameters, for the model
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"effect": self.effect, "value": self.value, "ci95": list(self.ci95), "delta_ic": self.delta_ic,
+                "accepted": self.accepted, "text": self.text, "params": self.params}
+
+
+def _move_m(t: FloatArray, d: float, v: float, a: float) -> FloatArray:
+    """Distance of a moveL trapezoid (triangle when short; a = inf: ramp) `t` after its start."""
+    if not math.isfinite(a):
+        return np.clip(v * t, 0.0, d)
+    if d < v * v / a:
+        ta = math.sqrt(d / a)
+        v = a * ta
+        tc = 0.0
+    else:
+        ta, tc = v / a, d / v - v / a
+    u1 = np.clip(t, 0.0, ta)
+    u2 = np.clip(t - ta, 0.0, tc)
+    u3 = np.clip(t - ta - tc, 0.0, ta)
+    return 0.5 * a * u1**2 + v * (u2 + u3) - 0.5 * a * u3**2
+
+
+def _down_moves(batch: KeystrokeBatch) -> list[tuple[int, FloatArray, FloatArray]]:
+    """Each keystroke's measured arm from rest to its deepest point (time on the arm's clock),
+    with the keystroke's row."""
+    t = batch.input_t_s - batch.clock_offset_s
+    out = []
+    for i, x in enumerate(batch.input_x0_m):
+        bottom = int(np.argmax(x))
+        travel = float(x[bottom])
+        if travel <= 0:
+            continue
+        start = np.flatnonzero(x[:bottom] < 0.02 * travel)
+        first = int(start[-1]) if start.size else 0
+        lo = max(first - max(int(0.05 / max(t[1] - t[0], 1e-6)), 5), 0)
+        out.append((i, t[lo : bottom + 1], x[lo : bottom + 1]))
+    return out
+
+
+def _fit_move(t: FloatArray, x: FloatArray, a: float, t0_free: bool) -> tuple[FloatArray, float]:
+    """Residual and start time of one down move for a given acceleration (d, v, t0 free)."""
+    d0 = float(np.max(x))
+    moving = np.flatnonzero((x > 0.1 * d0) & (x < 0.9 * d0))
+    v0 = 0.8 * d0 / max(float(t[moving[-1]] - t[moving[0]]), 1e-3) if moving.size > 1 else 0.05
+    t0 = float(t[np.flatnonzero(x > 0.02 * d0)[0]]) - 0.5 * d0 * 0.02 / max(v0, 1e-3) if t0_free else 0.0
+
+    def residual(p: FloatArray) -> FloatArray:
+        start = p[2] if t0_free else 0.0
+        return _move_m(t - start, p[0], p[1], a) - x
+
+    p0 = np.array([d0, v0, t0] if t0_free else [d0, v0])
+    lo = np.array([0.5 * d0, 1e-3, t[0] - 0.5] if t0_free else [0.5 * d0, 1e-3])
+    hi = np.array([1.5 * d0, 5.0, t[-1]] if t0_free else [1.5 * d0, 5.0])
+    res = least_squares(residual, np.clip(p0, lo + 1e-9, hi - 1e-9), bounds=(lo, hi), x_scale="jac", max_nfev=200)
+    return np.asarray(res.fun, dtype=np.float64), float(res.x[2]) if t0_free else 0.0
+
+
+def _refine(ics: list[float], k: int) -> tuple[float, tuple[float, float]]:
+    """Best acceleration and 95 % interval from the scanned criterion: a parabola in log a
+    through the best grid point and its neighbours (−2 log L: the interval is where it rises by
+    3.84, χ²₁)."""
+    u = np.log(_ACCELERATIONS)
+    if k == 0 or k == len(ics) - 1:
+        a = float(_ACCELERATIONS[k])
+        return a, (a, a)
+    c2, c1, _ = np.polyfit(u[k - 1 : k + 2], np.asarray(ics[k - 1 : k + 2]), 2)
+    if not c2 > 0:
+        a = float(_ACCELERATIONS[k])
+        return a, (a, a)
+    centre = float(np.clip(-c1 / (2 * c2), u[k - 1], u[k + 1]))
+    half = math.sqrt(3.84 / c2)
+    return math.exp(centre), (math.exp(centre - half), math.exp(centre + half))
+
+
+def arm_checks(batch: KeystrokeBatch) -> list[Finding]:
+    """`arm_acceleration` and `arm_lag` against the measured arm trace (empty without one)."""
+    if not batch.arm_measured:
+        return []
+    found = _down_moves(batch)
+    moves = [(t, x) for _, t, x in found]
+    rows = np.array([i for i, _, _ in found], dtype=np.intp)
+    if len(moves) < 3:
+        return []
+    # The commanded start is known for a run's own arm log (t = 0) or from a schedule.
+    command = batch.command_start_s
+    timed = bool(np.isfinite(command[rows]).all()) if rows.size else False
+    rss: list[float] = []
+    for a in [math.inf, *_ACCELERATIONS]:
+        rss.append(sum(float(np.sum(_fit_move(t, x, a, True)[0] ** 2)) for t, x in moves))
+    n = sum(t.size for t, _ in moves)
+    noise = noise_sigma_m(np.concatenate([x for _, x in moves]))
+    best = int(np.argmin(rss[1:])) + 1
+    residual = np.concatenate([_fit_move(t, x, _ACCELERATIONS[best - 1], True)[0] for t, x in moves])
+    tau = autocorrelation_time(residual[None, :])
+    n_eff = n / tau
+
+    def ic(value: float, k: int) -> float:
+        return n_eff * math.log(max(value / n, noise**2, 1e-300)) + k * math.log(n_eff)
+
+    a_best, ci = _refine([ic(r, 1) for r in rss[1:]], best - 1)
+    delta = ic(rss[0], 0) - min(ic(r, 1) for r in rss[1:])
+    recorded = batch.acceleration_mps2[np.isfinite(batch.acceleration_mps2)]
+    said = f" (commanded {np.median(recorded):.3g} m/s²)" if recorded.size else ""
+    accepted = delta > MARGIN
+    text = (f"the measured arm accelerates at {a_best:.3g} m/s² [{ci[0]:.3g}, {ci[1]:.3g}]{said}: a trapezoid, not a "
+            f"ramp (ΔIC {delta:.0f})" if accepted else f"the measured arm is as well described by a constant-speed ramp "
+                                                         f"(ΔIC {delta:.1f} for a trapezoid)")
+    out = [Finding("arm_acceleration", a_best, ci, delta, accepted, text, {})]
+    if timed:
+        # Against the command's own profile: its acceleration where recorded (a lag would read
+        # as a gentler acceleration if that were free), started where the command started.
+        a_cmd = float(np.median(recorded)) if recorded.size else a_best
+        starts = np.array([_fit_move(t, x, a_cmd, True)[1] for t, x in moves]) - command[rows]
+        lag = float(np.median(starts))
+        se = float(1.2533 * np.std(starts, ddof=1) / math.sqrt(starts.size)) if starts.size > 1 else math.inf
+        z = lag / se if se > 0 else math.inf
+        lagging = lag > _MIN_DELAY_S and z > 3.0
+        out.append(Finding("arm_lag", lag, (lag - 1.96 * se, lag + 1.96 * se), z * z, lagging,
+                           f"the measured arm starts {1e3 * lag:.1f} ± {1.96e3 * se:.1f} ms after the commanded start"
+                           + ("" if lagging else " (no lag worth modelling)"), {"arm_lag_s": lag}))
+    return out
+
+
+def clock_check(batch: KeystrokeBatch) -> Finding | None:
+    """`mocap_delay` from the clock offset between the arm log and the arm marker (None when the
+    batch's arm trace is the marker itself: then one clock serves both)."""
+    if batch.arm_source != "arm" or not batch.has_motion:
+        return None
+    tau, se = batch.clock_offset_s, batch.clock_offset_se_s
+    z = abs(tau) / se if se > 0 else (math.inf if tau else 0.0)
+    accepted = abs(tau) > _MIN_DELAY_S and z > 3.0
+    return Finding("mocap_delay", tau, (tau - 1.96 * se, tau + 1.96 * se), z * z, accepted,
+                   f"motion capture runs {1e3 * tau:.2f} ± {1.96e3 * se:.2f} ms behind the arm log "
+                   f"(measured on the arm marker{'' if accepted else '; too small to model'})",
+                   {"mocap_delay_s": tau})
+
+
+def readout_check(batch: KeystrokeBatch) -> Finding | None:
+    """`velocity_curve` against the measured key speed at the trigger depth (None without both a
+    tracked key and MIDI, or with too few sounded keystrokes)."""
+    if not (batch.has_motion and batch.has_midi):
+        return None
+    trials = pd.DataFrame({"trial_id": list(batch.trial_id), "on_velocity": batch.on_velocity})
+    fit = fit_readout(batch, trials)
+    if fit is None:
+        return None
+    n = fit.n_trials
+    # The straight line through the origin (γ = 1) at its best full scale, against the power law.
+    rmse_power, rmse_line = fit.rmse_velocity, fit.linear_rmse_velocity
+    if not math.isfinite(rmse_line):
+        return None
+    floor = VELOCITY_QUANTUM_SIGMA**2
+    delta = n * (math.log(max(rmse_line**2, floor)) - math.log(max(rmse_power**2, floor))) - math.log(n)
+    accepted = delta > MARGIN and abs(fit.curve_exponent - 1.0) > 0.05
+    text = (f"measured key speed → MIDI velocity follows a power {fit.curve_exponent:.2f} (RMSE {rmse_power:.2f} "
+            f"against {rmse_line:.2f} MIDI for a straight line; ΔIC {delta:.0f})")
+    return Finding("velocity_curve", fit.curve_exponent, (math.nan, math.nan), delta, accepted, text,
+                   {"curve_exponent": min(max(fit.curve_exponent, 0.5), 4.0), "curve_saturation": 0.0})

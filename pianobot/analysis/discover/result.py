@@ -1,0 +1,187 @@
+"""What discovery reports: each iteration's judgement, the measured checks, the verdict.
+
+Units: positions in the JSON are metres with a millimetre copy (`*_mm`) for reading; every text
+line and table in the report uses mm. The held-out gap ratio is before/after.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from pianobot.analysis.discover.decide import Rule, Verdict
+from pianobot.analysis.discover.gap import Gap
+from pianobot.analysis.discover.localise import Localisation
+from pianobot.analysis.discover.measured import Finding
+from pianobot.analysis.discover.sparse import Proposal
+from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
+from pianobot.analysis.greybox.prediction import Prediction
+from pianobot.physics.model import KeystrokeModel
+
+
+@dataclass(frozen=True)
+class Iteration:
+    """One round: the current model's held-out gap and localisation, every candidate judged."""
+
+    index: int
+    gap_before: Gap
+    before: Localisation
+    verdicts: tuple[Verdict, ...]
+    accepted: Verdict | None
+    after: Localisation | None
+    explainable: bool  # the current model's held-out error is above the noise
+    proposals: tuple[Proposal, ...] = ()  # the residual search, when nothing was accepted
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "index": self.index,
+            "accepted_effect": self.accepted.effect if self.accepted else None,
+            "accepted_form": self.accepted.form if self.accepted else None,
+            "accepted_family": self.accepted.family if self.accepted else None,
+            "gap_before": self.gap_before.to_dict(),
+            "gap_after": (self.accepted.gap_after if self.accepted else self.gap_before).to_dict(),
+            "explainable": self.explainable,
+            "candidates": [v.to_dict() for v in self.verdicts],
+            "residual_search": [{"term": p.term, "family": p.family, "coefficient": p.coefficient, "share": p.share}
+                                for p in self.proposals],
+            "localisation_before": self.before.to_dict(),
+            "localisation_after": None if self.after is None else self.after.to_dict(),
+        }
+
+
+@dataclass(frozen=True)
+class DiscoveryResult:
+    """Everything discovery found, with the model it ends with."""
+
+    mode: str  # "trajectories" (measured arm drives the model) | "midi" (commanded presses)
+    iterations: tuple[Iteration, ...]
+    findings: tuple[Finding, ...]  # checks against the measurements themselves (arm, clock, readout)
+    start_model: KeystrokeModel
+    base_model: KeystrokeModel  # the start model with its base parameters fitted
+    final_model: KeystrokeModel
+    base_params: dict[str, float]
+    base_on_bounds: tuple[str, ...]
+    verdict: str
+    explained: bool
+    rule: Rule
+    n_train: int
+    n_held_out: int
+    held_out: KeystrokeBatch
+    predictions_before: Prediction  # held-out, base model
+    predictions_after: Prediction  # held-out, final model
+    base_holdout_rms_x2_m: float = math.nan  # as identify reports it (x2 only, offsets profiled)
+    unexplained: Proposal | None = None
+    notes: tuple[str, ...] = ()
+    seconds: float = math.nan
+    timings: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def accepted(self) -> tuple[Verdict, ...]:
+        return tuple(it.accepted for it in self.iterations if it.accepted)
+
+    @property
+    def accepted_effects(self) -> tuple[str, ...]:
+        """Accepted effects in the order they were found."""
+        return tuple(v.effect for v in self.accepted)
+
+    @property
+    def measured_effects(self) -> tuple[str, ...]:
+        """Effects established against the measurements (arm, clock, readout) and in the model."""
+        return tuple(f.effect for f in self.findings if f.accepted)
+
+    @property
+    def gap_before(self) -> Gap:
+        return self.iterations[0].gap_before
+
+    @property
+    def gap_after(self) -> Gap:
+        last = self.iterations[-1]
+        return last.accepted.gap_after if last.accepted else last.gap_before
+
+    @property
+    def decision_line(self) -> str:
+        return decision_line(self)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready summary (the `--json` output)."""
+        return {
+            "mode": self.mode,
+            "verdict": self.verdict,
+            "explained": self.explained,
+            "decision": self.decision_line,
+            "accepted_effects": list(self.accepted_effects),
+            "accepted": [{"effect": v.effect, "form": v.form, "family": v.family} for v in self.accepted],
+            "measured": [f.to_dict() for f in self.findings],
+            "measured_effects": list(self.measured_effects),
+            "unexplained_term": None if self.unexplained is None else {
+                "term": self.unexplained.term, "family": self.unexplained.family, "share": self.unexplained.share},
+            "base_params": self.base_params,
+            "base_on_bounds": list(self.base_on_bounds),
+            "base_holdout_rms_x2_m": self.base_holdout_rms_x2_m,
+            "gap_before": self.gap_before.to_dict(),
+            "gap_after": self.gap_after.to_dict(),
+            "rule": self.rule.describe(),
+            "n_train": self.n_train,
+            "n_held_out": self.n_held_out,
+            "notes": list(self.notes),
+            "seconds": self.seconds,
+            "iterations": [it.to_dict() for it in self.iterations],
+            "final_model": self.final_model.to_dict(),
+        }
+
+
+def _params_text(v: Verdict) -> str:
+    parts = []
+    for name, value in v.params.items():
+        lo, hi = v.intervals.get(name, (math.nan, math.nan))
+        short = name.split(".", 1)[1]
+        scale, unit = 1.0, ""
+        if short.endswith("_m"):
+            scale, unit = 1e3, " mm"
+        elif short.endswith("_s"):
+            scale, unit = 1e3, " ms"
+        elif short.endswith("_n"):
+            unit = " N"
+        elif short.endswith("_per_m"):
+            unit = " 1/m"
+        elif short.endswith("_npm"):
+            unit = " N/m"
+        elif short.endswith("_nspm"):
+            unit = " N·s/m"
+        elif short.endswith("_mps"):
+            scale, unit = 1e3, " mm/s"
+        ci = f" [{scale * lo:.3g}, {scale * hi:.3g}]" if math.isfinite(lo) and math.isfinite(hi) else ""
+        flag = " (on bound)" if name in v.on_bounds else ""
+        parts.append(f"{short} = {scale * value:.3g}{unit}{ci}{flag}")
+    return ", ".join(parts)
+
+
+def decision_line(result: DiscoveryResult) -> str:
+    """One line per accepted effect: parameters with 95 % intervals, held-out gap before → after."""
+    lines = []
+    for v in result.accepted:
+        params = _params_text(v)
+        ratio = "to the noise floor" if not math.isfinite(v.ratio) else f"{v.ratio:.1f}×"
+        lines.append(f"Missing effect: {v.label}" + (f" ({params})" if params else "")
+                     + f"; held-out {v.gap_before.text()} → {v.gap_after.text()} ({ratio}); ΔIC {v.delta_ic:.0f}")
+    return "\n".join(lines) if lines else "No missing effect found."
+
+
+def verdict_text(iterations: Sequence[Iteration], findings: Sequence[Finding], final: Gap,
+                 unexplained: Proposal | None, explainable: bool, worst: Sequence[str]) -> tuple[str, bool]:
+    """The closing sentence, and whether what is left is at the noise level."""
+    accepted = [it.accepted.label for it in iterations if it.accepted]
+    text = ("missing effects found: " + ", ".join(accepted)) if accepted else "no missing effect found"
+    measured = [f.effect for f in findings if f.accepted]
+    if measured:
+        text += "; measured on the set-up: " + ", ".join(measured)
+    if not explainable:
+        return text + f"; the remaining held-out error ({final.text()}) is at the noise level (explained)", True
+    where = f" in stages {', '.join(worst)}" if worst else ""
+    hint = ""
+    if unexplained is not None:
+        family = f", family {unexplained.family}" if unexplained.family else ""
+        hint = f"; best-supported residual term: {unexplained.term}{family}"
+    return text + f"; an unexplained discrepancy remains ({final.text()}){where}{hint}", False

@@ -1,0 +1,196 @@
+"""Fitting discovery's models: the base model, and each candidate = the current model + one effect.
+
+Every model is fitted by the one grey-box fitter on the training keystrokes, judged by one
+information criterion (with the current model's effective sample sizes and error levels, so all
+candidates of an iteration stand on one scale) and evaluated on the held-out keystrokes.
+
+- Trajectories: the base fit is identification's (`identify.fit.fit_base`: measured-arm drive,
+  k1 per level, c1, k2, c2, and k0, c0, m1 when the criterion wants them).
+- MIDI only: the commanded drive; the finger and key stiffness, the piano's full-scale speed,
+  trigger and release depths, and the arm's acceleration where it was not recorded.
+
+A candidate is first *screened*: its effect's parameters alone, from the best of several
+starting points (a stick/slip or an end stop the key never reaches has no gradient to follow),
+with the current model fixed; the most promising are then refitted *jointly* with the base
+parameters, so a wrong stiffness is never mistaken for missing physics.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from pianobot.analysis.discover.candidates import CandidateSpec, candidate_params, start_points
+from pianobot.analysis.discover.gap import Gap, held_out_gap
+from pianobot.analysis.greybox.commanded import Commanded
+from pianobot.analysis.greybox.criterion import Criterion
+from pianobot.analysis.greybox.fitter import Drive, GreyBoxFit
+from pianobot.analysis.greybox.forward import MeasuredArm
+from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
+from pianobot.analysis.greybox.layout import Layout, base_layout, model_values
+from pianobot.analysis.identify.fit import fit_base
+from pianobot.physics.model import KeystrokeModel
+
+Mode = Literal["trajectories", "midi"]
+
+#: Iteration limits of the screening and joint fits (function evaluations).
+SCREEN_NFEV = 40
+JOINT_NFEV = 80
+
+
+@dataclass(frozen=True)
+class Setting:
+    """The training and held-out keystrokes with their drives."""
+
+    mode: Mode
+    train: KeystrokeBatch
+    held: KeystrokeBatch
+    train_drive: Drive
+    held_drive: Drive
+
+    @classmethod
+    def of(cls, train: KeystrokeBatch, held: KeystrokeBatch) -> Setting:
+        if train.has_motion:
+            return cls("trajectories", train, held, MeasuredArm.of(train), MeasuredArm.of(held))
+        return cls("midi", train, held, Commanded(train), Commanded(held))
+
+
+@dataclass
+class Evaluated:
+    """One fitted model: its training fit, criterion, held-out gap and (when asked) intervals."""
+
+    label: str
+    spec: CandidateSpec | None
+    fit: GreyBoxFit
+    ic: float
+    gap: Gap
+    joint: bool = True  # refitted with the base parameters (False: screened only)
+    intervals: dict[str, tuple[float, float]] = field(default_factory=dict)
+
+    @property
+    def model(self) -> KeystrokeModel:
+        return self.fit.model_
+
+    @property
+    def n_params(self) -> int:
+        return int(self.fit.theta_.size)
+
+
+def base_fit(setting: Setting, start: KeystrokeModel) -> GreyBoxFit:
+    """The base model fitted on the training keystrokes (see the module docstring)."""
+    train = setting.train
+    if setting.mode == "trajectories":
+        return fit_base(train, start, "auto")
+    commanded = setting.train_drive
+    needs = isinstance(commanded, Commanded) and commanded.needs_acceleration
+    layout = base_layout(start, train.levels_kpa, trajectories=False, readout=True, fit_acceleration=needs)
+    starts = [_scaled_readout(commanded, layout, _with_trigger(layout, f)) for f in (0.2, 0.4, 0.6, 0.8)]
+    best = min(starts, key=lambda th: _cost(GreyBoxFit(commanded, layout), th))
+    return GreyBoxFit(commanded, layout).fit(best)
+
+
+def _scaled_readout(drive: Drive, layout: Layout, theta: np.ndarray) -> np.ndarray:
+    """theta with the piano's full-scale speed moved so the median predicted on-velocity of the
+    sounded keystrokes matches the measured median (velocity is ∝ 1/full scale for a linear map)."""
+    prediction = drive.predict(layout.model(theta), layout.drive(theta))
+    both = (drive.observed.sounded == 1.0) & np.isfinite(prediction.on_velocity)
+    if both.sum() < 3:
+        return theta
+    ratio = float(np.median(prediction.on_velocity[both]) / max(np.median(drive.observed.on_velocity[both]), 1.0))
+    values = layout.values(theta)
+    name = "readout.full_scale_speed_mps"
+    param = next(p for p in layout.params if p.name == name)
+    values[name] = min(max(values[name] * ratio, param.lower), param.upper)
+    return layout.internal(values)
+
+
+def _with_trigger(layout: Layout, fraction: float) -> np.ndarray:
+    """The layout's start with the trigger depth at `fraction` of its range (MIDI: where the
+    key must reach to sound decides silence, and a local fit cannot cross that step)."""
+    values = {p.name: p.start for p in layout.params}
+    trigger = next(p for p in layout.params if p.name == "readout.trigger_depth_m")
+    values[trigger.name] = trigger.lower + fraction * (trigger.upper - trigger.lower)
+    values["readout.release_m"] = min(values.get("readout.release_m", 1e-3), 0.5 * values[trigger.name])
+    return layout.internal(values)
+
+
+def _cost(fit: GreyBoxFit, theta: np.ndarray) -> float:
+    if not fit.sigma:
+        fit.sigma = fit.error_levels(fit.raw(fit.predict(theta)))
+    r = fit.residuals(theta)
+    return float(np.sum(np.log1p(r * r)))  # robust: one diverged start does not dominate
+
+
+def criterion_of(fit: GreyBoxFit) -> Criterion:
+    """The criterion on `fit`'s effective sample sizes and noise levels."""
+    res = fit.residuals_
+    return Criterion.of(res.values, res.keystroke, res.frame, fit.noise(res))
+
+
+def evaluate(setting: Setting, fit: GreyBoxFit, criterion: Criterion, noise_m: float, label: str,
+             spec: CandidateSpec | None, joint: bool = True) -> Evaluated:
+    """The fit's criterion on the training keystrokes and its gap on the held-out ones."""
+    held = GreyBoxFit(setting.held_drive, fit.layout, channels=fit.channels, sigma=fit.sigma).evaluate(fit.theta_)
+    gap = held_out_gap(held.residuals_, setting.held.n, noise_m, setting.held.sounded, held.prediction_.sounded,
+                       np.isfinite(held.prediction_.margin_m))
+    return Evaluated(label, spec, fit, criterion.value(fit.channels_, fit.theta_.size), gap, joint)
+
+
+def held_noise_m(setting: Setting, fit: GreyBoxFit) -> float:
+    """Position noise of the held-out residuals under `fit` (NaN with MIDI only)."""
+    if setting.mode != "trajectories":
+        return float("nan")
+    held = GreyBoxFit(setting.held_drive, fit.layout, channels=fit.channels, sigma=fit.sigma).evaluate(fit.theta_)
+    noise = held.noise(held.residuals_)
+    values = [noise[c] for c in ("x1", "x2") if c in noise]
+    return float(np.sqrt(np.mean(np.square(values)))) if values else float("nan")
+
+
+def screen(setting: Setting, current: GreyBoxFit, spec: CandidateSpec) -> GreyBoxFit:
+    """The effect's parameters alone, from the best starting point, the current model fixed."""
+    full = _candidate_layout(current, spec, setting.train)
+    # With MIDI only, an effect on the outcome is seen through the piano's readout, which must be
+    # free to follow (a velocity curve's exponent and the full-scale speed trade off).
+    layout = full.restricted([spec.effect, "readout"] if setting.mode == "midi" else [spec.effect])
+    probe = GreyBoxFit(setting.train_drive, layout, channels=current.channels, sigma=current.sigma)
+    starts = [layout.internal(s) for s in start_points(layout, spec, setting.train)] or [layout.start()]
+    best = min(starts, key=lambda th: _cost(probe, th))
+    return GreyBoxFit(setting.train_drive, layout, channels=current.channels, sigma=current.sigma,
+                      max_nfev=SCREEN_NFEV, tol=1e-5).fit(best)
+
+
+def joint(setting: Setting, current: GreyBoxFit, spec: CandidateSpec, screened: GreyBoxFit,
+          start_model: KeystrokeModel | None = None) -> GreyBoxFit:
+    """The candidate refitted with every parameter of the current model, from the screened fit
+    and, when given, also from `start_model`'s base values with the screened effect: a base fit
+    that bent its parameters to imitate the missing effect (friction read as key damping) is a
+    basin the joint fit may not leave from its own values. The better fit is kept."""
+    layout = _candidate_layout(current, spec, setting.train)
+    starts = [layout.internal({**current.params_, **screened.params_})]
+    if start_model is not None:
+        # The start model's base values, with the effect's best starting point for them.
+        prior = model_values(start_model, layout.levels_kpa)
+        fresh = {**current.params_, **{k: v for k, v in prior.items() if k in current.params_ and "." not in k}}
+        probe = GreyBoxFit(setting.train_drive, layout, channels=current.channels, sigma=current.sigma)
+        options = [layout.internal({**fresh, **screened.params_})]
+        options += [layout.internal({**fresh, **point}) for point in start_points(layout, spec, setting.train)]
+        starts.append(min(options, key=lambda th: _cost(probe, th)))
+    fits = [GreyBoxFit(setting.train_drive, layout, channels=current.channels, sigma=current.sigma,
+                       max_nfev=JOINT_NFEV, tol=1e-5).fit(start) for start in starts]
+    return min(fits, key=lambda f: _cost(f, f.theta_))
+
+
+def as_full(setting: Setting, current: GreyBoxFit, spec: CandidateSpec, screened: GreyBoxFit) -> GreyBoxFit:
+    """A screened fit expressed in the full layout (base parameters at the current values), so
+    that its parameter count and intervals are those of the whole model."""
+    layout = _candidate_layout(current, spec, setting.train)
+    start = layout.internal({**current.params_, **screened.params_})
+    return GreyBoxFit(setting.train_drive, layout, channels=current.channels, sigma=current.sigma).evaluate(start)
+
+
+def _candidate_layout(current: GreyBoxFit, spec: CandidateSpec, batch: KeystrokeBatch) -> Layout:
+    """The current model's layout plus the candidate effect's parameters (effect switched on)."""
+    layout = current.layout.rebased(current.model_, current.drive_)
+    return layout.with_params(candidate_params(spec, batch), {spec.effect: spec.form})

@@ -1,0 +1,149 @@
+"""The commanded drive of the forward model: presses as the arm was told to make them.
+
+For MIDI-only data (an old keystroke log) nothing measured the arm, so the model is driven by
+each trial's commanded press: a UR moveL trapezoid when the model has `arm_acceleration`, the
+study's constant-speed ramp otherwise, delayed by `arm_lag` when the model has it. What the data
+do not record is a drive parameter the layout fits (`drive.acceleration_mps2`), never a silent
+default; the trigger depth and the piano's velocity map are readout parameters of the model.
+
+Outputs are the piano's MIDI outcome per keystroke, read from the simulated key trace at 1 ms
+the way a two-sensor digital action reads it (`physics.piano`), but before rounding: the
+on-velocity is the smooth function of key speed, and the crossings are interpolated between
+samples, so a fit sees smooth functions of the parameters.
+
+Only what the MIDI needs is simulated: each keystroke until its arm has risen back past the
+depth it pressed plus a margin (the key is back above its release depth by then); keystrokes
+are simulated in blocks of similar length.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
+from pianobot.analysis.greybox.prediction import Prediction, fastest_rate_per_s
+from pianobot.physics.model import KeystrokeModel
+from pianobot.physics.piano import PianoParams
+from pianobot.physics.simulate import simulate_presses
+from pianobot.physics.trajectory import Press, press_timing
+
+FloatArray = npt.NDArray[np.float64]
+
+OUT_DT_S = 1e-3
+SIM_STEP_S = 2e-4
+STEP_PER_TIME_SCALE = 0.2
+#: Keystrokes per simulated block (the simulator's SIMD block).
+GROUP = 16
+#: Simulated past the arm's rise through the pressed depth: the key settles above release.
+RISE_MARGIN_M = 5e-3
+TAIL_S = 0.15
+
+
+def _presses(batch: KeystrokeBatch, acceleration_mps2: float | None) -> list[Press]:
+    return [batch.press(i, acceleration_mps2) for i in range(batch.n)]
+
+
+def _cut_s(press: Press, profile: str, lag_s: float) -> float:
+    """How long keystroke `press` must be simulated for its MIDI outcome."""
+    tm = press_timing(press, "trapezoid" if profile == "trapezoid" else "ramp")
+    rise = min(press.depth_m + RISE_MARGIN_M, tm.up.distance_m)
+    return float(tm.t_hold_end_s + tm.up.time_at_m(rise) + TAIL_S + lag_s)
+
+
+def _first(mask: npt.NDArray[np.bool_]) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.bool_]]:
+    """Index of the first True per row, and whether there is one."""
+    return np.asarray(np.argmax(mask, axis=1), dtype=np.intp), np.asarray(mask.any(axis=1), dtype=bool)
+
+
+def _cross_s(x: FloatArray, k: npt.NDArray[np.intp], level: float, dt_s: float) -> FloatArray:
+    """Interpolated time of crossing `level` between samples k − 1 and k of each row."""
+    rows = np.arange(x.shape[0])
+    k = np.maximum(k, 1)
+    a, b = x[rows, k - 1], x[rows, k]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        frac = np.where(b != a, (level - a) / (b - a), 0.0)
+    return np.asarray((k - 1 + np.clip(frac, 0.0, 1.0)) * dt_s, dtype=np.float64)
+
+
+def midi_outcomes(x2_m: FloatArray, valid: npt.NDArray[np.bool_], piano: PianoParams,
+                  dt_s: float) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """(on-velocity before rounding and clipping, note-on time, hold, trigger margin) of key traces.
+
+    The note sounds when the key reaches the lower sensor, with the velocity of the speed
+    between the two sensors; it stops when the key rises back past the release depth. `valid`
+    masks each row's simulated samples.
+    """
+    x = np.where(valid, x2_m, -np.inf)
+    margin = np.max(x, axis=1) - piano.lower_sensor_m
+    k_up, _ = _first(x >= piano.upper_sensor_m)
+    k_lo, sounded = _first(x >= piano.lower_sensor_m)
+    t_up = _cross_s(x, k_up, piano.upper_sensor_m, dt_s)
+    t_on = _cross_s(x, k_lo, piano.lower_sensor_m, dt_s)
+    gap = piano.lower_sensor_m - piano.upper_sensor_m
+    speed = gap / np.maximum(t_on - t_up, 1e-6)
+    u = speed / piano.full_scale_speed_mps
+    g = u**piano.curve_exponent
+    if piano.curve_saturation > 0.0:
+        g = np.tanh(piano.curve_saturation * g) / math.tanh(piano.curve_saturation)
+    # Not clipped to the MIDI range: a fit needs the slope everywhere (measured velocities are
+    # 1–127 anyway, and a model beyond them is simply that far off).
+    velocity = 127.0 * g
+    after = np.arange(x.shape[1])[None, :] > k_lo[:, None]
+    k_off, released = _first(after & valid & (x2_m <= piano.release_m))
+    rows = np.arange(x.shape[0])
+    a, b = x2_m[rows, np.maximum(k_off - 1, 0)], x2_m[rows, k_off]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        frac = np.clip(np.where(a != b, (a - piano.release_m) / (a - b), 0.0), 0.0, 1.0)
+    t_off = (k_off - 1 + frac) * dt_s
+    hold = np.where(released, t_off - t_on, np.nan)
+    nan = np.nan
+    return (np.where(sounded, velocity, nan), np.where(sounded, t_on, nan), np.where(sounded, hold, nan),
+            np.asarray(margin, dtype=np.float64))
+
+
+@dataclass(frozen=True, eq=False)
+class Commanded:
+    """The commanded drive over a batch (see the module docstring)."""
+
+    batch: KeystrokeBatch
+    out_dt_s: float = OUT_DT_S
+
+    @property
+    def observed(self) -> KeystrokeBatch:
+        """The batch the predictions are for."""
+        return self.batch
+
+    @property
+    def needs_acceleration(self) -> bool:
+        """True when some keystroke does not record its acceleration (a drive parameter)."""
+        return bool(np.isnan(self.batch.acceleration_mps2).any())
+
+    def predict(self, model: KeystrokeModel, drive: dict[str, float] | None = None) -> Prediction:
+        """The model's MIDI outcome for every keystroke of the batch."""
+        batch = self.batch
+        accel = (drive or {}).get("acceleration_mps2")
+        presses = _presses(batch, accel)
+        lag = model.effects.value("arm_lag", "arm_lag_s", 0.0)
+        cuts = np.array([_cut_s(p, model.arm_profile, lag) for p in presses])
+        step_s = min(SIM_STEP_S, STEP_PER_TIME_SCALE / fastest_rate_per_s(model, batch.vacuum_kpa))
+        piano = model.readout_params()
+        n = batch.n
+        out = [np.full(n, np.nan) for _ in range(4)]
+        order = np.argsort(cuts, kind="stable")
+        for start in range(0, n, GROUP):
+            rows = order[start : start + GROUP]
+            duration = float(cuts[rows].max())
+            with np.errstate(over="ignore", invalid="ignore"):
+                sim = simulate_presses([presses[i] for i in rows], batch.vacuum_kpa[rows], model,
+                                       out_dt_s=self.out_dt_s, duration_s=duration, step_s=step_s)
+            valid = sim.t_s[None, :] <= cuts[rows][:, None]
+            x2 = np.where(np.isfinite(sim.x2_m), sim.x2_m, 0.0)
+            for target, values in zip(out, midi_outcomes(x2, valid, piano, self.out_dt_s), strict=True):
+                target[rows] = values
+        empty = np.zeros((n, batch.t_s.size))
+        return Prediction(np.full_like(empty, np.nan), np.full_like(empty, np.nan), np.zeros((n, 0)),
+                          np.zeros((n, 0)), *out)

@@ -1,0 +1,141 @@
+"""Per-keystroke features from trajectories: what the piano "sees" and how the stroke unfolded.
+
+- key speed at the trigger depth: a digital piano times the key between two sensors near the
+  bottom of travel, so the speed where the key passes the trigger depth is what sets the
+  on-velocity (the study's readout);
+- max key travel; contact time (fingertip on the key); time from motion start to the trigger
+  (the lead `play` must schedule ahead of a note).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+import numpy.typing as npt
+import pandas as pd
+
+from pianobot.analysis.greybox.phases import (
+    KEY_MOTION_THRESHOLD_M,
+    fill_gaps,
+    first_crossing_s,
+    segment_keystroke,
+)
+
+FloatArray = npt.NDArray[np.float64]
+
+FEATURE_COLUMNS: tuple[str, ...] = (
+    "key_speed_at_trigger_mps",
+    "max_key_travel_m",
+    "contact_time_s",
+    "time_to_trigger_s",
+)
+
+
+@dataclass(frozen=True)
+class KeystrokeFeatures:
+    """Features of one keystroke (NaN where the keystroke did not reach the stage)."""
+
+    key_speed_at_trigger_mps: float
+    max_key_travel_m: float
+    contact_time_s: float
+    time_to_trigger_s: float
+
+    def row(self) -> dict[str, float]:
+        """As a flat dict with the table's column names."""
+        return asdict(self)
+
+
+def speed_at_s(t_s: FloatArray, x: FloatArray, t_at_s: float, half_window: int = 2) -> float:
+    """Slope of x at time `t_at_s` from a local quadratic fit (robust to µm mocap noise)."""
+    if not np.isfinite(t_at_s):
+        return float("nan")
+    i = int(np.clip(np.searchsorted(t_s, t_at_s), 1, t_s.size - 1))
+    lo, hi = max(0, i - half_window - 1), min(t_s.size, i + half_window + 1)
+    tt, xx = t_s[lo:hi] - t_at_s, x[lo:hi]
+    good = np.isfinite(xx)
+    if good.sum() < 2:
+        return float("nan")
+    degree = 2 if good.sum() >= 4 else 1
+    coeffs = np.polyfit(tt[good], xx[good], degree)
+    return float(coeffs[-2])  # derivative at tt = 0
+
+
+def keystroke_features(
+    t_s: npt.ArrayLike,
+    x2_m: npt.ArrayLike,
+    *,
+    trigger_depth_m: float | None,
+    x0_m: npt.ArrayLike | None = None,
+    x1_m: npt.ArrayLike | None = None,
+    distance_m: float | None = None,
+) -> KeystrokeFeatures:
+    """Features of one keystroke.
+
+    `trigger_depth_m` is the key displacement where the piano triggers; None uses half of this
+    keystroke's own travel (for traces whose key marker does not see the full dip).
+    """
+    t = np.asarray(t_s, dtype=np.float64)
+    x2_raw = np.asarray(x2_m, dtype=np.float64)
+    stages = segment_keystroke(t, x2_raw, x0_m=x0_m, x1_m=x1_m, distance_m=distance_m)
+    x2 = fill_gaps(t, x2_raw)
+    if not np.isfinite(x2).any():
+        nan = float("nan")
+        return KeystrokeFeatures(nan, nan, nan, nan)
+    head = x2[: max(3, x2.size // 20)]
+    x2 = x2 - float(np.median(head[np.isfinite(head)]))
+    travel = float(np.nanmax(x2))
+    depth = 0.5 * travel if trigger_depth_m is None else trigger_depth_m
+    t_trigger = first_crossing_s(t, x2, depth) if travel >= KEY_MOTION_THRESHOLD_M else np.nan
+    speed = speed_at_s(t, x2, t_trigger)
+
+    contact_end = stages.t_rest_s
+    if x1_m is not None and distance_m is not None and distance_m > 0 and np.isfinite(stages.t_bottom_s):
+        x1 = fill_gaps(t, np.asarray(x1_m, dtype=np.float64))
+        closed = (x1 - float(np.median(x1[: max(3, x1.size // 20)]))) - x2
+        after = np.flatnonzero((t >= stages.t_bottom_s) & (closed < distance_m - KEY_MOTION_THRESHOLD_M))
+        if after.size:
+            contact_end = float(t[after[0]])
+    contact_time = contact_end - stages.t_contact_s
+    return KeystrokeFeatures(
+        key_speed_at_trigger_mps=speed,
+        max_key_travel_m=max(travel, 0.0),
+        contact_time_s=float(contact_time),
+        time_to_trigger_s=float(t_trigger - stages.t_motion_s),
+    )
+
+
+def features_table(
+    samples: pd.DataFrame,
+    *,
+    trigger_depth_m: float | None,
+    source: str | None = None,
+    distance_m: pd.Series | None = None,
+) -> pd.DataFrame:
+    """Features per trial from a long-form samples table (`trial_id, source, t_s, x0_m, x1_m, x2_m`).
+
+    Args:
+        samples: the store's samples table (or a subset).
+        trigger_depth_m: the piano's trigger depth (see `keystroke_features`).
+        source: use only this source ("mocap", "sim-truth", ...); None takes every row.
+        distance_m: initial gap per trial_id (index trial_id), e.g. `trials.set_index("trial_id").distance_m`.
+    Returns:
+        One row per trial_id with `FEATURE_COLUMNS`.
+    """
+    frame = samples if source is None else samples[samples["source"] == source]
+    rows = []
+    for trial_id, group in frame.groupby("trial_id", sort=False):
+        group = group.sort_values("t_s")
+        gap = None if distance_m is None else float(distance_m.get(trial_id, np.nan))
+        if gap is not None and not np.isfinite(gap):
+            gap = None
+        feats = keystroke_features(
+            group["t_s"].to_numpy(float),
+            group["x2_m"].to_numpy(float),
+            trigger_depth_m=trigger_depth_m,
+            x0_m=group["x0_m"].to_numpy(float) if "x0_m" in group else None,
+            x1_m=group["x1_m"].to_numpy(float) if "x1_m" in group else None,
+            distance_m=gap,
+        )
+        rows.append({"trial_id": trial_id, **feats.row()})
+    return pd.DataFrame(rows, columns=["trial_id", *FEATURE_COLUMNS])

@@ -1,0 +1,195 @@
+"""The measured-arm drive of the forward model: the physical keystroke, driven by the arm trace.
+
+A keystroke does not start in contact. The fingertip starts `distance_m` above the key and hangs
+from the arm on (k0, c0) while it approaches; the finger-key coupling (k1, c1) acts only from the
+instant the gap closes (x1 − x2 ≥ distance_m); from then on the study's bilateral linear coupling
+holds. Driving the study's in-contact state space with the arm trace from t = 0 instead would
+push the key down from the first millimetre of the approach, and a fit would bend every
+parameter to explain 5 cm of key travel that never happened.
+
+Where the model applies: from rest, through the approach and the press, until the fingertip
+leaves the key. The study's coupling is a bilateral spring: once engaged it never lets go, so on
+the way up it pulls the key above its rest position and stretches the finger between key and
+arm. A real finger lets go of the key (and a real key rests on its stop), so the model says
+nothing true after lift-off; `model_window` ends each keystroke there (measured: after the key's
+deepest point, when the fingertip-key gap has reopened by `LIFT_OFF_M` beyond the gap at which
+the key started to move, or the key is back at rest), and outputs are NaN after it.
+
+`pianobot.physics.simulate.simulate_arm` integrates exactly this (the `KeystrokeModel` without
+effects is the study's model with its free approach), thousands of keystrokes per second, which
+is fast enough to sit inside `least_squares`. What this module adds is the sampling: each
+keystroke's frames have their own clock phase (`KeystrokeBatch.t_offset_s`), and since the
+system is time-invariant and at rest before the arm moves, row i is simulated with its input
+advanced by its offset, so the simulator's output grid falls on that row's frames exactly. The
+input is resampled for this once, finely enough (≤ 0.5 ms and ≤ half the input's own period)
+that the piecewise-linear arm trace the simulator interpolates is unchanged.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
+from pianobot.analysis.greybox.phases import KEY_MOTION_THRESHOLD_M, fill_gaps
+from pianobot.analysis.greybox.prediction import Prediction, fastest_rate_per_s
+from pianobot.physics.effects import Effects
+from pianobot.physics.model import KeystrokeModel
+from pianobot.physics.msd import MSDParams
+from pianobot.physics.simulate import simulate_arm
+
+FloatArray = npt.NDArray[np.float64]
+
+#: Largest internal integration step. The fastest mode of the published model is near 20 Hz;
+#: at 0.2 ms the semi-implicit scheme's phase error over a keystroke stays far below mocap noise.
+SIM_STEP_S = 2e-4
+#: The step is also kept below this fraction of the model's fastest time scale (1/ω of its
+#: stiffest mode, m/c of its heaviest damping): the explicit scheme is stable and accurate only
+#: well inside h·ω < 2 and h·c/m < 1, and a fit may try stiff or heavily damped parameters.
+STEP_PER_TIME_SCALE = 0.2
+#: Largest spacing of the resampled input.
+INPUT_STEP_S = 5e-4
+#: The fingertip has left the key once the fingertip-key gap has reopened by this much (well
+#: above mocap noise, well below a finger's compression in a press).
+LIFT_OFF_M = 5e-4
+#: Keystrokes simulated side by side (the simulator's SIMD block): rows are grouped by length,
+#: so short keystrokes are not integrated through the long ones' rest.
+GROUP = 16
+
+
+@dataclass(frozen=True, eq=False)
+class MeasuredArm:
+    """Parameter-independent preparation of a batch's simulation (build with `of`).
+
+    Rows that repeat a keystroke (a bootstrap draw) are simulated once: `batch` holds the
+    distinct keystrokes and `rows` maps the caller's rows onto them.
+    """
+
+    batch: KeystrokeBatch
+    t_sim_s: FloatArray  # (M,) uniform simulation input grid, from rest
+    lead: int  # output samples simulated before batch.t_s[0]
+    lo: npt.NDArray[np.intp]  # (n, M) input-grid interval of each shifted sample
+    frac: FloatArray  # (n, M) position inside it
+    arm_sim_m: FloatArray  # (n, M) the batch's shifted input (parameter-independent, kept)
+    last: npt.NDArray[np.intp]  # (n,) each row's last modelled sample (measured, before lift-off)
+    rows: npt.NDArray[np.intp]  # (n_caller,) the distinct keystroke behind each caller's row
+    observed: KeystrokeBatch  # the caller's batch (rows may repeat), which predictions are for
+
+    @classmethod
+    def of(cls, batch: KeystrokeBatch) -> MeasuredArm:
+        observed = batch
+        _, first, rows = np.unique(np.asarray(batch.trial_id), return_index=True, return_inverse=True)
+        if first.size < batch.n:
+            batch = batch.subset(first)
+        else:
+            rows = np.arange(batch.n)
+        dt = batch.dt_s
+        if not dt > 0:
+            raise ValueError("a keystroke batch needs at least two output samples to simulate.")
+        t_in = batch.input_t_s
+        # Start the simulation a whole number of output periods early, at or before the first
+        # input sample, where the arm is at rest (the model starts at rest).
+        lead = max(0, math.ceil((batch.t_s[0] - t_in[0]) / dt - 1e-9))
+        t0 = float(batch.t_s[0] - lead * dt)
+        dt_in = float(t_in[1] - t_in[0]) if t_in.size > 1 else dt
+        per_out = max(1, math.ceil(dt / min(INPUT_STEP_S, 0.5 * dt_in) - 1e-9))
+        step = dt / per_out
+        t_end = float(batch.t_s[-1]) + dt
+        t_sim = t0 + step * np.arange(int(math.ceil((t_end - t0) / step)) + 1, dtype=np.float64)
+        # Row i's input advanced by its offset: its output samples land on its own frames.
+        shifted = t_sim[None, :] + batch.t_offset_s[:, None]
+        if t_in.size > 1:
+            u = np.clip((shifted - t_in[0]) / dt_in, 0.0, t_in.size - 1.0)
+            lo = np.minimum(u.astype(np.intp), t_in.size - 2)
+            frac = u - lo
+        else:
+            lo = np.zeros(shifted.shape, dtype=np.intp)
+            frac = np.zeros(shifted.shape)
+        measured = np.isfinite(batch.x1_m) | np.isfinite(batch.x2_m)
+        last = np.where(measured.any(axis=1), batch.t_s.size - 1 - np.argmax(measured[:, ::-1], axis=1), 0)
+        last = np.minimum(last, model_window(batch))
+        return cls(batch, t_sim, int(lead), lo, frac, _resample(batch.input_x0_m, lo, frac),
+                   np.asarray(last, dtype=np.intp), np.asarray(rows, dtype=np.intp).ravel(), observed)
+
+    def arm_m(self, input_x0_m: FloatArray | None = None) -> FloatArray:
+        """The (shifted) arm input on the simulation grid; `input_x0_m` (the caller's rows)
+        replaces the batch's (a repeated keystroke takes its first row's)."""
+        if input_x0_m is None:
+            return self.arm_sim_m
+        first = np.zeros(self.batch.n, dtype=np.intp)
+        first[self.rows[::-1]] = np.arange(self.rows.size)[::-1]
+        return _resample(input_x0_m[first], self.lo, self.frac)
+
+    def simulate(self, model: KeystrokeModel | MSDParams, input_x0_m: FloatArray | None = None,
+                 *, states: bool = False) -> tuple[FloatArray, ...]:
+        """Simulated fingertip x1 and key x2 (n, T) at each row's sample times, NaN after the
+        row's last modelled sample (a keystroke is simulated only as long as it was measured);
+        with `states` also the key speed and the finger's force on the key.
+
+        Arm-side effects (`arm_lag`, `arm_acceleration`) do not apply: the arm is measured."""
+        if isinstance(model, MSDParams):
+            model = KeystrokeModel(msd=model, effects=Effects.none())
+        batch = self.batch
+        step_s = min(SIM_STEP_S, STEP_PER_TIME_SCALE / fastest_rate_per_s(model, batch.vacuum_kpa))
+        arm = self.arm_m(input_x0_m)
+        dt = batch.dt_s
+        outs = [np.full(batch.x1_m.shape, np.nan) for _ in range(4 if states else 2)]
+        order = np.argsort(-self.last, kind="stable")
+        for start in range(0, order.size, GROUP):
+            rows = order[start : start + GROUP]
+            n_out = self.lead + int(self.last[rows].max()) + 1
+            n_in = min(self.t_sim_s.size, int(math.ceil(n_out * dt / (self.t_sim_s[1] - self.t_sim_s[0]))) + 2)
+            with np.errstate(over="ignore", invalid="ignore"):  # trial parameters may be unstable
+                sim = simulate_arm(self.t_sim_s[:n_in], arm[rows, :n_in], batch.vacuum_kpa[rows], model,
+                                   distance_m=batch.distance_m[rows], out_dt_s=dt,
+                                   duration_s=(n_out - 1) * dt, step_s=step_s)
+            sims = (sim.x1_m, sim.x2_m, sim.v2_mps, sim.contact_force_n)
+            for out, values in zip(outs, sims, strict=False):
+                out[rows, : n_out - self.lead] = values[:, self.lead :]
+        after = np.arange(batch.t_s.size)[None, :] > self.last[:, None]
+        for out in outs:
+            out[after] = np.nan
+        return tuple(out[self.rows] for out in outs)
+
+    def predict(self, model: KeystrokeModel, drive: dict[str, float] | None = None) -> Prediction:
+        """The model's trajectories (and key states) at the batch's frames."""
+        x1, x2, v2, force = self.simulate(model, states=True)
+        return Prediction.trajectories(x1, x2, v2, force)
+
+
+def model_window(batch: KeystrokeBatch) -> npt.NDArray[np.intp]:
+    """Per keystroke, the last output sample the model describes: before the fingertip lifts
+    off the key (see the module docstring); the whole trace when the key never moved."""
+    out = np.full(batch.n, batch.t_s.size - 1, dtype=np.intp)
+    for i in range(batch.n):
+        t = batch.row_times_s(i)
+        x2 = fill_gaps(t, batch.x2_m[i])
+        moved = np.flatnonzero(x2 > KEY_MOTION_THRESHOLD_M)
+        if moved.size == 0 or not np.isfinite(batch.x1_m[i]).any():
+            continue
+        touch = int(moved[0])
+        gap = fill_gaps(t, batch.x1_m[i]) - x2
+        peak = touch + int(np.nanargmax(x2[touch:]))
+        after = np.arange(x2.size) > peak
+        off = np.flatnonzero(after & ((gap < gap[touch] - LIFT_OFF_M) | (x2 < KEY_MOTION_THRESHOLD_M)))
+        if off.size:
+            out[i] = int(off[0]) - 1
+    return out
+
+
+def _resample(x: FloatArray, lo: npt.NDArray[np.intp], frac: FloatArray) -> FloatArray:
+    """Rows of x (n, T_in) linearly interpolated at fractional indices lo + frac (n, M)."""
+    if x.shape[1] == 1:
+        return np.repeat(x, lo.shape[1], axis=1)
+    a = np.take_along_axis(x, lo, axis=1)
+    b = np.take_along_axis(x, lo + 1, axis=1)
+    return np.asarray(a + frac * (b - a), dtype=np.float64)
+
+
+def simulate_batch(batch: KeystrokeBatch, model: KeystrokeModel | MSDParams) -> tuple[FloatArray, FloatArray]:
+    """Simulated x1, x2 (n, T) of the keystroke model driven by the batch's arm traces."""
+    x1, x2 = MeasuredArm.of(batch).simulate(model)
+    return x1, x2

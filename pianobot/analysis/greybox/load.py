@@ -1,0 +1,233 @@
+"""The one store loader: runs in, one `KeystrokeBatch` out (trajectories, command, MIDI).
+
+Runs are concatenated with their trial ids prefixed by the run id. Key trajectories come from
+motion capture (or the simulator's truth) when the runs have them (`trajectories.keystroke_batch`:
+one frame grid, the arm trace on the output clock); otherwise the batch is MIDI only.
+
+The commanded press and the MIDI outcome come from the trials table. What a run does not record
+is never silently assumed: a speed or depth is derived from the measured arm where an importer
+estimated it (and said so in `notes`); an acceleration that was not recorded stays NaN, and the
+commanded drive fits it (`forward.Commanded`); the distance defaults to 0 (the finger starts on
+the key, as in the study's mocap takes), which is noted.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
+from pianobot.analysis.greybox.trajectories import OUTPUT_SOURCES, keystroke_batch
+from pianobot.errors import InputError
+from pianobot.store import load_run
+
+
+@dataclass(frozen=True)
+class Loaded:
+    """A loaded batch with the runs' trials (prefixed ids), data hashes and stated assumptions."""
+
+    batch: KeystrokeBatch
+    trials: pd.DataFrame
+    hashes: dict[str, str]
+    notes: tuple[str, ...]
+
+
+def _file_hash(path: Path) -> str:
+    digest = hashlib.sha256()
+    for name in ("trials.parquet", "samples.parquet"):
+        file = path / name
+        if file.is_file():
+            digest.update(file.read_bytes())
+    return digest.hexdigest()
+
+
+def _column(frame: pd.DataFrame, name: str) -> np.ndarray:
+    if name not in frame:
+        return np.full(len(frame), np.nan)
+    return pd.to_numeric(frame[name], errors="coerce").to_numpy(dtype=np.float64)
+
+
+def _has_trajectories(samples: pd.DataFrame) -> bool:
+    if samples is None or samples.empty or "x2_m" not in samples:
+        return False
+    return bool((samples["source"].isin(OUTPUT_SOURCES) & samples["x2_m"].notna()).any())
+
+
+def _commands(rows: pd.DataFrame, notes: set[str]) -> dict[str, np.ndarray]:
+    """The commanded press per trial; derived values (and what stays unknown) are noted."""
+    down = _column(rows, "down_velocity_mps")
+    estimate = _column(rows, "arm_speed_mps")  # an imported take's arm speed estimate
+    use = ~(down > 0) & (estimate > 0)
+    if use.any():
+        down = np.where(use, estimate, down)
+        notes.add("down speed taken from the measured arm speed")
+    distance = _column(rows, "distance_m")
+    distance = np.where(np.isfinite(distance), distance, 0.0)
+    depth = _column(rows, "depth_m")
+    travel = _column(rows, "arm_travel_m") - distance  # measured arm travel = distance + depth
+    use = ~(depth > 0) & (travel > 0)
+    if use.any():
+        depth = np.where(use, travel, depth)
+        notes.add("depth taken from the measured arm travel")
+    up = _column(rows, "up_velocity_mps")
+    up = np.where(up > 0, up, down)
+    accel = _column(rows, "acceleration_mps2")
+    accel = np.where(accel > 0, accel, np.nan)
+    if np.isnan(accel).any():
+        notes.add("acceleration not recorded")
+    hold = _column(rows, "hold_s")
+    # An imported take times its strokes: with equal down and up moves, the hold is what the
+    # stroke lasts beyond twice the time to the bottom.
+    start, bottom, end = (_column(rows, c) for c in ("t_start_s", "t_bottom_s", "t_end_s"))
+    derived = np.maximum((end - start) - 2.0 * (bottom - start), 0.0)
+    use = ~np.isfinite(hold) & np.isfinite(derived)
+    if use.any():
+        hold = np.where(use, derived, hold)
+        notes.add("hold derived from the take's stroke timing (equal down and up moves)")
+    return {"down_velocity_mps": down, "up_velocity_mps": up, "acceleration_mps2": accel,
+            "depth_m": depth, "hold_s": np.where(np.isfinite(hold), hold, 0.0)}
+
+
+def _midi(rows: pd.DataFrame, recorded: bool) -> dict[str, np.ndarray]:
+    """MIDI outcome per trial (all NaN when the runs recorded no MIDI)."""
+    n = len(rows)
+    if not recorded:
+        return {k: np.full(n, np.nan) for k in ("on_velocity", "t_on_s", "hold_midi_s", "sounded")}
+    velocity = _column(rows, "on_velocity")
+    status = rows["status"].astype(str).to_numpy() if "status" in rows else np.full(n, "ok")
+    sounded = (status == "ok") & np.isfinite(velocity)
+    hold = _column(rows, "midi_hold_s")
+    hold = np.where(np.isfinite(hold), hold, _column(rows, "t_off_s") - _column(rows, "t_on_s"))
+    return {"on_velocity": np.where(sounded, velocity, np.nan), "t_on_s": np.where(sounded, _column(rows, "t_on_s"), np.nan),
+            "hold_midi_s": np.where(sounded, hold, np.nan), "sounded": sounded.astype(np.float64)}
+
+
+def load_keystrokes(run_ids: Sequence[str], data_dir: Path, *, x0_source: str = "auto",
+                    vacuum_kpa: float | None = None, need_motion: bool = False,
+                    schedule: pd.DataFrame | None = None) -> Loaded:
+    """Load runs as one batch (see the module docstring).
+
+    Args:
+        x0_source: the arm trace that drives the model: "arm", "mocap", "sim-truth" or "auto".
+        vacuum_kpa: the vacuum of runs that do not record one (an imported Motive take).
+        need_motion: raise when the runs hold no key trajectories (trajectory identification).
+        schedule: the commanded presses (`read_schedule`) of runs that do not record them (an
+            imported Motive take): matched to keystrokes by motion start.
+
+    Raises:
+        InputError: no run id, an unknown run, no trials, no vacuum, or (with `need_motion`) no
+            key trajectories.
+    """
+    if not run_ids:
+        raise InputError("give at least one run id", "RUN_ID")
+    samples, trials, hashes, midi_recorded = [], [], {}, False
+    for run_id in run_ids:
+        run = load_run(run_id, data_dir)
+        t, s = run.trials, run.samples
+        if t.empty:
+            raise InputError("the run has no trials", run.run_id)
+        if vacuum_kpa is not None:
+            t = t.assign(vacuum_kpa=vacuum_kpa if "vacuum_kpa" not in t else t["vacuum_kpa"].fillna(vacuum_kpa))
+        if "vacuum_kpa" not in t or t["vacuum_kpa"].isna().all():
+            raise InputError("the run records no vacuum level; give --vacuum-kpa", run.run_id)
+        midi_recorded |= bool(not run.midi.empty or ("on_velocity" in t and t["on_velocity"].notna().any()))
+        prefix = f"{run.run_id}/"
+        trials.append(t.assign(trial_id=prefix + t["trial_id"].astype(str)))
+        if s is not None and not s.empty:
+            samples.append(s.assign(trial_id=prefix + s["trial_id"].astype(str)))
+        hashes[run.run_id] = _file_hash(run.path)
+    all_trials = pd.concat(trials, ignore_index=True)
+    if "status" in all_trials:
+        all_trials = all_trials[all_trials["status"] != "failed"]
+    all_trials = all_trials.drop_duplicates("trial_id", keep="last")
+    all_trials = all_trials[all_trials["vacuum_kpa"].notna()]
+    frame = pd.concat(samples, ignore_index=True) if samples else pd.DataFrame()
+    if _has_trajectories(frame):
+        batch = keystroke_batch(frame, all_trials, x0_source=x0_source)
+    elif need_motion:
+        raise InputError("the run has no key trajectories (x2_m from mocap or sim-truth); "
+                         "trajectory identification needs mocap", "identify")
+    else:
+        n = len(all_trials)
+        batch = KeystrokeBatch(tuple(all_trials["trial_id"].astype(str)), _column(all_trials, "vacuum_kpa"),
+                               np.zeros(0), np.zeros((n, 0)), np.zeros((n, 0)), np.zeros((n, 0)),
+                               distance_m=np.nan_to_num(_column(all_trials, "distance_m")))
+        if not midi_recorded:
+            raise InputError("the runs have neither key trajectories nor MIDI outcomes", ",".join(run_ids))
+    rows = all_trials.set_index("trial_id").loc[list(batch.trial_id)]
+    notes: set[str] = set()
+    if "distance_m" not in rows or rows["distance_m"].isna().any():
+        notes.add("distance 0 assumed where not recorded (the finger starts on the key)")
+    columns: dict[str, Any] = {**_commands(rows, notes), **_midi(rows, midi_recorded)}
+    # A run's own arm log starts at the commanded motion start; an imported take does not know it.
+    columns["command_start_s"] = np.full(batch.n, 0.0 if batch.arm_source == "arm" else np.nan)
+    batch = replace(batch, **columns)
+    if schedule is not None:
+        batch = attach_schedule(batch, rows, schedule, notes)
+    return Loaded(batch, all_trials.reset_index(drop=True), hashes, tuple(sorted(notes)))
+
+
+#: Columns of a commanded schedule (a lab script's log of what it told the arm).
+SCHEDULE_COLUMNS = ("t_start_s", "down_velocity_mps", "up_velocity_mps", "acceleration_mps2", "depth_m",
+                    "distance_m", "hold_s")
+
+
+def read_schedule(path: Path) -> pd.DataFrame:
+    """A commanded schedule CSV: one row per press with `SCHEDULE_COLUMNS` (times on the clock of
+    the take it belongs to).
+
+    Raises:
+        InputError: the file is missing, not a CSV, or lacks a column.
+    """
+    try:
+        frame = pd.read_csv(path)
+    except (OSError, ValueError, pd.errors.ParserError) as exc:
+        raise InputError(f"cannot read the schedule ({exc})", str(path)) from None
+    missing = [c for c in SCHEDULE_COLUMNS if c not in frame]
+    if missing:
+        raise InputError(f"the schedule lacks column(s) {', '.join(missing)}; expected {', '.join(SCHEDULE_COLUMNS)}",
+                         str(path))
+    return frame
+
+
+def attach_schedule(batch: KeystrokeBatch, rows: pd.DataFrame, schedule: pd.DataFrame,
+                    notes: set[str] | None = None) -> KeystrokeBatch:
+    """The batch with each keystroke's commanded press from a schedule: the command whose start
+    is the latest at or before the keystroke's observed motion start (trials' `t_start_s`, on
+    the schedule's clock), within 1 s; unmatched keystrokes keep what they had."""
+    observed = _column(rows, "t_start_s")
+    starts = schedule["t_start_s"].to_numpy(dtype=np.float64)
+    order = np.argsort(starts)
+    starts = starts[order]
+    out = {name: getattr(batch, name).copy() for name in ("command_start_s", *SCHEDULE_COLUMNS[1:])}
+    matched = 0
+    for i, t in enumerate(observed):
+        k = int(np.searchsorted(starts, t + 0.05, side="right")) - 1  # a command up to 50 ms late
+        if not math.isfinite(t) or k < 0 or t - starts[k] > 1.0:
+            continue
+        row = schedule.iloc[order[k]]
+        out["command_start_s"][i] = float(starts[k] - t)
+        for name in SCHEDULE_COLUMNS[1:]:
+            out[name][i] = float(row[name])
+        matched += 1
+    if notes is not None:
+        notes.discard("acceleration not recorded")
+        notes.discard("down speed taken from the measured arm speed")
+        notes.discard("depth taken from the measured arm travel")
+        notes.add(f"commanded presses from the schedule ({matched} of {batch.n} keystrokes matched)")
+    return replace(batch, **out)
+
+
+def load_batch(run_ids: Sequence[str], data_dir: Path, *, x0_source: str = "auto",
+               vacuum_kpa: float | None = None) -> tuple[KeystrokeBatch, dict[str, str]]:
+    """The runs' trajectory batch and each run's data hash (InputError without trajectories)."""
+    loaded = load_keystrokes(run_ids, data_dir, x0_source=x0_source, vacuum_kpa=vacuum_kpa, need_motion=True)
+    return loaded.batch, loaded.hashes
+
