@@ -6,7 +6,7 @@ STAMP := $(VENV)/.installed
 DATA ?= data
 PYTEST_WORKERS ?= 2
 
-.PHONY: install test test-fast demo bench bench-large check lint types imports schema clean
+.PHONY: install test test-fast demo bench robustness-cases bench-large check lint types imports schema clean
 
 install: $(STAMP)
 
@@ -39,6 +39,11 @@ bench: $(STAMP)
 
 # 100,000 random trials and 1,000,000 for peak RSS, every stream stored (about an hour, ~10 GB
 # of scratch data on disk while it runs): results in benchmarks/results/sweep_large.json.
+# Issue 13's reported hostile-input cases, one child process each (a few minutes; see the script).
+robustness-cases: $(STAMP)
+	mkdir -p benchmarks/results
+	$(BIN)/python benchmarks/robustness_cases.py
+
 bench-large: $(STAMP)
 	mkdir -p benchmarks/results
 	$(BIN)/python benchmarks/bench_sweep.py --large

@@ -73,7 +73,7 @@ def held_out() -> SongSpec:
     d4, e4, fs4, g4, a4, b4, cs5, d5 = 62, 64, 66, 67, 69, 71, 73, 74
     pitches = [d4, d4, a4, a4, b4, b4, a4, g4, g4, fs4, fs4, e4, e4, d4, a4,
                d5, d5, cs5, b4, a4, a4, b4, g4, fs4, e4, e4, fs4, d4, d4, d5]
-    beats = [1.0] * 6 + [2.0] + [1.0] * 3 + [1.5, 0.5, 1.0, 2.0, 1.0] + [1.0] * 4 + [1.5, 0.5] + [1.0] * 6 + [1.5, 0.5, 2.0, 2.0]
+    beats = [1.0] * 6 + [2.0] + [1.0] * 3 + [1.5, 0.5, 1.0, 2.0, 1.0] + [1.0] * 4 + [1.5, 0.5] + [1.0] * 5 + [1.5, 0.5, 2.0, 2.0]
     velocities = [40, 42, 46, 50, 52, 58, 60, 64, 66, 70, 72, 76, 80, 84, 88,
                   88, 86, 80, 78, 72, 70, 64, 60, 56, 52, 50, 46, 44, 42, 40]
     assert len(pitches) == len(beats) == len(velocities) == 30 and min(velocities) > PP
@@ -123,6 +123,7 @@ def _row(result: PlayResult) -> dict[str, Any]:
     return {"f1": score.f1, "onset_rms_ms": score.onset_rms_ms, "velocity_mae": score.velocity_mae,
             "tempo_bpm": tempo.played_bpm, "skipped": skipped, "notes": score.notes_target,
             "played": score.notes_played, "missed": score.notes_target - score.notes_matched - skipped,
+            "note_status": score.to_dict()["note_status"],
             "f1_beat": score.f1_beat, "warmup_lab_time_s": None if result.warmup is None else result.warmup.lab_time_s}
 
 

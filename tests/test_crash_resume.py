@@ -19,6 +19,7 @@ import pytest
 
 from pianobot.run import run_sweep
 from pianobot.store import load_run, read_journal
+from pianobot.store.journal import BOOKKEEPING_EVENTS
 
 OUTCOME = ["trial_id", "index", "status", "note", "vacuum_kpa", "down_velocity_mps", "depth_m",
            "on_velocity", "off_velocity", "t_on_s", "t_off_s", "midi_hold_s", "n_note_on",
@@ -45,11 +46,14 @@ KILLS = 5
 
 
 def _journal_lines(path: Path) -> int:
+    """Lines of the runner's events (the store's bookkeeping records are not kill points)."""
     try:
         with open(path, "rb") as handle:
-            return handle.read().count(b"\n")
+            lines = handle.read().split(b"\n")[:-1]
     except FileNotFoundError:
         return 0
+    bookkeeping = tuple(f'"event":"{e}"'.encode() for e in BOOKKEEPING_EVENTS)
+    return sum(1 for line in lines if not any(tag in line for tag in bookkeeping))
 
 
 # The `sweep` command exactly as `python -m pianobot sweep` runs it, without importing every

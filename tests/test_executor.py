@@ -29,7 +29,7 @@ from pianobot.executor import (
     usable_cores,
 )
 from pianobot.run import run_sweep
-from pianobot.store import load_run
+from pianobot.store import Run, check_run, load_run, read_journal
 
 TWO = ExecutorSettings(workers=2)
 
@@ -121,6 +121,12 @@ def test_a_sweep_on_two_worker_processes_equals_the_serial_sweep(tmp_path: Path)
         pd.testing.assert_frame_equal(u, v, check_exact=True)
     retried = [e for e in b.journal if e["event"] == "retried"]
     assert retried and len(retried) == len([e for e in a.journal if e["event"] == "retried"])
+    # Parts the workers encoded are journalled (rows, SHA-256) like the serial path's.
+    def parts(run: Run) -> int:
+        return sum(e["event"] == "part" for e in read_journal(run.paths.journal, bookkeeping=True))
+
+    assert parts(b) == parts(a) > 0
+    assert check_run(b.paths, deep=True).ok
 
 
 @pytest.mark.slow

@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from pianobot.atomic_files import write_text_atomic
 from pianobot.physics.linear import frequency_response, peak_response
 from pianobot.physics.msd import LinearParams, MSDParams
 
@@ -262,9 +263,7 @@ def store_findings(path: Path, findings: Iterable[Finding]) -> Path:
     """Add the findings to a model or predictor file (JSON) as its `warnings`, atomically."""
     payload = json.loads(path.read_text(encoding="utf-8"))
     payload["warnings"] = as_dicts(findings)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(payload, indent=2, default=str) + "\n", encoding="utf-8")
-    tmp.replace(path)
+    write_text_atomic(path, json.dumps(payload, indent=2, default=str) + "\n")
     return path
 
 

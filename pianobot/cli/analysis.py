@@ -30,6 +30,7 @@ from pianobot.cli.common import (
 )
 from pianobot.errors import InputError
 from pianobot.executor import ExecutorSettings
+from pianobot.output import check_output_path
 from pianobot.store import load_run
 
 # The analysis and report modules load scikit-learn, scipy.optimize and matplotlib (seconds on a
@@ -82,6 +83,7 @@ def register(app: typer.Typer) -> None:
         """Identify the keystroke model from mocap trajectories; write a model file with intervals."""
         if coupling not in ("tied", "free", "auto"):
             raise InputError(f"expected tied, free or auto, got {coupling!r}", "--coupling")
+        check_output_path(out, "--out")  # before minutes of fitting, not after
         writable(plot, "--plot")
         levels = force_log_levels(force_log or [])
         static = static_stiffness_from_logs(levels, compression_m=compression_m) if levels else None
@@ -203,6 +205,7 @@ def register(app: typer.Typer) -> None:
         no_progress: NoProgressFlag = False,
     ) -> None:
         """Write one self-contained HTML report (figures embedded, no network)."""
+        check_output_path(out, "--out")
         progress = command_progress(json_out, no_progress)
         with progress.task("report: loading matplotlib" + (" and scikit-learn" if compare else "")):
             from pianobot.reports.run_report import build_run_report

@@ -14,7 +14,8 @@ import os
 import re
 import sys
 import textwrap
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import AbstractContextManager, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any, NoReturn
@@ -87,6 +88,44 @@ def _clean(value: Any) -> Any:
     if hasattr(value, "item") and callable(value.item):  # numpy scalars
         return _clean(value.item())
     return value
+
+
+@contextmanager
+def loading_row(what: str, args: Sequence[str], *, delay_s: float = 1.0) -> Iterator[None]:
+    """A progress row while a command's libraries load (scikit-learn, scipy, matplotlib: seconds
+    on a busy machine), drawn only when loading takes longer than `delay_s`, so a quick command
+    stays clean. Off under --json, --no-progress, --help or without a terminal, like all progress.
+    """
+    if not sys.stderr.isatty() or {"--json", "--no-progress", "--help"} & set(args):
+        yield
+        return
+    import threading
+
+    import pianobot.progress_rich  # noqa: F401  # loaded here, not in the drawing thread
+
+    progress = progress_display(True)
+    lock = threading.Lock()
+    opened: list[AbstractContextManager[object]] = []
+    finished = False
+
+    def start() -> None:
+        with lock:
+            if not finished:
+                row = progress.task(what)
+                row.__enter__()
+                opened.append(row)
+
+    timer = threading.Timer(delay_s, start)
+    timer.daemon = True
+    timer.start()
+    try:
+        yield
+    finally:
+        with lock:
+            finished = True
+        timer.cancel()
+        for row in opened:
+            row.__exit__(None, None, None)
 
 
 def command_progress(json_out: bool, no_progress: bool = False) -> Progress:

@@ -126,7 +126,7 @@ def play(
     tempo_scale: Annotated[float, typer.Option("--tempo-scale", help="Multiply the written tempo (0.5 = half speed); alone, plays at that tempo.")] = 1.0,
     warmup: Annotated[int | None, typer.Option("--warmup", help="Warm-up keystrokes per vacuum level before the song (default 12).")] = None,
     no_warmup: Annotated[bool, typer.Option("--no-warmup", help="Play with the starting model as it is.")] = False,
-    finger: Annotated[str | None, typer.Option("--finger", help="soft (default) | rigid: the safety envelope and stroke defaults.")] = None,
+    finger: Annotated[str | None, typer.Option("--finger", help="soft (default) | rigid: the safety envelope and stroke defaults (on the built-in rig, also the simulated finger).")] = None,
     transpose: Annotated[int, typer.Option("--transpose", help="Semitones to add to every note.")] = 0,
     track: Annotated[int | None, typer.Option("--track", help="Play only this track (0-based).")] = None,
     dynamics: Annotated[str, typer.Option("--dynamics", help="mapped (song range → reachable range) | absolute (clip).")] = "mapped",
@@ -139,17 +139,23 @@ def play(
         from pianobot.errors import InputError
 
         raise InputError("give either --warmup N or --no-warmup", "--no-warmup")
+    said: list[str] = []
+
+    def warn(line: str) -> None:  # as soon as it is known: before the motion it concerns
+        said.append(line)
+        print(f"warning: {line}", file=sys.stderr, flush=True)
+
     try:
         result = play_song(song, data_dir=data, model=model, planner=planner, adapt=adapt, dry_run=dry_run,
                            tempo=tempo, tempo_scale=tempo_scale, transpose=transpose, track=track,
                            dynamics=dynamics, rig=rig, finger=finger, warmup=0 if no_warmup else warmup, seed=seed,
-                           plot=plot, progress=command_progress(json_out, no_progress),
-                           on_warning=lambda line: print(f"warning: rig: {line}", file=sys.stderr))
+                           plot=plot, progress=command_progress(json_out, no_progress), on_warning=warn)
     except WarmUpFailed as exc:  # the run is stored (status failed) with the warm-up's keystrokes
         print(f"error: warm-up: {exc}", file=sys.stderr)
         raise typer.Exit(1) from None
     for line in result.warnings:
-        print(f"warning: {line}", file=sys.stderr)
+        if line not in said:
+            warn(line)
     if json_out:
         payload = result.to_dict()
         if dry_run:

@@ -1,4 +1,4 @@
-"""Command `runs`: list the runs of a data folder, or show one.
+"""Command `runs`: list the runs of a data folder; show, check or repair one.
 
 Imports only the store (no physics, no plan), so it answers quickly.
 """
@@ -21,7 +21,17 @@ from pianobot.cli.common import (
     print_table,
 )
 from pianobot.durations import format_duration
-from pianobot.store import RunSummary, list_runs, load_run, summarize_run
+from pianobot.store import (
+    RunDamaged,
+    RunHealth,
+    RunSummary,
+    check_run,
+    list_runs,
+    load_run,
+    repair_run,
+    rig_summary,
+    summarize_run,
+)
 from pianobot.store.tables import trial_status_counts
 
 RUN_COLUMNS = (
@@ -43,10 +53,16 @@ def _print_summaries(summaries: list[RunSummary]) -> None:
         rows.append([s.run_id, s.name, s.kind, s.status, f"{s.trials_done}/{planned}", silent,
                      format_duration(s.lab_time_s)])
     print_table(RUN_COLUMNS, rows)
+    for s in summaries:
+        if s.status == "damaged":
+            print(f"damaged: {s.run_id}: {s.reason} (`pianobot runs check {s.run_id}`)")
 
 
 def _run_details(run_id: str, data: Path) -> dict[str, Any]:
-    run = load_run(run_id, data)
+    run = load_run(run_id, data, check=False)
+    health = check_run(run.paths, deep=False)
+    if not health.ok:
+        raise RunDamaged(health.reason, run.run_id)
     meta = run.meta
     summary = summarize_run(run)
     spec = meta.get("spec", {}) if isinstance(meta.get("spec"), dict) else {}
@@ -58,6 +74,7 @@ def _run_details(run_id: str, data: Path) -> dict[str, Any]:
         "spec_sha256": meta.get("spec_sha256"),
         "seed": meta.get("seed"),
         "rig_kind": _rig_kind(meta.get("rig")),
+        "rig": rig_summary(meta),
         "pianobot_version": meta.get("pianobot_version"),
         "git_commit": meta.get("git_commit"),
         "end_utc": meta.get("end_utc"),
@@ -90,7 +107,7 @@ def _print_details(details: dict[str, Any]) -> None:
         ("lab time", format_duration(details["lab_time_s"])),
         ("started / ended", f"{details['start_utc']} / {details['end_utc'] or '-'}"),
         ("spec", f"{details['spec_path']} (sha256 {str(details['spec_sha256'])[:12]})"),
-        ("rig / seed", f"{details['rig_kind']} / {details['seed']}"),
+        ("rig / seed", f"{details['rig']} / {details['seed']}"),
         ("pianobot / git", f"{details['pianobot_version']} / {details['git_commit'] or '-'}"),
         ("folder", details["path"]),
     ]
@@ -100,8 +117,8 @@ def _print_details(details: dict[str, Any]) -> None:
 
 
 def register(app: typer.Typer) -> None:
-    """Add `runs` and `runs show` to the app."""
-    runs_app = typer.Typer(help="List runs, or show one run.", no_args_is_help=False)
+    """Add `runs`, `runs show`, `runs check` and `runs repair` to the app."""
+    runs_app = typer.Typer(help="List runs; show, check or repair one run.", no_args_is_help=False)
 
     @runs_app.callback(invoke_without_command=True)
     def runs(ctx: typer.Context, data: DataDir = DEFAULT_DATA, json_out: JsonFlag = False) -> None:
@@ -129,4 +146,45 @@ def register(app: typer.Typer) -> None:
         else:
             _print_details(details)
 
+    @runs_app.command("check")
+    def check(
+        run_id: Annotated[str, typer.Argument(help="Run id or a unique prefix.")],
+        data: DataDir = DEFAULT_DATA,
+        json_out: JsonFlag = False,
+    ) -> None:
+        """Verify every file of a run against its journal (readable, rows, SHA-256). Exit 1 if damaged."""
+        health = check_run(load_run(run_id, data, check=False).paths, deep=True)
+        if json_out:
+            emit_json(health.to_dict())
+        else:
+            _print_health(health)
+        raise typer.Exit(code=0 if health.ok else 1)
+
+    @runs_app.command("repair")
+    def repair(
+        run_id: Annotated[str, typer.Argument(help="Run id or a unique prefix.")],
+        data: DataDir = DEFAULT_DATA,
+        json_out: JsonFlag = False,
+    ) -> None:
+        """Repair a damaged run: restore from the journal, quarantine the rest, mark lost trials to redo."""
+        report = repair_run(load_run(run_id, data, check=False).paths)
+        if json_out:
+            emit_json(report.to_dict())
+        else:
+            for line in report.lines():
+                print(line)
+        raise typer.Exit(code=0 if report.ok else 1)
+
     app.add_typer(runs_app, name="runs")
+
+
+def _print_health(health: RunHealth) -> None:
+    if health.ok:
+        print(f"run {health.run_id}: intact ({health.files_checked} files checked against the journal)")
+    else:
+        print(f"run {health.run_id}: DAMAGED ({len(health.damage)} of {health.files_checked} files)")
+        for damage in health.damage:
+            print(f"  {damage.text()}")
+        print(f"repair: pianobot runs repair {health.run_id}")
+    for note in health.notes:
+        print(f"  note: {note}")

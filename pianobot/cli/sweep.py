@@ -24,9 +24,10 @@ from pianobot.cli.common import (
 )
 from pianobot.durations import format_duration
 from pianobot.executor import ENV_SCHEDULER, ENV_WORKERS, ExecutorSettings
+from pianobot.plan.size import DEFAULT_MAX_TRIALS
 from pianobot.run import RunOutcome, RunStarted, dry_run, run_sweep
 
-EXIT_CODES = {"completed": 0, "failed": 1, "stopped": 3, "interrupted": 130}
+EXIT_CODES = {"completed": 0, "failed": 1, "damaged": 1, "stopped": 3, "interrupted": 130}
 
 
 def _how_to_look(outcome: RunOutcome, data: Path, spec: Path | None) -> list[str]:
@@ -76,6 +77,12 @@ def register(app: typer.Typer) -> None:
         json_out: JsonFlag = False,
         seed: Annotated[int | None, typer.Option("--seed", help="Seed of the simulated world (overrides the rig file).")] = None,
         rig: Annotated[Path | None, typer.Option("--rig", help="Rig file to use instead of the spec's.")] = None,
+        rig_override: Annotated[bool, typer.Option(
+            "--rig-override", help="Resume on another rig than the run started with (recorded per session).",
+        )] = False,
+        max_trials: Annotated[int, typer.Option(
+            "--max-trials", min=1, help="Refuse plans with more trials than this (checked before the plan is built).",
+        )] = DEFAULT_MAX_TRIALS,
         no_progress: Annotated[bool, typer.Option("--no-progress", help="No progress bar.")] = False,
         batch_trials: Annotated[int | None, typer.Option(
             "--batch-trials", min=1,
@@ -97,7 +104,7 @@ def register(app: typer.Typer) -> None:
         if dry_run_flag:
             if spec is None:
                 raise typer.BadParameter("--dry-run needs a SPEC")
-            summary = dry_run(spec, rig_path=rig)
+            summary = dry_run(spec, rig_path=rig, max_trials=max_trials)
             if json_out:
                 emit_json(summary.to_dict())
             else:
@@ -113,6 +120,7 @@ def register(app: typer.Typer) -> None:
         outcome = run_sweep(
             spec, data_dir=data, resume=resume, seed=seed, rig_path=rig,
             progress=not no_progress and not json_out and sys.stderr.isatty(), batch_trials=batch_trials,
+            max_trials=max_trials, rig_override=rig_override,
             executor=ExecutorSettings.resolve(workers=workers, scheduler=scheduler),
             subscribers=[_warn_before_motion],
         )

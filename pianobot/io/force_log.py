@@ -33,7 +33,9 @@ FloatArray = npt.NDArray[np.float64]
 DEFAULT_RATE_HZ = 47.8
 DEFAULT_GAIN_N = 0.0353  # newtons per reading (the study's calibration)
 DEFAULT_OFFSET_N = 0.204
-_LINE = re.compile(r"Analog reading = (-?\d+)")
+# An ADC reading has a few digits; a longer number is a garbled line, never a force (and
+# a 100,000-digit one must not reach int()).
+_LINE = re.compile(r"Analog reading = (-?\d{1,9})")
 _PREFIX = "Analog reading = "
 BURST_COLUMNS = (
     "start_s", "end_s", "duration_s", "t_peak_s", "peak_force_n", "peak_above_baseline_n",
@@ -94,6 +96,9 @@ def read_force_log(
     rule = rule or BurstRule()
     if not (calibration.rate_hz > 0 and math.isfinite(calibration.rate_hz)):
         raise InputError(f"sample rate should be > 0 Hz, got {calibration.rate_hz}", "--rate-hz")
+    for option, value in (("--gain-n", calibration.gain_n), ("--offset-n", calibration.offset_n)):
+        if not math.isfinite(value):
+            raise InputError(f"must be a finite number of newtons, got {value}", option)
     lines = _read_text(path).splitlines()
     readings, skipped, truncated = parse_readings(lines)
     if not readings:

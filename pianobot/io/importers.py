@@ -56,6 +56,9 @@ def import_force_log(
     with progress.task(f"reading the force log ({_size(path)})"):
         force = read_force_log(path, calibration, rule)
     bursts = force.bursts.copy()
+    if bursts.empty:  # a run of no trials is no import: say so, store nothing
+        raise InputError(f"no press found: no force burst above the baseline in "
+                         f"{len(force.samples)} readings", str(path))
     extra: dict[str, Any] = {"bursts": len(bursts), "rate_hz": calibration.rate_hz}
     meta_align: dict[str, Any] | None = None
     if align_run is not None:

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from array import array
 from collections import Counter
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -42,6 +43,10 @@ from pianobot.progress import NO_PROGRESS, Progress
 from pianobot.spec.parameters import FINGER_ENVELOPES
 
 __all__ = ["KeystrokeLog", "SkippedLine", "read_keystroke_log"]
+
+# A session of the study logged a few hundred keystrokes; a million lines is a week of
+# non-stop pressing. Checked as the lines stream in, so memory stays bounded either way.
+MAX_LOG_LINES = 1_000_000
 
 
 @dataclass(frozen=True)
@@ -103,7 +108,7 @@ def read_keystroke_log(
     if finger is not None and finger not in ("soft", "rigid"):
         raise InputError(f"finger should be soft or rigid, got {finger!r}", "--finger")
     size = path.stat().st_size if path.is_file() else None
-    parsed = parse_lines(text_lines(path, "a text log"), progress, size)
+    parsed = parse_lines(_bounded(text_lines(path, "a text log"), where), progress, size)
     if not len(parsed):
         reasons = "; ".join(f"line {s.line}: {s.reason}" for s in parsed.skipped[:3])
         raise InputError(
@@ -133,6 +138,15 @@ def read_keystroke_log(
         columns=records.columns,
         notes=notes_text,
     )
+
+
+def _bounded(lines: Iterator[tuple[int, str]], where: str) -> Iterator[tuple[int, str]]:
+    """The lines, refused (InputError) once there are more than MAX_LOG_LINES."""
+    for number, text in lines:
+        if number > MAX_LOG_LINES:
+            raise InputError(f"has more than {MAX_LOG_LINES:,} lines; a keystroke log is read up "
+                             "to that many (split it into sessions)", where)
+        yield number, text
 
 
 def _declared(

@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from pianobot.errors import InputError
+from pianobot.output import write_output
 
 LOWEST_NOTE = 21  # A0
 HIGHEST_NOTE = 108  # C8
@@ -33,6 +34,10 @@ DRUM_CHANNEL = 9  # channel 10 in 1-based numbering
 DEFAULT_TEMPO_US = 500_000  # 120 bpm until the first set_tempo
 PERFORMANCE_TICKS_PER_BEAT = 1000
 PERFORMANCE_TEMPO_US = 1_000_000  # 60 bpm: with 1000 ticks per beat, 1 tick = 1 ms
+# Limits checked before the notes are paired: a piano piece has a few thousand notes (a fast
+# hour of playing is ~20,000); a 16 MB standard MIDI file holds millions of events.
+MAX_SONG_NOTES = 100_000
+MAX_SONG_BYTES = 16 << 20
 
 
 @dataclass(frozen=True)
@@ -114,6 +119,10 @@ def read_song(
         raise InputError(f"tempo scale should be > 0, got {tempo_scale}", "--tempo-scale")
     if not source.is_file():
         raise InputError("song file not found", where)
+    size = source.stat().st_size
+    if size > MAX_SONG_BYTES:
+        raise InputError(f"is {size / 2**20:.0f} MB; a song file is read up to "
+                         f"{MAX_SONG_BYTES >> 20} MB", where)
     try:
         mid = mido.MidiFile(source)
     except (OSError, EOFError, ValueError, KeyError, IndexError) as exc:
@@ -133,6 +142,11 @@ def read_song(
             f"ticks per beat should be > 0, got {mid.ticks_per_beat} (SMPTE timing is not supported)",
             where,
         )
+    n_notes = sum(1 for trk in mid.tracks for msg in trk
+                  if getattr(msg, "type", "") == "note_on" and getattr(msg, "velocity", 0) > 0)
+    if n_notes > MAX_SONG_NOTES:
+        raise InputError(f"has {n_notes:,} notes; a song is played up to {MAX_SONG_NOTES:,} notes "
+                         "(split it)", where)
     notes, counts, first_tempo_us = _notes(mid, tempo_scale)
     warnings: list[str] = []
     if counts["drums"]:
@@ -326,8 +340,4 @@ def _write(
     track.append(mido.MetaMessage("end_of_track", time=0))
     mid = mido.MidiFile(type=0, ticks_per_beat=ticks_per_beat)
     mid.tracks.append(track)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    mid.save(tmp)
-    tmp.replace(path)
-    return path
+    return write_output(path, lambda tmp: mid.save(tmp))

@@ -117,6 +117,18 @@ def read_mocap(
     where = str(path)
     if up_axis not in _AXES:
         raise InputError(f"up axis should be one of x, y, z, got {up_axis!r}", "--up-axis")
+    if not 0.0 <= min_coverage <= 1.0:  # also refuses NaN
+        raise InputError(f"must be a fraction of frames in [0, 1], got {min_coverage}", "--min-coverage")
+    try:
+        return _read_mocap(path, markers, min_coverage, up_axis)
+    except csv.Error as exc:  # a 50 MB line, a stray quote: not a Motive export
+        raise InputError(f"not a readable CSV ({exc})", where) from None
+
+
+def _read_mocap(
+    path: Path, markers: dict[str, str] | None, min_coverage: float, up_axis: str
+) -> MocapTake:
+    where = str(path)
     lines = _read_text(path).splitlines()
     meta = _metadata(lines[0] if lines else "", where)
     header_at = next((i for i, line in enumerate(lines[:100]) if line.startswith("Frame,")), None)
@@ -132,6 +144,7 @@ def read_mocap(
     if data.shape[0] == 0:
         raise InputError("no data rows after the header", where)
     t = data[:, 1] if data.shape[1] > 1 else np.arange(data.shape[0]) / frame_rate
+    _refuse_time_going_back(t, where)
     t = np.where(np.isfinite(t), t, np.arange(data.shape[0]) / frame_rate)
     stitched = stitch(_tracks(data, columns, scale), t)
     coverage = {track.name: track.frames.size / data.shape[0] for track in stitched.chains}
@@ -172,6 +185,16 @@ def _tracks(data: npt.NDArray[np.float64], columns: dict[str, dict[str, int]], s
         present = np.flatnonzero(np.isfinite(xyz).all(axis=1))
         tracks.append(Track(name, present.astype(np.int64), xyz[present]))
     return tracks
+
+
+def _refuse_time_going_back(t: FloatArray, where: str) -> None:
+    """Frames out of time order (a spliced or reversed export) would segment into nonsense."""
+    rows = np.flatnonzero(np.isfinite(t))
+    back = np.flatnonzero(np.diff(t[rows]) < 0)
+    if back.size:
+        before, after = rows[back[0]], rows[back[0] + 1]
+        raise InputError(f"time runs backwards at data row {after + 1} ({t[before]:.6g} s, then "
+                         f"{t[after]:.6g} s); frames must be in time order", where)
 
 
 def _read_text(path: Path) -> str:

@@ -19,6 +19,7 @@ from typing import Any
 
 from pianobot.atomic_files import write_text_atomic
 from pianobot.errors import InputError
+from pianobot.output import check_output_path
 from pianobot.physics.effects import Effects
 from pianobot.physics.msd import MSDParams
 from pianobot.physics.piano import PianoParams
@@ -126,6 +127,8 @@ def save_model(
         "intervals": _finite(dict(intervals)) if intervals is not None else None,
         "provenance": _finite(dict(provenance)) if provenance is not None else None,
     }
+    # Checked first (a folder, a read-only place: one line), then written atomically.
+    check_output_path(target, "--out")
     target.parent.mkdir(parents=True, exist_ok=True)
     write_text_atomic(target, json.dumps(payload, indent=2, default=str) + "\n")
     return target
@@ -153,11 +156,39 @@ def read_model_file(path: str | Path) -> ModelFile:
     kind = payload.get("kind", MODEL_KIND)
     if kind != MODEL_KIND:
         raise InputError(f"expected kind {MODEL_KIND!r}, got {kind!r}", where)
+    raw = payload.get("model") or {}
+    problem = _non_finite(raw, "model")
+    if problem is not None:
+        raise InputError(f"invalid model: {problem}", where)
     try:
-        model = KeystrokeModel.from_dict(payload.get("model") or {})
-    except (TypeError, ValueError) as exc:
-        raise InputError(f"invalid model: {exc}", where) from None
-    return ModelFile(model, payload.get("intervals"), payload.get("provenance"))
+        model = KeystrokeModel.from_dict(raw) if isinstance(raw, dict) else None
+    except (TypeError, ValueError, AttributeError, KeyError, IndexError, OverflowError) as exc:
+        # A hand-edited or damaged file: any shape the parameter classes do not expect.
+        raise InputError(f"invalid model: {' '.join(str(exc).split())[:200]}", where) from None
+    if model is None:
+        raise InputError(f"invalid model: expected an object, got {type(raw).__name__}", where)
+    intervals, provenance = payload.get("intervals"), payload.get("provenance")
+    return ModelFile(model, intervals if isinstance(intervals, dict) else None,
+                     provenance if isinstance(provenance, dict) else None)
+
+
+def _non_finite(value: Any, path: str) -> str | None:
+    """Where a model holds a number that is not one (NaN, ±inf, true/false), if anywhere."""
+    if isinstance(value, bool):
+        return f"{path} is {str(value).lower()}, not a number"
+    if isinstance(value, float) and not math.isfinite(value):
+        return f"{path} is {value}, not a finite number"
+    if isinstance(value, dict):
+        for key, item in value.items():
+            found = _non_finite(item, f"{path}.{key}")
+            if found:
+                return found
+    if isinstance(value, list):
+        for i, item in enumerate(value):
+            found = _non_finite(item, f"{path}[{i}]")
+            if found:
+                return found
+    return None
 
 
 def load_model(path: str | Path) -> KeystrokeModel:

@@ -17,11 +17,13 @@ from pianobot.plan.labtime import (
     lab_time,
     move_durations_s,
 )
+from pianobot.plan.size import DEFAULT_MAX_TRIALS, check_size, count_trials, estimated_lab_time_s
 from pianobot.plan.summary import Coverage, PlanSummary, ViolationGroup, summarize
 from pianobot.plan.trial import PLAN_COLUMNS, Trial, plan_frame, trial_columns
 from pianobot.spec import resolved_spec_dict, spec_sha256
 
 __all__ = [
+    "DEFAULT_MAX_TRIALS",
     "PLAN_COLUMNS",
     "Coverage",
     "LabTime",
@@ -30,8 +32,11 @@ __all__ = [
     "Violation",
     "ViolationGroup",
     "check_envelope",
+    "check_size",
     "contact_speeds_mps",
+    "count_trials",
     "estimate_lab_time_s",
+    "estimated_lab_time_s",
     "expand",
     "format_duration",
     "key_change_s",

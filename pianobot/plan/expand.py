@@ -3,7 +3,8 @@
 `expand(spec)` turns a grid, random or Latin-hypercube sweep into `Trial`s in run order, each
 with a stable `trial_id`: a hash of the resolved spec, the trial's parameters and its repeat
 index, so the same spec always gives the same ids and a resumed run finds its trials again.
-The work is done on parameter columns, so a 100,000-trial plan takes about a second.
+The work is done on parameter columns a chunk at a time, so a 100,000-trial plan takes about
+a second and memory grows with the trials, never with a meshgrid of every level.
 """
 
 from __future__ import annotations
@@ -14,9 +15,11 @@ import math
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from pianobot.errors import InputError
 from pianobot.plan.envelope import check_envelope, raise_for_errors
+from pianobot.plan.size import DEFAULT_MAX_TRIALS, check_size
 from pianobot.plan.trial import FloatArray, Trial
 from pianobot.spec import (
     PARAMETER_NAMES,
@@ -35,71 +38,102 @@ from pianobot.spec.sweep import VALUE_DECIMALS
 
 TRIAL_ID_HEX = 16
 _HASH_DECIMALS = 9  # parameters are hashed at 1e-9 resolution: YAML repr noise is far below it
+_CHUNK = 65_536  # trials built at a time
 
 Columns = dict[str, FloatArray]
+IntArray = npt.NDArray[np.int64]
 
 
-def expand(spec: ExperimentSpec, rig: RigSpec | None = None) -> list[Trial]:
+def expand(
+    spec: ExperimentSpec, rig: RigSpec | None = None, *, max_trials: int = DEFAULT_MAX_TRIALS
+) -> list[Trial]:
     """The trials of `spec` in run order (pure and deterministic for a given spec).
 
     Each point of the sweep is pressed `repeats` times back to back, then `order` rearranges
-    the trials. With `rig`, the trials are also checked against the finger's safety envelope
-    on that rig and an InputError is raised for the first error-severity violation.
+    the trials. The size is checked first (`check_size`: more than `max_trials` is an
+    InputError naming the count and its lab time), and the trials are then built a chunk at a
+    time from their grid indices, so nothing the size of "every level of every parameter" is
+    ever allocated. With `rig`, the trials are also checked against the finger's safety
+    envelope on that rig and an InputError is raised for the first error-severity violation.
     """
     label = str(spec.source_path) if spec.source_path else spec.name
-    points = _point_columns(spec, label)
+    check_size(spec, rig, max_trials=max_trials)
+    source = _PointSource(spec, label)
     repeats = spec.sweep.repeats
-    n_points = len(points["note"])
-    columns = {name: np.repeat(values, repeats) for name, values in points.items()}
-    repeat = np.tile(np.arange(repeats), n_points)
-    trial_ids = _trial_ids(spec, columns, repeat)
-    order = np.array(_run_order(spec, columns), dtype=np.int64)
-    in_order = [columns[name][order] for name in PARAMETER_NAMES]
-    # Trial's fields after (trial_id, index, repeat) are PARAMETER_NAMES, note first.
-    trials = list(map(
-        Trial,
-        [trial_ids[k] for k in order.tolist()],
-        range(len(order)),
-        repeat[order].tolist(),
-        in_order[0].astype(np.int64).tolist(),
-        *(values.tolist() for values in in_order[1:]),
-    ))
+    n = source.n_points * repeats
+    trial_ids = _trial_ids(spec, source, repeats)
+    order = _run_order(spec, source, repeats)
+    trials: list[Trial] = []
+    for start in range(0, n, _CHUNK):
+        positions = order[start:start + _CHUNK]
+        columns = source.columns(positions // repeats)
+        repeat = (positions % repeats).tolist()
+        trials += map(
+            Trial,
+            [trial_ids[k] for k in positions.tolist()],
+            range(start, start + len(positions)),
+            repeat,
+            columns["note"].astype(np.int64).tolist(),
+            *(columns[name].tolist() for name in PARAMETER_NAMES[1:]),
+        )
     if rig is not None:
         raise_for_errors(check_envelope(trials, spec.finger, rig, rig_label=spec.rig), label)
     return trials
 
 
-def _point_columns(spec: ExperimentSpec, label: str) -> Columns:
-    """Every parameter of every point of the sweep (before repeats and ordering)."""
-    sweep = spec.sweep
-    if isinstance(sweep, GridSweep):
-        levels = [
-            np.array(value.values() if isinstance(value, Linspace) else
-                     [clean_value(v) for v in value], dtype=np.float64)
-            for _, value in sweep.params.items()
-        ]
-        # 'ij' indexing nests the first listed parameter outermost, as the spec reads.
-        grids = np.meshgrid(*levels, indexing="ij") if levels else []
-        varied = {name: g.ravel() for name, g in zip(sweep.params.names(), grids, strict=True)}
-        n = int(np.prod([len(v) for v in levels])) if levels else 1
-    else:
-        varied = _samples(spec)
-        n = sweep.samples
-    held = {name: float(value) for name, value in sweep.fixed.items()}
-    columns: Columns = {}
-    for name in PARAMETER_NAMES:
-        if name in varied:
-            columns[name] = varied[name].astype(np.float64)
-        elif name in held:
-            columns[name] = np.full(n, held[name])
-        elif (default := default_value(name, spec)) is not None:
-            columns[name] = np.full(n, default)
-        elif name != "up_velocity_mps":
-            raise InputError(f"{name} is not set: give it in sweep.params or sweep.fixed",
-                             f"{label}: sweep.params")
-    # The study moved up at the speed it moved down; so does a spec that does not say.
-    columns.setdefault("up_velocity_mps", columns["down_velocity_mps"].copy())
-    return {name: columns[name] for name in PARAMETER_NAMES}
+class _PointSource:
+    """Every parameter of any point of the sweep, by point index (before repeats and order).
+
+    A grid point's levels come from its index (`unravel_index`, first parameter outermost);
+    sampled points are drawn once (the sampler needs them all) and indexed.
+    """
+
+    def __init__(self, spec: ExperimentSpec, label: str) -> None:
+        sweep = spec.sweep
+        self.varied: dict[str, FloatArray] = {}
+        if isinstance(sweep, GridSweep):
+            self.levels = {
+                name: np.array(value.values() if isinstance(value, Linspace) else
+                               [clean_value(v) for v in value], dtype=np.float64)
+                for name, value in sweep.params.items()
+            }
+            self.shape = tuple(len(v) for v in self.levels.values())
+            self.n_points = math.prod(self.shape)
+        else:
+            self.levels = {}
+            self.shape = ()
+            self.varied = _samples(spec)
+            self.n_points = sweep.samples
+        self.held: dict[str, float] = {name: float(value) for name, value in sweep.fixed.items()}
+        for name in PARAMETER_NAMES:
+            if name in self.levels or name in self.varied or name in self.held:
+                continue
+            default = default_value(name, spec)
+            if default is not None:
+                self.held[name] = default
+            elif name != "up_velocity_mps":
+                raise InputError(f"{name} is not set: give it in sweep.params or sweep.fixed",
+                                 f"{label}: sweep.params")
+
+    def level_indices(self, points: IntArray) -> dict[str, IntArray]:
+        """Per grid parameter, the index of each point's level."""
+        if not self.levels:
+            return {}
+        return dict(zip(self.levels, np.unravel_index(points, self.shape), strict=True))
+
+    def columns(self, points: IntArray) -> Columns:
+        """Every parameter (PARAMETER_NAMES order) of the given points."""
+        n = len(points)
+        columns: Columns = {}
+        for name, index in self.level_indices(points).items():
+            columns[name] = self.levels[name][index]
+        for name, values in self.varied.items():
+            columns[name] = values[points].astype(np.float64)
+        for name, value in self.held.items():
+            columns[name] = np.full(n, value)
+        # The study moved up at the speed it moved down; so does a spec that does not say.
+        columns.setdefault("up_velocity_mps", columns["down_velocity_mps"].copy())
+        return {name: columns[name] for name in PARAMETER_NAMES}
 
 
 def _samples(spec: ExperimentSpec) -> Columns:
@@ -136,26 +170,32 @@ def _scale(value: Range | list[float], u: FloatArray, integer: bool) -> FloatArr
     return picked
 
 
-def _trial_ids(spec: ExperimentSpec, columns: Columns, repeat: Any) -> list[str]:
-    """16 hex of sha256(resolved spec, rounded parameters, repeat, occurrence) per trial."""
+def _trial_ids(spec: ExperimentSpec, source: _PointSource, repeats: int) -> list[str]:
+    """16 hex of sha256(resolved spec, rounded parameters, repeat, occurrence) per trial, in
+    point-major order (each point's repeats back to back)."""
     base = hashlib.sha256(_spec_fingerprint(spec))
-    # One little-endian float64 row per trial: the same rounded values give the same bytes on
-    # every machine (adding 0.0 turns -0.0 into 0.0).
-    table = np.column_stack(
-        [np.round(columns[n], _HASH_DECIMALS) + 0.0 for n in PARAMETER_NAMES] + [repeat]
-    ).astype("<f8")
-    width = table.shape[1] * 8
-    data = np.ascontiguousarray(table).tobytes()
-    ids = []
+    ids: list[str] = []
     seen: dict[bytes, int] = {}
-    for start in range(0, len(data), width):
-        key = data[start : start + width]
-        # Two random samples may coincide; the k-th copy keeps a distinct, stable id.
-        nth = seen.get(key, 0)
-        seen[key] = nth + 1
-        digest = base.copy()
-        digest.update(key + nth.to_bytes(4, "little"))
-        ids.append(digest.hexdigest()[:TRIAL_ID_HEX])
+    n = source.n_points * repeats
+    for start in range(0, n, _CHUNK):
+        positions = np.arange(start, min(n, start + _CHUNK), dtype=np.int64)
+        columns = source.columns(positions // repeats)
+        # One little-endian float64 row per trial: the same rounded values give the same bytes
+        # on every machine (adding 0.0 turns -0.0 into 0.0).
+        table = np.column_stack(
+            [np.round(columns[name], _HASH_DECIMALS) + 0.0 for name in PARAMETER_NAMES]
+            + [positions % repeats]
+        ).astype("<f8")
+        width = table.shape[1] * 8
+        data = np.ascontiguousarray(table).tobytes()
+        for row in range(0, len(data), width):
+            key = data[row : row + width]
+            # Two random samples may coincide; the k-th copy keeps a distinct, stable id.
+            nth = seen.get(key, 0)
+            seen[key] = nth + 1
+            digest = base.copy()
+            digest.update(key + nth.to_bytes(4, "little"))
+            ids.append(digest.hexdigest()[:TRIAL_ID_HEX])
     return ids
 
 
@@ -176,29 +216,40 @@ def _rounded(value: Any) -> Any:
     return value
 
 
-def _run_order(spec: ExperimentSpec, columns: Columns) -> list[int]:
+def _run_order(spec: ExperimentSpec, source: _PointSource, repeats: int) -> IntArray:
     """Positions into the point-major list (repeats back to back), in run order."""
     sweep = spec.sweep
-    n = len(columns["note"])
+    n = source.n_points * repeats
     _, order_seed = np.random.SeedSequence(sweep.seed).spawn(2)
     rng = np.random.default_rng(order_seed)
     if sweep.order == "as-listed":
-        return list(range(n))
+        return np.arange(n, dtype=np.int64)
     if sweep.order == "shuffled":
-        return [int(i) for i in rng.permutation(n)]
+        return rng.permutation(n).astype(np.int64)
     # blocked-shuffle: slow settings (vacuum takes seconds to settle) stay together; the blocks
     # run in the order the spec lists their levels, the trials inside each block shuffled.
-    blocks: dict[tuple[float, ...], list[int]] = {}
-    keys: list[tuple[float, ...]] = (
-        list(zip(*(columns[name].tolist() for name in sweep.block_by), strict=True))
-        if sweep.block_by else [()] * n  # no slow parameter: one block, i.e. shuffled
-    )
-    for i, key in enumerate(keys):
-        blocks.setdefault(key, []).append(i)
+    # Each trial's block is a code (one per distinct combination of the blocking values, in
+    # order of first appearance), computed chunk by chunk.
+    codes = np.empty(n, dtype=np.int64)
+    blocks: dict[tuple[float, ...], int] = {}
+    for start in range(0, n, _CHUNK):
+        positions = np.arange(start, min(n, start + _CHUNK), dtype=np.int64)
+        columns = source.columns(positions // repeats)
+        keys = (zip(*(columns[name].tolist() for name in sweep.block_by), strict=True)
+                if sweep.block_by else [()] * len(positions))  # no slow parameter: one block
+        codes[start:start + len(positions)] = [blocks.setdefault(key, len(blocks)) for key in keys]
     ranks = [_level_rank(spec, name, [key[j] for key in blocks]) for j, name in
              enumerate(sweep.block_by)]
     ordered = sorted(blocks, key=lambda key: tuple(rank[v] for rank, v in zip(ranks, key, strict=True)))
-    return [m for key in ordered for m in (blocks[key][int(j)] for j in rng.permutation(len(blocks[key])))]
+    # Members of each block in point-major order (a stable sort by code keeps it).
+    by_code = np.argsort(codes, kind="stable")
+    bounds = np.searchsorted(codes[by_code], np.arange(len(blocks) + 1))
+    parts = []
+    for key in ordered:
+        code = blocks[key]
+        members = by_code[bounds[code]:bounds[code + 1]]
+        parts.append(members[rng.permutation(len(members))])
+    return np.concatenate(parts) if parts else np.arange(0, dtype=np.int64)
 
 
 def _level_rank(spec: ExperimentSpec, name: str, seen: list[float]) -> dict[float, int]:

@@ -21,7 +21,6 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import math
-import os
 from collections.abc import Callable, Sequence
 from contextlib import ExitStack
 from dataclasses import dataclass, field
@@ -112,7 +111,7 @@ class Performer:
                                      **({"warnings": rig_warnings} if rig_warnings else {})})
         for line in rig_warnings:  # before any motion: the user may want to stop here
             if self.on_warning is not None:
-                self.on_warning(line)
+                self.on_warning(f"rig: {line}")
         self.warnings.extend(rig_warnings)
         return self
 
@@ -126,10 +125,7 @@ class Performer:
     def replan(self, plan: pd.DataFrame) -> None:
         """Replace plan.parquet (before the song starts): the warm-up as played and the song as it
         will be played, so the run's plan names every keystroke it holds."""
-        temp = self.writer.path / ".plan.parquet.tmp"
-        plan.to_parquet(temp, index=False)
-        os.replace(temp, self.writer.path / "plan.parquet")
-        self.writer.update_meta(trials_planned=len(plan))
+        self.writer.replace_plan(plan)  # written atomically and recorded, so `runs check` agrees
 
     @property
     def run_id(self) -> str:

@@ -59,6 +59,9 @@ PLAYER_APPROACH = Approach(velocity_mps=0.5, acceleration_mps2=4.0, clearance_m=
 # A rigid finger's stiffness for the starting model (the published model is the soft finger's):
 # stiff enough that the arm's travel reaches the key almost one to one.
 RIGID_FINGER_K1_NPM = 5000.0
+# The built-in sim rig's world with `--finger rigid`: no vacuum line, ~25x the soft finger's
+# stiffness (not the starting model's value: the warm-up is what learns it).
+BUILTIN_RIGID_FINGER = {"k1_a_npm": 2000.0, "k1_b_npm_per_kpa": 0.0}
 
 
 @dataclass(frozen=True)
@@ -108,8 +111,12 @@ class PlayResult:
         return out
 
 
-def play_rig(rig: str | Path | RigSpec) -> RigSpec:
+def play_rig(rig: str | Path | RigSpec, finger: Finger = "soft") -> RigSpec:
     """The rig to play on: "sim" (the built-in sim rig) or a rig file, with a player's moves.
+
+    On the built-in rig, `finger="rigid"` simulates a rigid finger (`BUILTIN_RIGID_FINGER`, as
+    `experiments/rigs/sim-rigid.yaml`): the soft finger's world would not reach the key with a
+    rigid finger's shallow strokes. A rig file's world is used as written.
 
     The built-in travel and approach settings are a sweep's (slow, with a 50 mm lift between
     keys; fast approaches that keep 5 mm and 1.5 s of the spec's motion). A simulated rig whose
@@ -121,6 +128,9 @@ def play_rig(rig: str | Path | RigSpec) -> RigSpec:
     if spec.kind == "sim":
         player = {"travel": PLAYER_TRAVEL, "approach": PLAYER_APPROACH}
         spec = spec.model_copy(update={k: v for k, v in player.items() if k not in spec.model_fields_set})
+        if finger == "rigid" and isinstance(rig, str) and rig == "sim":
+            msd = {**spec.world.get("msd", {}), **BUILTIN_RIGID_FINGER}
+            spec = spec.model_copy(update={"world": {**spec.world, "msd": msd}})
     return spec
 
 
@@ -171,8 +181,11 @@ def play_song(
     `model` is a model/predictor file, a StrokePredictor, or None for the published physics
     model (the warm-up's starting point). `tempo`: None (auto unless `tempo_scale` is given),
     "auto", "written" or bpm. `warmup`: keystrokes per vacuum level (None: the settings', 0: none).
-    `world` replaces the sim rig's physics World (tests). `on_warning` hears what the rig found when
-    it was opened (e.g. the UR's speed slider below 100 %), before any motion.
+    `world` replaces the sim rig's physics World (tests). `on_warning` hears each warning when it is
+    known, before the motion it concerns: the song's (chords reduced to a melody) once it is read,
+    the rig's (e.g. the UR's speed slider below 100 %) once it is open, the plan's (the written
+    tempo is too fast, and the one played instead) after the warm-up, before the song;
+    `PlayResult.warnings` holds the song's and the plan's again.
     """
     if planner not in PLANNERS:
         raise InputError(f"planner should be one of {', '.join(PLANNERS)}, got {planner!r}", "--planner")
@@ -191,9 +204,12 @@ def play_song(
     request = tempo if isinstance(tempo, TempoRequest) else TempoRequest.parse(tempo)
     if tempo is None and tempo_scale != 1.0:
         request = TempoRequest("written", None, True)  # --tempo-scale alone asks for that tempo
-    rig_spec = play_rig(rig)
+    rig_spec = play_rig(rig, settings.finger)
     song, line = load_song(Path(song_path), tempo_scale=tempo_scale, transpose=transpose, track=track,
                            rule=settings.melody_rule)
+    tell = on_warning or (lambda _: None)
+    for text in (*song.warnings, *line.warnings):
+        tell(text)
     mode: DynamicsMode = "absolute" if dynamics == "absolute" else "mapped"
     if planner == "naive":
         plan = plan_naive(line.notes, settings, rig_spec, tempo=request, written_bpm=song.tempo_bpm)
@@ -232,7 +248,7 @@ def play_song(
     name = f"play-{Path(song_path).stem}-{planner}{'-adapt' if adapt else ''}"
     warm: WarmUp | None = None
     with Performer(rig_spec, data_dir=data_dir, name=name, song_key=song_key, meta=meta, plan=initial,
-                   seed=seed, world=world, progress=progress, on_warning=on_warning) as performer:
+                   seed=seed, world=world, progress=progress, on_warning=tell) as performer:
         if design:
             survey, survey_s = performer.warm_up(design)
             focus = design_warmup([n.pitch for n in line.notes], plan.geometry, levels, settings,  # type: ignore[arg-type]
@@ -251,6 +267,8 @@ def play_song(
             performer.replan(_initial_plan(design + focus, plan, song_key))
         performer.writer.update_meta(plan_summary=plan.summary(), warnings=list(plan.warnings),
                                      warmup=None if warm is None else warm.summary())
+        for text in plan.warnings:  # the tempo played and why, before the song starts
+            tell(text)
         performance = performer.play(plan, adapter)
     assert plan.tempo is not None
     target = _at_tempo(line.notes, plan.tempo.scale)

@@ -25,6 +25,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import pandas as pd  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
+from pianobot.output import write_output  # noqa: E402
+
 _STYLE = """
 body { font-family: -apple-system, "Segoe UI", Helvetica, Arial, sans-serif; margin: 2em auto;
        max-width: 1000px; padding: 0 1em; color: #222; line-height: 1.45; counter-reset: figure; }
@@ -173,9 +175,5 @@ def page_html(title: str, sections: Sequence[Section], *, subtitle: str = "") ->
 
 def write_page(path: Path, title: str, sections: Sequence[Section], *, subtitle: str = "") -> Path:
     """Write the page atomically (temp file + rename) so a half-written report never exists."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(page_html(title, sections, subtitle=subtitle), encoding="utf-8")
-    tmp.replace(path)
-    return path
+    text = page_html(title, sections, subtitle=subtitle)
+    return write_output(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))

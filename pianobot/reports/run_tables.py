@@ -19,6 +19,7 @@ from pianobot.analysis.learn.predictors import INPUT_COLUMNS
 from pianobot.durations import format_duration
 from pianobot.physics.msd import MSDParams
 from pianobot.reports.style import quantity
+from pianobot.store import rig_summary
 
 #: Model parameters as a person reads them: name, symbol, unit (stiffness stays N/m, as published).
 PARAMETER_NAMES: dict[str, tuple[str, str]] = {
@@ -51,6 +52,8 @@ def day(when: datetime | None) -> str:
 
 def _rig(meta: Mapping[str, Any]) -> str:
     rig = meta.get("rig")
+    if isinstance(rig, dict) and rig.get("mixed"):
+        return rig_summary(dict(meta))  # a resume ran on another rig (--rig-override): say so
     if isinstance(rig, dict):
         found = rig.get("spec")
         spec: dict[str, Any] = found if isinstance(found, dict) else {}

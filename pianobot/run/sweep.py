@@ -17,13 +17,22 @@ from typing import Any
 
 from pianobot.errors import InputError
 from pianobot.executor import IN_PROCESS, Executor, ExecutorSettings, open_executor
-from pianobot.plan import PlanSummary, Trial, check_envelope, expand, plan_frame, summarize
+from pianobot.plan import (
+    DEFAULT_MAX_TRIALS,
+    PlanSummary,
+    Trial,
+    check_envelope,
+    expand,
+    plan_frame,
+    summarize,
+)
 from pianobot.plan.approach import apply_approach
 from pianobot.rig import Rig, open_rig
 from pianobot.rig.errors import DeviceUnavailable
 from pianobot.run.parallel import SweepSetup, run_parallel
 from pianobot.run.progress import ProgressBar, stage
 from pianobot.run.records import Subscriber
+from pianobot.run.resume import check_rig, record_rig_session, refuse_damaged
 from pianobot.run.runner import BLOCK_TRIALS, RetryPolicy, Runner, SessionResult
 from pianobot.run.signals import SignalHandlers, StopControl
 from pianobot.run.sink import StoreSink
@@ -36,7 +45,15 @@ from pianobot.spec import (
     resolved_spec_dict,
     spec_sha256,
 )
-from pianobot.store import Run, RunLocked, RunWriter, load_run, read_journal, summarize_run
+from pianobot.store import (
+    Run,
+    RunLocked,
+    RunWriter,
+    check_data_dir,
+    load_run,
+    read_journal,
+    summarize_run,
+)
 from pianobot.store.tables import read_run_table, trial_status_counts
 
 BATCH_TRIALS = 50  # trials per part on a rig that runs keystrokes one at a time
@@ -81,16 +98,20 @@ class RunOutcome:
 
 
 def prepare_sweep(
-    spec_path: Path, *, seed: int | None = None, rig_path: Path | None = None
+    spec_path: Path, *, seed: int | None = None, rig_path: Path | None = None,
+    max_trials: int = DEFAULT_MAX_TRIALS,
 ) -> PreparedSweep:
     """Load and check a spec and its rig and expand the plan; raises InputError, writes nothing.
 
-    `rig_path` replaces the rig file the spec names (e.g. the faulty sim rig for a drill).
+    `rig_path` replaces the rig file the spec names (e.g. the faulty sim rig for a drill);
+    a plan of more than `max_trials` trials is refused before it is built.
     """
+    if seed is not None and not 0 <= seed < 2**63:
+        raise InputError(f"must be a whole number from 0 to 2**63 - 1, got {seed}", "--seed")
     path = Path(spec_path)
     spec = load_spec(path, rig=rig_path)
     rig = load_rig_for(spec) if rig_path is None else load_rig(rig_path)
-    trials = apply_approach(spec, expand(spec, rig), rig)
+    trials = apply_approach(spec, expand(spec, rig, max_trials=max_trials), rig)
     if not trials:
         raise InputError("the sweep has no trials", f"{path}: sweep")
     text = path.read_text(encoding="utf-8")
@@ -119,6 +140,8 @@ def run_sweep(
     batch_trials: int | None = None,
     batch_s: float = 2.0,
     world: Any | None = None,
+    max_trials: int = DEFAULT_MAX_TRIALS,
+    rig_override: bool = False,
     executor: ExecutorSettings | None = None,
 ) -> RunOutcome:
     """Run a sweep on its rig into a new run folder, or resume run `resume`.
@@ -136,22 +159,27 @@ def run_sweep(
             On a batching rig (the simulator) a batch is also the block of trials simulated
             together; default 50 trials, 128 on a batching rig.
         world: a physics World for the sim rig instead of the rig file's (tests, benchmarks).
+        max_trials: refuse a plan with more trials (a resume allows the run's own plan).
+        rig_override: let a resume run on another rig than the run started with (recorded).
         executor: where a simulated sweep's blocks run (`--workers`, `--scheduler`; default: this
             process for small sweeps, else a local cluster sized to the machine). The driver
             (this process) keeps the run lock, the journal and every write.
 
     Raises:
-        InputError: bad spec, unknown run, a spec that changed since the run started.
+        InputError: bad spec, unknown run, a spec that changed since the run started, a damaged
+            run (RunDamaged), another rig on resume without `rig_override`.
     """
     writer: RunWriter | None = None
     done_ids: set[str] = set()
+    check_data_dir(Path(data_dir))
     if resume is not None:
-        writer, prepared, done_ids = _reopen(Path(data_dir), resume, spec_path, seed, rig_path)
+        writer, prepared, done_ids = _reopen(Path(data_dir), resume, spec_path, seed, rig_path,
+                                             max_trials=max_trials, rig_override=rig_override)
     else:
         if spec_path is None:
             raise InputError("give a spec file (or --resume RUN_ID)", "SPEC")
         with stage(progress, "expanding the plan"):
-            prepared = prepare_sweep(spec_path, seed=seed, rig_path=rig_path)
+            prepared = prepare_sweep(spec_path, seed=seed, rig_path=rig_path, max_trials=max_trials)
     with ExitStack() as stack:
         if writer is not None:
             stack.enter_context(writer)
@@ -202,10 +230,12 @@ def _create(data_dir: Path, prepared: PreparedSweep) -> RunWriter:
 
 
 def _reopen(
-    data_dir: Path, run_id: str, spec_path: Path | None, seed: int | None, rig_path: Path | None
+    data_dir: Path, run_id: str, spec_path: Path | None, seed: int | None, rig_path: Path | None,
+    *, max_trials: int, rig_override: bool,
 ) -> tuple[RunWriter, PreparedSweep, set[str]]:
-    """Open a run to resume: same spec (by sha256), same plan, the trials already on disk."""
-    run = load_run(run_id, data_dir)
+    """Open a run to resume: intact, same spec (by sha256), same plan and rig, the trials on disk."""
+    run = load_run(run_id, data_dir, check=False)
+    refuse_damaged(run.paths)  # before anything else reads it, and long before the arm moves
     meta = run.meta
     if meta.get("kind") != "sweep":
         raise InputError(f"run {run.run_id} is a {meta.get('kind')!r} run, not a sweep", "--resume")
@@ -224,7 +254,11 @@ def _reopen(
     rig_meta = meta.get("rig") or {}
     if rig_path is None and rig_meta.get("override"):
         rig_path = Path(str(rig_meta.get("file")))
-    prepared = prepare_sweep(path, seed=int(meta.get("seed", 0)), rig_path=rig_path)
+    planned = int(meta.get("trials_planned") or 0)
+    prepared = prepare_sweep(path, seed=int(meta.get("seed", 0)), rig_path=rig_path,
+                             max_trials=max(max_trials, planned))
+    rig_label = str(rig_path) if rig_path is not None else prepared.spec.rig
+    rig_changed = check_rig(meta, prepared.rig, rig_label, override=rig_override)
     planned_ids = list(run.plan["trial_id"]) if len(run.plan) else []
     if planned_ids != [t.trial_id for t in prepared.trials]:
         raise InputError(f"the plan of {path} no longer matches run {run.run_id}'s plan.parquet", "--resume")
@@ -232,6 +266,8 @@ def _reopen(
         writer = RunWriter.reopen(data_dir, run.run_id)
     except RunLocked as exc:
         raise InputError(str(exc), "--resume") from None
+    if rig_changed:
+        record_rig_session(writer, prepared.rig, rig_label, int(meta.get("sessions", 1)) + 1)
     trials = read_run_table(writer.paths, "trials", columns=["trial_id", "status"]).to_pydict()
     done_ids = {
         t for t, s in zip(trials["trial_id"], trials["status"], strict=True) if s in ("ok", "silent")
@@ -372,15 +408,18 @@ def _outcome(
     )
 
 
-def dry_run(spec_path: Path, *, rig_path: Path | None = None) -> PlanSummary:
+def dry_run(
+    spec_path: Path, *, rig_path: Path | None = None, max_trials: int = DEFAULT_MAX_TRIALS
+) -> PlanSummary:
     """The plan of a spec without running it: count, coverage, lab time, every violation.
 
-    Spec-level problems (unknown key, wrong type, a written value outside the envelope) raise
-    InputError; trial-level envelope violations are listed in the summary, not raised.
+    Spec-level problems (unknown key, wrong type, a written value outside the envelope, a plan
+    above `max_trials`) raise InputError; trial-level envelope violations are listed in the
+    summary, not raised.
     """
     spec = load_spec(Path(spec_path), rig=rig_path)
     rig = load_rig_for(spec) if rig_path is None else load_rig(rig_path)
-    trials = apply_approach(spec, expand(spec), rig)
+    trials = apply_approach(spec, expand(spec, max_trials=max_trials), rig)
     label = spec.rig if rig_path is None else str(rig_path)
     violations = check_envelope(trials, spec.finger, rig, rig_label=label)
     return summarize(spec, trials, violations, rig)

@@ -18,6 +18,7 @@ if TYPE_CHECKING:
         load_rig,
         load_rig_for,
         load_spec,
+        parse_spec_text,
         spec_sha256,
         write_rig_calibration,
     )
@@ -68,6 +69,7 @@ _SOURCES: dict[str, str] = {
     "load_rig": "pianobot.spec.loader",
     "load_rig_for": "pianobot.spec.loader",
     "load_spec": "pianobot.spec.loader",
+    "parse_spec_text": "pianobot.spec.loader",
     "spec_sha256": "pianobot.spec.loader",
     "write_rig_calibration": "pianobot.spec.loader",
     "ENVELOPE_PARAMETERS": "pianobot.spec.parameters",
@@ -150,6 +152,7 @@ __all__ = [
     "load_rig",
     "load_rig_for",
     "load_spec",
+    "parse_spec_text",
     "resolved_spec_dict",
     "spec_problems",
     "spec_sha256",

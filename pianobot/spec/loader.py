@@ -23,57 +23,23 @@ from pianobot.spec.checks import Problem, spec_problems
 from pianobot.spec.experiment import SIM_RIG, ExperimentSpec
 from pianobot.spec.messages import Location, error_message, format_path
 from pianobot.spec.rig import RigSpec
+from pianobot.spec.yaml_safe import parse_yaml, read_text_bounded
 
 ModelT = TypeVar("ModelT", bound=BaseModel)
 
 
 def _read_yaml(path: Path) -> tuple[Any, yaml.Node | None]:
-    """The parsed document and its node tree (for line numbers)."""
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError("no such file", str(path)) from None
-    except IsADirectoryError:
-        raise InputError("is a folder, not a YAML file", str(path)) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read the file: {exc}", str(path)) from None
-    return _parse_yaml(text, str(path))
+    """The parsed document and its node tree (for line numbers); bounded, see `yaml_safe`."""
+    return _parse_yaml(read_text_bounded(path), str(path))
 
 
 def _parse_yaml(text: str, label: str) -> tuple[Any, yaml.Node | None]:
-    try:
-        root = yaml.compose(text, Loader=yaml.SafeLoader)
-        data = yaml.safe_load(text)
-    except yaml.MarkedYAMLError as exc:
-        mark = exc.problem_mark or exc.context_mark
-        where = f"{label}:{mark.line + 1}:{mark.column + 1}" if mark else label
-        problem = exc.problem or exc.context or "invalid YAML"
-        raise InputError(f"YAML syntax error: {problem}", where) from None
-    except yaml.YAMLError as exc:
-        raise InputError(f"YAML syntax error: {' '.join(str(exc).split())}", label) from None
-    if root is not None:
-        _refuse_duplicate_keys(root, (), label)
+    data, root = parse_yaml(text, label)
     if data is None:
         raise InputError("the file is empty", label)
     if not isinstance(data, dict):
         raise InputError(f"must be a YAML mapping (key: value), got {type(data).__name__}", label)
     return data, root
-
-
-def _refuse_duplicate_keys(node: yaml.Node, path: Location, label: str) -> None:
-    """PyYAML keeps the last of two equal keys silently; a spec with one is a mistake."""
-    if isinstance(node, yaml.MappingNode):
-        seen: set[str] = set()
-        for key, value in node.value:
-            name = str(key.value)
-            if name in seen:
-                where = f"{label}: {format_path((*path, name))}"
-                raise InputError(f"duplicate key {name!r} (line {key.start_mark.line + 1})", where)
-            seen.add(name)
-            _refuse_duplicate_keys(value, (*path, name), label)
-    elif isinstance(node, yaml.SequenceNode):
-        for i, item in enumerate(node.value):
-            _refuse_duplicate_keys(item, (*path, i), label)
 
 
 def _line_of(root: yaml.Node | None, path: Location) -> int | None:
@@ -157,6 +123,15 @@ def load_spec(path: str | Path, rig: str | Path | None = None) -> ExperimentSpec
     return spec
 
 
+def parse_spec_text(text: str, label: str) -> ExperimentSpec:
+    """A spec from its YAML text (as a run records it), validated but not envelope-checked.
+
+    For rebuilding what a run already accepted (its plan); new runs go through `load_spec`.
+    """
+    data, root = _parse_yaml(text, label)
+    return _validate(ExperimentSpec, data, label, root)
+
+
 def spec_sha256(path: str | Path) -> str:
     """SHA-256 (hex) of a spec file's bytes, as recorded with a run."""
     try:
@@ -180,8 +155,8 @@ def write_rig_calibration(path: str | Path, pose: Sequence[float], when: datetim
         "reference_pose": "[" + ", ".join(f"{round(v, 7)!r}" for v in values) + "]",
         "calibrated_utc": f'"{stamp.strftime("%Y-%m-%dT%H:%M:%SZ")}"',
     }
-    _, root = _read_yaml(Path(path))
-    text = Path(path).read_text(encoding="utf-8")
+    text = read_text_bounded(Path(path))
+    _, root = _parse_yaml(text, label)
     new_text = _replace_values(text, root, "ur5", replacements, label)
     data, new_root = _parse_yaml(new_text, label)
     rig = _validate(RigSpec, data, label, new_root)

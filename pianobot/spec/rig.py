@@ -8,17 +8,20 @@ geometry. `load_rig("sim")` is the default simulated rig.
 
 from __future__ import annotations
 
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import Field, ValidationError, field_validator, model_validator
+from pydantic import Field, Strict, ValidationError, field_validator, model_validator
 
 from pianobot.spec.messages import error_message, format_path
 from pianobot.spec.parameters import FINGER_ENVELOPES, PARAMETERS, Finger, Limits
-from pianobot.spec.sweep import StrictModel
+from pianobot.spec.sweep import Number, Pair, StrictModel
 
 WORLD_PRESETS: tuple[str, ...] = ("default", "linear")
-Vector3 = tuple[float, float, float]
-Pose6 = tuple[float, float, float, float, float, float]
+# YAML lists, each item a strict finite number (see `sweep.StrictModel`).
+Vector3 = Annotated[tuple[Number, Number, Number], Strict(False)]
+Pose6 = Annotated[tuple[Number, Number, Number, Number, Number, Number], Strict(False)]
+# Keys of `world:` whose value is a name, not a number.
+_WORLD_TEXT_KEYS = ("preset", "form")
 
 
 class Faults(StrictModel):
@@ -105,13 +108,13 @@ class Approach(StrictModel):
 class FingerEnvelope(StrictModel):
     """Explicit per-parameter [low, high] ranges that replace a finger's built-in envelope."""
 
-    vacuum_kpa: tuple[float, float] | None = Field(None, description="[low, high] kPa gauge.")
-    down_velocity_mps: tuple[float, float] | None = Field(None, description="[low, high] m/s.")
-    up_velocity_mps: tuple[float, float] | None = Field(None, description="[low, high] m/s.")
-    acceleration_mps2: tuple[float, float] | None = Field(None, description="[low, high] m/s².")
-    depth_m: tuple[float, float] | None = Field(None, description="[low, high] m.")
-    distance_m: tuple[float, float] | None = Field(None, description="[low, high] m.")
-    hold_s: tuple[float, float] | None = Field(None, description="[low, high] s.")
+    vacuum_kpa: Pair | None = Field(None, description="[low, high] kPa gauge.")
+    down_velocity_mps: Pair | None = Field(None, description="[low, high] m/s.")
+    up_velocity_mps: Pair | None = Field(None, description="[low, high] m/s.")
+    acceleration_mps2: Pair | None = Field(None, description="[low, high] m/s².")
+    depth_m: Pair | None = Field(None, description="[low, high] m.")
+    distance_m: Pair | None = Field(None, description="[low, high] m.")
+    hold_s: Pair | None = Field(None, description="[low, high] s.")
 
     @model_validator(mode="after")
     def _ordered_and_physical(self) -> FingerEnvelope:
@@ -226,10 +229,10 @@ class RegulatorCommand(StrictModel):
         "(4-20 mA). pianobot puts the UR output in that domain (ur_rtde's "
         "setAnalogOutputVoltage / setAnalogOutputCurrent)."
     )
-    signal_span: tuple[float, float] = Field(
+    signal_span: Pair = Field(
         description="The input signal's two ends in V or mA, e.g. [0, 10] V or [4, 20] mA."
     )
-    kpa_span: tuple[float, float] = Field(
+    kpa_span: Pair = Field(
         description="The pressure (kPa gauge) at the two ends of signal_span, from the "
         "regulator's data sheet, e.g. [0, -80] for an SMC ITV2090."
     )
@@ -252,10 +255,10 @@ class RegulatorMonitor(StrictModel):
         "voltage", description="Domain of the monitor output; the UR input must be set to the "
         "same domain on the teach pendant."
     )
-    signal_span: tuple[float, float] = Field(
+    signal_span: Pair = Field(
         description="The monitor's two ends in V or mA, e.g. [1, 5] V on an SMC ITV."
     )
-    kpa_span: tuple[float, float] | None = Field(
+    kpa_span: Pair | None = Field(
         None, description="Pressure at the two ends of signal_span (null: the command's)."
     )
 
@@ -358,7 +361,7 @@ class RigSpec(StrictModel):
     """A rig file: the simulated rig or the UR5 lab, with faults, pauses and envelope."""
 
     kind: Literal["sim", "ur5"] = Field("sim", description="sim: the simulated world; ur5: the lab.")
-    seed: int = Field(0, ge=0, description="Seed of the simulated world (noise, faults).")
+    seed: int = Field(0, ge=0, le=2**63 - 1, description="Seed of the simulated world (noise, faults).")
     realtime: bool = Field(
         False, description="Run the sim at wall-clock speed (default: a virtual clock)."
     )
@@ -393,13 +396,14 @@ class RigSpec(StrictModel):
         if preset not in WORLD_PRESETS:
             raise ValueError(f"preset must be one of {', '.join(WORLD_PRESETS)}, got {preset!r}")
         overrides = {k: v for k, v in value.items() if k != "preset"}
+        _refuse_non_numbers(overrides, ())
         if overrides:
             # Imported only when needed: the physics world pulls in the simulator.
             from pianobot.physics.world import WorldConfig
 
             try:
                 # Building the model also checks the MSD parameter and effect names.
-                WorldConfig.model_validate(overrides).build_model()
+                WorldConfig.model_validate(overrides, strict=True).build_model()
             except ValidationError as exc:
                 path, message = error_message(exc.errors()[0], list(WorldConfig.model_fields))
                 raise ValueError(f"{format_path(path)}: {message}") from None
@@ -428,3 +432,25 @@ class RigSpec(StrictModel):
     def lift_m(self) -> float:
         """Lift before a sideways move: the arm's safe lift on the UR5, else `travel.lift_m`."""
         return self.ur5.safe_lift_m if self.ur5 is not None else self.travel.lift_m
+
+
+def _refuse_non_numbers(value: Any, path: tuple[str | int, ...]) -> None:
+    """In `world:`, every setting is a finite number (or a name where a name is meant).
+
+    The physics world takes plain dicts of parameters and would turn `true` into 1.0.
+    """
+    if isinstance(value, dict):
+        for key, item in value.items():
+            _refuse_non_numbers(item, (*path, str(key)))
+        return
+    if isinstance(value, list | tuple):
+        for i, item in enumerate(value):
+            _refuse_non_numbers(item, (*path, i))
+        return
+    name = next((p for p in reversed(path) if isinstance(p, str)), "")
+    if value is None or (isinstance(value, str) and name in _WORLD_TEXT_KEYS):
+        return
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ValueError(f"{format_path(path)}: must be a number, got {value!r}")
+    if isinstance(value, float) and value != value or value in (float("inf"), float("-inf")):
+        raise ValueError(f"{format_path(path)}: must be a finite number, got {value!r}")

@@ -17,6 +17,7 @@ from pydantic import (
     Field,
     PrivateAttr,
     SerializerFunctionWrapHandler,
+    Strict,
     Tag,
     create_model,
     model_serializer,
@@ -44,9 +45,19 @@ Order = Literal["as-listed", "shuffled", "blocked-shuffle"]
 
 
 class StrictModel(BaseModel):
-    """Base of every spec model: unknown keys are errors, values are immutable."""
+    """Base of every spec model: unknown keys are errors, values are immutable and strict.
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    Strict: `true` is not a number and `"1.0"` is not 1.0 (no coercion from bool or text), a
+    whole number is not written `2.0`, and NaN or infinity is never a valid setting.
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True, allow_inf_nan=False)
+
+
+# A YAML list where a fixed-length tuple is expected: the list itself is accepted (lax), each
+# item is still a strict, finite number.
+Number = Annotated[float, Strict()]
+Pair = Annotated[tuple[Number, Number], Strict(False)]
 
 
 def clean_value(value: float) -> float:
@@ -214,7 +225,7 @@ class SweepBase(StrictModel):
         default_factory=lambda: list[ParameterName](["vacuum_kpa"]),
         description="Slow parameters that define the blocks of order: blocked-shuffle.",
     )
-    seed: int = Field(0, ge=0, description="Seed of the sampling and of the shuffles.")
+    seed: int = Field(0, ge=0, le=2**63 - 1, description="Seed of the sampling and of the shuffles.")
 
 
 class GridSweep(SweepBase):

@@ -79,22 +79,45 @@ class Journal:
             self._fd = None
 
 
-def read_journal(path: Path) -> list[dict[str, Any]]:
-    """Every complete event of a journal, in order (a torn or garbled line is skipped)."""
-    if not path.is_file():
-        return []
+# The store's own records of the files it wrote (`store.records`): bookkeeping for the
+# integrity check, left out of what `read_journal` shows.
+BOOKKEEPING_EVENTS = frozenset({"run_created", "meta", "part", "compacted"})
+
+
+def read_journal(path: Path, *, bookkeeping: bool = False) -> list[dict[str, Any]]:
+    """Every complete event of a journal, in order (a torn or garbled line is skipped).
+
+    The store's bookkeeping records are left out unless `bookkeeping` is set.
+    """
+    events = scan_journal(path)[0]
+    if bookkeeping:
+        return events
+    return [e for e in events if e.get("event") not in BOOKKEEPING_EVENTS]
+
+
+def scan_journal(path: Path) -> tuple[list[dict[str, Any]], list[int]]:
+    """(every complete event, the 1-based numbers of garbled lines) of a journal.
+
+    The last line without its newline is a write cut short by a kill: normal, not garbled.
+    """
     events: list[dict[str, Any]] = []
-    with open(path, encoding="utf-8", errors="replace") as handle:
-        for line in handle:
-            if not line.endswith("\n"):
+    garbled: list[int] = []
+    if not path.is_file():
+        return events, garbled
+    with open(path, "rb") as handle:
+        for number, raw in enumerate(handle, start=1):
+            if not raw.endswith(b"\n"):
                 break  # the writer is mid-line or was killed mid-line
             try:
-                record = json.loads(line)
-            except json.JSONDecodeError:
+                record = json.loads(raw)
+            except ValueError:  # JSONDecodeError, or bytes that are not UTF-8
+                garbled.append(number)
                 continue
             if isinstance(record, dict) and "event" in record:
                 events.append(record)
-    return events
+            elif raw.strip():
+                garbled.append(number)
+    return events, garbled
 
 
 def _nan_to_none(value: Any) -> Any:

@@ -10,6 +10,7 @@ written first, so a reader (or a resume) ignores samples/midi parts whose trials
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import re
@@ -26,14 +27,27 @@ import pyarrow.parquet as pq
 # The atomic writers live in a bottom-layer module (physics writes model files with them too);
 # the store's modules keep importing them from here.
 from pianobot.atomic_files import fsync_dir as fsync_dir
-from pianobot.atomic_files import temp_name as _temp_name
 from pianobot.atomic_files import write_bytes_atomic as write_bytes_atomic
 from pianobot.atomic_files import write_json_atomic as write_json_atomic
 from pianobot.errors import InputError
 
 RUNS_FOLDER = "runs"
+QUARANTINE_FOLDER = "quarantine"
 TABLE_NAMES = ("trials", "samples", "midi")
 _PART_RE = re.compile(r"^(trials|samples|midi)-(\d{6})\.parquet$")
+
+
+class RunDamaged(InputError):
+    """A run's files are damaged (unreadable, truncated, not what was written).
+
+    An InputError: the CLI prints one line (what is damaged, how to repair) and exits 2.
+    """
+
+    def __init__(self, problem: str, run_id: str) -> None:
+        self.problem = problem
+        self.run_id = run_id
+        super().__init__(f"{problem}; details: `pianobot runs check {run_id}`, repair: "
+                         f"`pianobot runs repair {run_id}`", f"run {run_id} is damaged")
 
 
 @dataclass(frozen=True)
@@ -65,6 +79,15 @@ class RunPaths:
     @property
     def lock(self) -> Path:
         return self.root / "run.lock"
+
+    @property
+    def quarantine(self) -> Path:
+        """Where repair moves damaged files (never deleted)."""
+        return self.root / QUARANTINE_FOLDER
+
+    def relative(self, path: Path) -> str:
+        """`path` relative to the run folder, as the journal names files (`parts/x.parquet`)."""
+        return path.relative_to(self.root).as_posix()
 
     def table(self, name: str) -> Path:
         """The compacted file of table `name`."""
@@ -133,26 +156,50 @@ def glob_escape(text: str) -> str:
 
 def write_parquet_atomic(path: Path, table: pa.Table) -> None:
     """Write a Parquet file so readers see either nothing or the whole file, never a torn one."""
-    temp = _temp_name(path)
-    try:
-        with open(temp, "wb") as handle:
-            pq.write_table(table, handle, **parquet_options(table.schema))
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(temp, path)
-    finally:
-        temp.unlink(missing_ok=True)
-    fsync_dir(path.parent)
+    write_bytes_atomic(path, encode_parquet(table))
 
 
 def encode_parquet(table: pa.Table) -> bytes:
-    """A whole Parquet file in memory, written as `write_parquet_atomic` writes it.
+    """`table` as the bytes of a Parquet file (written with `parquet_options`).
 
-    For work done elsewhere (a parallel sweep's worker) that only the run's writer stores.
+    Also for work done elsewhere (a parallel sweep's worker) that only the run's writer stores.
     """
     sink = pa.BufferOutputStream()
     pq.write_table(table, sink, **parquet_options(table.schema))
-    return bytes(sink.getvalue())
+    data: bytes = sink.getvalue().to_pybytes()
+    return data
+
+
+def sha256_file(path: Path) -> str:
+    """SHA-256 (hex) of a file's bytes, read in 1 MB blocks."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        while block := handle.read(1 << 20):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def check_data_dir(data_dir: Path) -> None:
+    """InputError unless `data_dir` is (or can become) a folder this process can write runs into.
+
+    Checked before anything is stored or any device is opened, so a typo in `--data` or a
+    read-only share costs one line, not a half-made run.
+    """
+    data = Path(data_dir)
+    probe = data
+    while not probe.exists():
+        if probe.parent == probe:
+            break
+        probe = probe.parent
+    if probe.exists() and not probe.is_dir():
+        what = "is a file, not a folder" if probe == data else f"{probe} is a file, not a folder"
+        raise InputError(what, f"--data {data}")
+    runs = runs_dir(data)
+    if runs.exists() and not runs.is_dir():
+        raise InputError(f"{runs} is a file, not a folder", f"--data {data}")
+    target = runs if runs.is_dir() else probe
+    if not os.access(target, os.W_OK | os.X_OK):
+        raise InputError(f"{target} is not writable (read-only folder or file system?)", f"--data {data}")
 
 
 def parquet_options(schema: pa.Schema) -> dict[str, Any]:

@@ -4,7 +4,7 @@ Guarantee (docs/architecture.md, "The run lock"): at most one `RunLock` holds a 
 time, as long as a live holder heartbeats within its lease.
 
 - **Acquire** writes the holder record (token, pid, host, boot id, start time, lease) to a
-  private temp file, fsyncs it and hard-links it to `run.lock`. `link` fails if the name exists,
+  private temp file and hard-links it to `run.lock`. `link` fails if the name exists,
   on local file systems and on NFS alike, so the lock appears with its full content in one step
   and never empty or half written.
 - **Heartbeat**: a daemon thread touches the lock file every `heartbeat_s`; its mtime, set by the
@@ -35,6 +35,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from pianobot.errors import InputError
+
 LEASE_S = 30.0
 HEARTBEAT_S = 5.0
 # A claim (a takeover in progress) lives for microseconds; one this old belongs to a dead breaker.
@@ -45,11 +47,11 @@ _LOCK_VERSION = 1
 TEMP_SUFFIX = ".locktmp"
 
 
-class RunLocked(RuntimeError):
-    """Another live process holds the lock."""
+class RunLocked(InputError):
+    """Another live process holds the lock (the CLI prints the one line and exits 2)."""
 
 
-class LockLost(RuntimeError):
+class LockLost(InputError):
     """This process held the lock, but another one has taken it over since."""
 
 
@@ -128,11 +130,14 @@ def _utc_now() -> str:
 
 
 def _write_private(path: Path, payload: bytes) -> None:
-    """A new file with `payload`, on disk before anyone can see it under another name."""
+    """A new file with `payload`, complete before anyone can see it under another name.
+
+    Not fsync'd: a record a power cut leaves torn reads as garbage, which counts as stale
+    (pid 0), and a lock never has to outlive the machine that holds it.
+    """
     fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
     try:
         os.write(fd, payload)
-        os.fsync(fd)
     finally:
         os.close(fd)
 

@@ -9,8 +9,9 @@ from typing import TYPE_CHECKING, Any
 
 import pyarrow.parquet as pq
 
+from pianobot.store.integrity import READ_ERRORS, check_run
 from pianobot.store.journal import read_journal
-from pianobot.store.layout import RunPaths, read_json, resolve_run, runs_dir
+from pianobot.store.layout import RunDamaged, RunPaths, read_json, resolve_run, runs_dir
 from pianobot.store.tables import read_run_table, trial_status_counts
 
 if TYPE_CHECKING:  # pandas takes a third of a second to import: only where frames are made
@@ -30,8 +31,19 @@ class Run:
 
     @property
     def meta(self) -> dict[str, Any]:
-        """run.json: spec, versions, rig, seed, times, status, reason, interruptions."""
-        return read_json(self.paths.run_json)
+        """run.json: spec, versions, rig, seed, times, status, reason, interruptions.
+
+        Raises:
+            RunDamaged: run.json is missing or does not parse.
+        """
+        try:
+            meta = read_json(self.paths.run_json)
+        except READ_ERRORS as exc:
+            why = "is missing" if isinstance(exc, FileNotFoundError) else "is not readable JSON"
+            raise RunDamaged(f"run.json {why}", self.run_id) from None
+        if not isinstance(meta, dict):
+            raise RunDamaged("run.json is not a run record", self.run_id)
+        return meta
 
     @property
     def status(self) -> str:
@@ -44,7 +56,11 @@ class Run:
             import pandas as pd
 
             return pd.DataFrame()
-        frame: pd.DataFrame = pq.read_table(self.paths.plan).to_pandas()
+        try:
+            frame: pd.DataFrame = pq.read_table(self.paths.plan).to_pandas()
+        except READ_ERRORS as exc:
+            raise RunDamaged(f"plan.parquet is unreadable ({' '.join(str(exc).split())[:80]})",
+                             self.run_id) from None
         return frame
 
     @property
@@ -93,13 +109,22 @@ class RunSummary:
         return asdict(self)
 
 
-def load_run(run_id: str, data_dir: Path) -> Run:
+def load_run(run_id: str, data_dir: Path, *, check: bool = True) -> Run:
     """Open a run by id or unique id prefix.
+
+    With `check` (the default) the run's files are checked first (each readable: the quick
+    check of `check_run`), so an analysis never runs on half a table; `runs check`, `repair`
+    and `show` open damaged runs with `check=False`.
 
     Raises:
         InputError: no such run (the message says how to list runs) or an ambiguous prefix.
+        RunDamaged: a file of the run is damaged (one line: which, and how to repair).
     """
     paths = resolve_run(Path(data_dir), run_id)
+    if check:
+        health = check_run(paths, deep=False)
+        if not health.ok:
+            raise RunDamaged(health.reason, paths.run_id)
     return Run(run_id=paths.run_id, path=paths.root)
 
 
@@ -126,15 +151,68 @@ def summarize_run(run: Run) -> RunSummary:
 
 
 def list_runs(data_dir: Path) -> list[RunSummary]:
-    """Every run under `data_dir/runs`, oldest first (run ids start with their UTC time)."""
+    """Every run under `data_dir/runs`, oldest first (run ids start with their UTC time).
+
+    A run whose files are damaged is listed with status `damaged` and the first problem as
+    its reason (a quick check: every file readable; `check_run` does the full one).
+    """
     base = runs_dir(Path(data_dir))
     if not base.is_dir():
         return []
     summaries = []
     for folder in sorted(base.iterdir()):
-        if (folder / "run.json").is_file():
+        if not folder.is_dir() or folder.name.startswith("."):
+            continue
+        has_files = any((folder / name).exists() for name in ("run.json", "journal.jsonl", "parts"))
+        if not has_files:
+            continue  # not a run folder (or one being created this very moment)
+        run = Run(run_id=folder.name, path=folder)
+        health = check_run(run.paths, deep=False)
+        if health.ok:
             try:
-                summaries.append(summarize_run(Run(run_id=folder.name, path=folder)))
-            except (OSError, ValueError):
-                continue  # a folder being created right now, or not a pianobot run
+                summaries.append(summarize_run(run))
+                continue
+            except RunDamaged as exc:
+                reason = exc.problem
+        else:
+            reason = health.reason
+        summaries.append(_damaged_summary(run, reason))
     return summaries
+
+
+def _damaged_summary(run: Run, reason: str) -> RunSummary:
+    """A `pianobot runs` line for a damaged run: what run.json still says, and why."""
+    try:
+        meta = run.meta
+    except RunDamaged:
+        meta = {}
+    planned = meta.get("trials_planned")
+    return RunSummary(
+        run_id=run.run_id,
+        name=str(meta.get("name", "?")),
+        kind=str(meta.get("kind", "?")),
+        status="damaged",
+        trials_done=0,
+        trials_planned=planned if isinstance(planned, int) else None,
+        silent_pct=math.nan,
+        failed=0,
+        lab_time_s=math.nan,
+        start_utc=meta.get("start_utc") if isinstance(meta.get("start_utc"), str) else None,
+        reason=reason,
+    )
+
+
+def rig_summary(meta: dict[str, Any]) -> str:
+    """The rig a run ran on, in words; says so loudly when a resume mixed rigs."""
+    rig = meta.get("rig")
+    if not isinstance(rig, dict):
+        return "-" if rig is None else str(rig)
+    spec = rig.get("spec")
+    kind = str((spec.get("kind") if isinstance(spec, dict) else None) or rig.get("kind") or "?")
+    text = f"{kind} ({rig.get('file')})" if rig.get("file") and rig.get("file") != kind else kind
+    sessions = meta.get("rig_sessions")
+    if rig.get("mixed") and isinstance(sessions, list):
+        parts = [f"{s.get('file')} from session {s.get('sessions_from')}" for s in sessions
+                 if isinstance(s, dict)]
+        return f"MIXED: {len(parts)} rigs over {meta.get('sessions', '?')} sessions: " + "; ".join(parts)
+    return text

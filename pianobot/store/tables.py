@@ -8,8 +8,11 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
-from pianobot.store.layout import TABLE_NAMES, RunPaths
+from pianobot.store.layout import TABLE_NAMES, RunDamaged, RunPaths
 from pianobot.store.schema import TABLE_SCHEMAS, batches_of, with_metadata
+
+# What reading a damaged Parquet file raises.
+_READ_ERRORS = (OSError, ValueError, pa.ArrowException)
 
 
 def committed_batches(paths: RunPaths) -> set[int]:
@@ -17,8 +20,16 @@ def committed_batches(paths: RunPaths) -> set[int]:
     held: set[int] = set()
     compacted = paths.table("trials")
     if compacted.is_file():
-        held |= batches_of(pq.read_schema(compacted).metadata)
+        try:
+            held |= batches_of(pq.read_schema(compacted).metadata)
+        except _READ_ERRORS as exc:
+            raise _damaged(paths, compacted, exc) from None
     return held | set(paths.part_batches()["trials"])
+
+
+def _damaged(paths: RunPaths, path: Path, exc: BaseException) -> RunDamaged:
+    why = " ".join(str(exc).split())[:80] or type(exc).__name__
+    return RunDamaged(f"{paths.relative(path)} is unreadable ({why})", paths.run_id)
 
 
 def drop_orphan_parts(paths: RunPaths) -> list[Path]:
@@ -48,7 +59,22 @@ def read_run_table(paths: RunPaths, name: str, columns: list[str] | None = None)
 
     Safe while the writer is running or was killed: parts appear by atomic rename, a part batch
     counts only once its trials part exists, and batches already compacted are not read twice.
+
+    Raises:
+        RunDamaged: a file is truncated or unreadable (one line naming it and the repair).
     """
+    try:
+        return _read_run_table(paths, name, columns)
+    except RunDamaged:
+        raise
+    except _READ_ERRORS as exc:
+        bad = getattr(exc, "filename", None)
+        where = Path(bad) if bad else paths.root
+        raise RunDamaged(f"{paths.relative(where) if bad else 'a table'} is unreadable "
+                         f"({' '.join(str(exc).split())[:80]})", paths.run_id) from None
+
+
+def _read_run_table(paths: RunPaths, name: str, columns: list[str] | None) -> pa.Table:
     if name not in TABLE_NAMES:
         raise ValueError(f"table must be one of {TABLE_NAMES}, got {name!r}")
     parts = paths.part_batches()
@@ -59,22 +85,33 @@ def read_run_table(paths: RunPaths, name: str, columns: list[str] | None = None)
     if compacted.is_file():
         # One open file for both metadata and rows: a concurrent compaction replaces the file
         # by rename, and this handle keeps reading the version whose batch list we hold.
-        with pq.ParquetFile(compacted) as parquet:
-            held = batches_of(parquet.schema_arrow.metadata)
-            tables.append(parquet.read(columns=columns))
+        try:
+            with pq.ParquetFile(compacted) as parquet:
+                held = batches_of(parquet.schema_arrow.metadata)
+                tables.append(parquet.read(columns=columns))
+        except FileNotFoundError:
+            return _read_run_table(paths, name, columns)
+        except _READ_ERRORS as exc:
+            raise _damaged(paths, compacted, exc) from None
     for batch in sorted(parts[name]):
         if batch in committed and batch not in held:
             try:
                 tables.append(pq.read_table(parts[name][batch], columns=columns))
             except FileNotFoundError:
                 # Compaction removed the part after we listed it; it is in the compacted file.
-                return read_run_table(paths, name, columns)
+                return _read_run_table(paths, name, columns)
+            except _READ_ERRORS as exc:
+                raise _damaged(paths, parts[name][batch], exc) from None
     if not tables:
         empty = TABLE_SCHEMAS[name].empty_table()
         if columns is not None:
             empty = empty.select([c for c in columns if c in empty.column_names])
         return with_metadata(empty, name)
-    merged = pa.concat_tables(tables, promote_options="default") if len(tables) > 1 else tables[0]
+    try:
+        merged = pa.concat_tables(tables, promote_options="default") if len(tables) > 1 else tables[0]
+    except pa.ArrowException as exc:
+        raise RunDamaged(f"the {name} files do not fit together ({' '.join(str(exc).split())[:80]})",
+                         paths.run_id) from None
     if name == "trials":
         merged = dedupe_trials(merged)
     return with_metadata(merged, name)

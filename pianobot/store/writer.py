@@ -1,8 +1,15 @@
-"""RunWriter: creates a run folder and writes its plan, parts, journal and compacted tables."""
+"""RunWriter: creates a run folder and writes its plan, parts, journal and compacted tables.
+
+Everything it writes is recorded in the journal as it lands (`store.records`): run.json as
+created and each change to it, every part with its rows and SHA-256 (and a copy of the small
+trials part), every compacted table before it replaces the old one. `runs check` verifies a
+run against these records, `runs repair` restores from them.
+"""
 
 from __future__ import annotations
 
 import os
+import shutil
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -10,10 +17,14 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 import pianobot
+from pianobot.errors import InputError
+from pianobot.store.integrity import check_run
 from pianobot.store.journal import Journal
 from pianobot.store.layout import (
     TABLE_NAMES,
+    RunDamaged,
     RunPaths,
+    check_data_dir,
     encode_parquet,
     git_commit,
     new_run_id,
@@ -21,12 +32,21 @@ from pianobot.store.layout import (
     read_json,
     resolve_run,
     runs_dir,
+    sha256_file,
     utc_now,
     write_bytes_atomic,
     write_json_atomic,
-    write_parquet_atomic,
 )
 from pianobot.store.lock import RunLock, RunLocked  # noqa: F401  (re-exported: RunLocked used to live here)
+from pianobot.store.records import (
+    COMPACTED,
+    META,
+    PART,
+    RUN_CREATED,
+    FileRecord,
+    index_journal,
+    part_record,
+)
 from pianobot.store.schema import (
     RUN_KINDS,
     RUN_STATUSES,
@@ -40,6 +60,10 @@ from pianobot.store.tables import committed_batches, dedupe_trials, drop_orphan_
 
 if TYPE_CHECKING:  # pandas takes a third of a second to import: only where frames are made
     import pandas as pd
+
+# Fields of run.json that change with every part batch; journalled without a disk flush of
+# their own (they ride on the next one).
+_FREQUENT_META = frozenset({"lab_time_s"})
 
 
 class RunWriter:
@@ -56,11 +80,12 @@ class RunWriter:
         try:
             self._journal = Journal(paths.journal, fsync=fsync)
             self._meta = read_json(paths.run_json)
+            known = committed_batches(paths)
         except BaseException:
             self._lock.release()
             raise
-        known = committed_batches(paths)
-        self._next_batch = max(known, default=0) + 1
+        # A batch number is never used twice, not even one a repair quarantined.
+        self._next_batch = max(max(known, default=0), index_journal(paths.journal).max_batch) + 1
 
     @property
     def run_id(self) -> str:
@@ -93,18 +118,25 @@ class RunWriter:
         """
         if kind not in RUN_KINDS:
             raise ValueError(f"run kind must be one of {RUN_KINDS}, got {kind!r}")
+        check_data_dir(data_dir)
         base = runs_dir(data_dir)
-        base.mkdir(parents=True, exist_ok=True)
-        for _ in range(20):
-            root = base / new_run_id(name)
-            try:
-                root.mkdir()
-                break
-            except FileExistsError:
-                continue
-        else:
-            raise FileExistsError(f"could not find a free run id in {base}")
-        paths = RunPaths(root)
+        try:
+            base.mkdir(parents=True, exist_ok=True)
+            root = _new_folder(base, name)
+        except OSError as exc:
+            raise InputError(f"cannot create a run folder: {exc.strerror or exc}", f"--data {data_dir}") from None
+        try:
+            return cls._fill(RunPaths(root), name=name, kind=kind, meta=meta, plan=plan, fsync=fsync)
+        except OSError as exc:
+            # Nothing of value is in the new folder yet (no trial ran): leave no half-made run.
+            shutil.rmtree(root, ignore_errors=True)
+            raise InputError(f"cannot write the run folder: {exc.strerror or exc}", f"--data {data_dir}") from None
+
+    @classmethod
+    def _fill(
+        cls, paths: RunPaths, *, name: str, kind: str, meta: dict[str, Any],
+        plan: pd.DataFrame | None, fsync: bool,
+    ) -> RunWriter:
         paths.parts.mkdir()
         now = utc_now()
         record: dict[str, Any] = {
@@ -125,9 +157,13 @@ class RunWriter:
         }
         if plan is not None:
             table = pa.Table.from_pandas(plan, preserve_index=False)
-            write_parquet_atomic(paths.plan, with_metadata(table, "plan"))
+            data = encode_parquet(with_metadata(table, "plan"))
+            write_bytes_atomic(paths.plan, data)
+            record["plan_file"] = FileRecord.of_bytes("plan.parquet", data, table.num_rows).to_dict()
         write_json_atomic(paths.run_json, record)
-        return cls(paths, fsync=fsync)
+        writer = cls(paths, fsync=fsync)
+        writer.journal(RUN_CREATED, meta=record)
+        return writer
 
     @classmethod
     def reopen(cls, data_dir: Path, run_id: str, *, fsync: bool = True) -> RunWriter:
@@ -138,7 +174,11 @@ class RunWriter:
             RunLocked: another live process holds the run.
         """
         paths = resolve_run(data_dir, run_id)
-        writer = cls(paths, fsync=fsync)
+        try:
+            writer = cls(paths, fsync=fsync)
+        except PermissionError as exc:
+            raise InputError(f"cannot write to run {paths.run_id}: {exc.strerror or exc}",
+                             f"--data {data_dir}") from None
         drop_orphan_parts(paths)
         return writer
 
@@ -151,7 +191,8 @@ class RunWriter:
         """Write one batch: a samples part, a midi part, then the trials part that commits it.
 
         Returns the batch number. Each file is written under a temporary name, fsync'd and
-        renamed, so a reader or a kill sees a whole part or none.
+        renamed, so a reader or a kill sees a whole part or none. Once all have landed, the
+        journal records each file's rows and SHA-256 and keeps a copy of the trials part.
         """
         tables = {
             "samples": None if samples is None else to_table(samples, "samples", self.run_id),
@@ -160,10 +201,17 @@ class RunWriter:
         }
         self._lock.verify()
         batch = self._next_batch
+        files: dict[str, FileRecord] = {}
+        trials_bytes = b""
         for name, table in tables.items():  # trials last: it commits the batch
             if table is not None and (table.num_rows or name == "trials"):
-                write_parquet_atomic(self.paths.part(name, batch), with_metadata(table, name))
+                path = self.paths.part(name, batch)
+                data = encode_parquet(with_metadata(table, name))
+                write_bytes_atomic(path, data)
+                files[name] = FileRecord.of_bytes(self.paths.relative(path), data, table.num_rows)
+                trials_bytes = data
         self._next_batch += 1
+        self._journal.write(PART, part_record(batch, files, trials_bytes))
         return batch
 
     def append_encoded(self, parts: dict[str, bytes]) -> int:
@@ -173,11 +221,28 @@ class RunWriter:
             raise ValueError("an encoded batch needs its trials part")
         self._lock.verify()  # the run is still ours (a parallel sweep's driver holds the lock)
         batch = self._next_batch
+        files: dict[str, FileRecord] = {}
         for name in ("samples", "midi", "trials"):
             if name in parts:
-                write_bytes_atomic(self.paths.part(name, batch), parts[name])
+                path = self.paths.part(name, batch)
+                data = parts[name]
+                write_bytes_atomic(path, data)
+                rows = pq.read_metadata(pa.BufferReader(data)).num_rows
+                files[name] = FileRecord.of_bytes(self.paths.relative(path), data, rows)
         self._next_batch += 1
+        self._journal.write(PART, part_record(batch, files, parts["trials"]))
         return batch
+
+    def replace_plan(self, plan: pd.DataFrame) -> None:
+        """Write a new plan.parquet (atomically) and record it: its rows and SHA-256 in run.json
+        (`plan_file`, journalled), `trials_planned` = its rows. For a run whose plan is only known
+        once it started (`play`: the warm-up as played, then the song)."""
+        self._lock.verify()
+        table = pa.Table.from_pandas(plan, preserve_index=False)
+        data = encode_parquet(with_metadata(table, "plan"))
+        write_bytes_atomic(self.paths.plan, data)
+        record = FileRecord.of_bytes("plan.parquet", data, table.num_rows)
+        self.update_meta(trials_planned=table.num_rows, plan_file=record.to_dict())
 
     def journal(self, event: str, **fields: Any) -> None:
         """Append one event to journal.jsonl (fsync'd)."""
@@ -196,9 +261,10 @@ class RunWriter:
         self._journal.write_many(events)
 
     def update_meta(self, **fields: Any) -> None:
-        """Merge fields into run.json (atomically)."""
+        """Merge fields into run.json (atomically); the change is journalled too."""
         self._meta.update(fields)
         write_json_atomic(self.paths.run_json, self._meta)
+        self._journal.write(META, {"fields": fields}, sync=not set(fields) <= _FREQUENT_META)
 
     def add_interruption(self, kind: str, **fields: Any) -> None:
         """Record an interruption (crash, signal, safety stop, ...) in run.json."""
@@ -206,26 +272,41 @@ class RunWriter:
         self.update_meta(interruptions=[*self._meta.get("interruptions", []), entry])
 
     def finish(self, status: str, reason: str | None = None, **fields: Any) -> None:
-        """Compact the parts into trials/samples/midi.parquet and set the final status."""
+        """Verify and compact the parts into trials/samples/midi.parquet, set the final status.
+
+        A run whose files fail the check is not compacted and not declared complete: its status
+        becomes `damaged` with the first problem as the reason (`pianobot runs repair`).
+        """
         if status not in RUN_STATUSES or status == "running":
             raise ValueError(f"final status must be one of {RUN_STATUSES[1:]}, got {status!r}")
-        self.compact()
+        try:
+            self.compact()
+        except RunDamaged as exc:
+            status, reason = "damaged", f"{exc.problem} (was {status}: {reason or 'no reason'})"
         self.update_meta(status=status, reason=reason, end_utc=utc_now(), **fields)
 
     def compact(self) -> None:
         """Merge committed parts into one file per table; parts are removed only afterwards.
 
-        A compacted file records in its metadata which batches it holds, so a crash between
-        writing it and removing the parts never makes a reader count a batch twice.
+        Every part is verified first (readable, rows and SHA-256 as journalled); each compacted
+        file is checked (rows) and journalled before it replaces the old one. It records in its
+        metadata which batches it holds, so a crash between writing it and removing the parts
+        never makes a reader count a batch twice.
+
+        Raises:
+            RunDamaged: a part or a compacted file is damaged; nothing was changed.
         """
         self._lock.verify()
         drop_orphan_parts(self.paths)
+        health = check_run(self.paths, deep=True)
+        if not health.ok:
+            raise RunDamaged(health.reason, self.run_id)
         parts = self.paths.part_batches()
         committed = sorted(parts["trials"])
         if not committed:
             return
         for name in TABLE_NAMES:
-            _compact_table(self.paths, name, committed, parts[name])
+            _compact_table(self.paths, name, committed, parts[name], self._journal)
         for name in TABLE_NAMES:
             for path in parts[name].values():
                 path.unlink(missing_ok=True)
@@ -247,7 +328,20 @@ def encode_part(table: pd.DataFrame | pa.Table, name: str, run_id: str) -> bytes
     return encode_parquet(with_metadata(to_table(table, name, run_id), name))
 
 
-def _compact_table(paths: RunPaths, name: str, committed: list[int], parts: dict[int, Path]) -> None:
+def _new_folder(base: Path, name: str) -> Path:
+    for _ in range(20):
+        root = base / new_run_id(name)
+        try:
+            root.mkdir()
+            return root
+        except FileExistsError:
+            continue
+    raise FileExistsError(f"could not find a free run id in {base}")
+
+
+def _compact_table(
+    paths: RunPaths, name: str, committed: list[int], parts: dict[int, Path], journal: Journal
+) -> None:
     target = paths.table(name)
     held: set[int] = set()
     sources: list[Path] = []
@@ -256,27 +350,38 @@ def _compact_table(paths: RunPaths, name: str, committed: list[int], parts: dict
         sources.append(target)
     sources += [parts[b] for b in committed if b in parts and b not in held]
     batches = sorted(held | set(committed))
-    if name == "trials":
-        # Small: one row per keystroke. A trial redone after a failure keeps its last row.
-        tables = [pq.read_table(p) for p in sources]
-        merged = dedupe_trials(pa.concat_tables(tables, promote_options="default")) if tables else (
-            TABLE_SCHEMAS[name].empty_table()
-        )
-        write_parquet_atomic(target, with_metadata(merged, name, batches))
-        return
-    # samples and midi can be large: stream them part by part so memory stays bounded.
-    schema = with_metadata(TABLE_SCHEMAS[name].empty_table(), name, batches).schema
     temp = target.with_name(f".{target.name}.{os.getpid()}.compact.tmp")
     try:
-        with pq.ParquetWriter(temp, schema, **parquet_options(schema)) as out:
-            # Text columns (ids, sources) read as dictionaries: no million-fold string copies.
-            text = [f.name for f in schema if pa.types.is_string(f.type)]
-            for source in sources:
-                parquet = pq.ParquetFile(source, read_dictionary=text)
-                for group in range(parquet.num_row_groups):
-                    out.write_table(parquet.read_row_group(group).cast(schema))
-        with open(temp, "rb+") as handle:
-            os.fsync(handle.fileno())
+        if name == "trials":
+            # Small: one row per keystroke. A trial redone after a failure keeps its last row.
+            tables = [pq.read_table(p) for p in sources]
+            merged = dedupe_trials(pa.concat_tables(tables, promote_options="default")) if tables else (
+                TABLE_SCHEMAS[name].empty_table()
+            )
+            expected = merged.num_rows
+            write_bytes_atomic(temp, encode_parquet(with_metadata(merged, name, batches)))
+        else:
+            # samples and midi can be large: stream them part by part so memory stays bounded.
+            schema = with_metadata(TABLE_SCHEMAS[name].empty_table(), name, batches).schema
+            expected = 0
+            with pq.ParquetWriter(temp, schema, **parquet_options(schema)) as out:
+                # Text columns (ids, sources) read as dictionaries: no million-fold string copies.
+                text = [f.name for f in schema if pa.types.is_string(f.type)]
+                for source in sources:
+                    parquet = pq.ParquetFile(source, read_dictionary=text)
+                    for group in range(parquet.num_row_groups):
+                        rows = parquet.read_row_group(group).cast(schema)
+                        expected += rows.num_rows
+                        out.write_table(rows)
+            with open(temp, "rb+") as handle:
+                os.fsync(handle.fileno())
+        # Read back what landed before it replaces anything: a short write never wins.
+        rows = pq.read_metadata(temp).num_rows
+        if rows != expected:
+            raise RunDamaged(f"compacting {name} wrote {rows} rows, expected {expected}", paths.run_id)
+        record = FileRecord(paths.relative(target), rows, temp.stat().st_size, sha256_file(temp),
+                            tuple(batches))
+        journal.write(COMPACTED, {"files": {name: record.to_dict()}})
         os.replace(temp, target)
     finally:
         temp.unlink(missing_ok=True)

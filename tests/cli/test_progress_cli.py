@@ -123,3 +123,23 @@ def test_identify_is_visibly_alive_on_a_terminal_and_silent_under_json(data_dir:
     code, out, err = _run([*base, "--json"], monkeypatch, capsys, terminal=True)
     assert code == 0 and json.loads(out)["parameters"]
     assert "identify:" not in err and all(line.startswith("warning: ") for line in err.splitlines())
+
+
+def test_a_slow_load_gets_a_row_a_quick_one_does_not(monkeypatch: pytest.MonkeyPatch) -> None:
+    import time
+
+    from pianobot.cli.common import loading_row
+
+    terminal = _Terminal()
+    monkeypatch.setattr(sys, "stderr", terminal)
+    with loading_row("play: loading", ["play", "song.mid"], delay_s=0.05):
+        time.sleep(0.4)
+    assert "play: loading" in terminal.getvalue()
+    quick = _Terminal()
+    monkeypatch.setattr(sys, "stderr", quick)
+    with loading_row("runs: loading", ["runs"], delay_s=5.0):
+        pass
+    for quiet in (["play", "--json"], ["play", "--no-progress"], ["play", "--help"]):
+        with loading_row("play: loading", quiet, delay_s=0.0):
+            time.sleep(0.2)
+    assert quick.getvalue() == ""

@@ -26,15 +26,28 @@ from pianobot.store import load_run
 SONGS = Path(__file__).resolve().parents[2] / "experiments" / "songs"
 TWINKLE = SONGS / "twinkle.mid"
 RIGID = str(Path(__file__).resolve().parents[2] / "experiments" / "rigs" / "sim-rigid.yaml")
+HEARD_BEFORE_THE_SONG: list[str] = []  # ode's warnings as its song started (the defaults fixture)
 
 
 @pytest.fixture(scope="module")
 def defaults(song_files: dict[str, Path], tmp_path_factory: pytest.TempPathFactory) -> dict[str, PlayResult]:
     """Every test song played with the default command (built-in sim rig, seed 0)."""
+    from pianobot.play.perform import Performer
+
     data = tmp_path_factory.mktemp("defaults")
     out = {}
+    heard: list[str] = []
+    play = Performer.play
+
+    def play_noting_what_was_heard(self: Performer, *args: object, **kwargs: object) -> object:
+        HEARD_BEFORE_THE_SONG.extend(heard)
+        return play(self, *args, **kwargs)  # type: ignore[arg-type]
+
     for name, path in song_files.items():
-        result = play_song(path, data_dir=data, seed=0)
+        with pytest.MonkeyPatch.context() as patch:
+            if name == "ode":
+                patch.setattr(Performer, "play", play_noting_what_was_heard)
+            result = play_song(path, data_dir=data, seed=0, on_warning=heard.append if name == "ode" else None)
         out[name] = result
         s, t = result.score, result.plan.tempo
         assert s is not None and t is not None
@@ -67,6 +80,7 @@ def test_the_written_tempo_is_too_fast_for_one_soft_finger_and_the_output_says_s
     assert tempo is not None and tempo.played_bpm < tempo.written_bpm
     lines = [w for w in result.warnings if "too fast for this finger" in w]
     assert len(lines) == 1 and f"{tempo.played_bpm:.4g} bpm" in lines[0] and "--tempo written" in lines[0]
+    assert lines[0] in HEARD_BEFORE_THE_SONG  # said before the song, not only after it
     assert tempo.limiting_notes and all(0 < i < len(result.melody.notes) for i in tempo.limiting_notes)
 
 
@@ -191,21 +205,22 @@ def test_a_song_without_playable_notes_is_refused(tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", ["ode", "march", "waltz"])
+@pytest.mark.parametrize(("name", "rig"), [("ode", RIGID), ("march", RIGID), ("waltz", "sim")])
 def test_the_rigid_finger_plays_at_the_written_tempo_where_the_dry_run_says_it_is_feasible(
-        name: str, tmp_path: Path) -> None:
+        name: str, rig: str, tmp_path: Path) -> None:
     """A user reads the dry run's feasible tempo and writes the song at it (or keeps its own
-    tempo when that is feasible), then asks for the written tempo: every note is kept."""
+    tempo when that is feasible), then asks for the written tempo: every note is kept. On the
+    built-in rig (`--finger rigid` alone) as on a rigid finger's rig file."""
     spec = TEST_SONGS[name]()
     path = write_song(tmp_path / f"{name}.mid", spec.to_notes(), tempo_bpm=spec.tempo_bpm)
-    dry = play_song(path, data_dir=tmp_path, dry_run=True, rig=RIGID, finger="rigid")
+    dry = play_song(path, data_dir=tmp_path, dry_run=True, rig=rig, finger="rigid")
     assert dry.plan.tempo is not None
     bpm = min(spec.tempo_bpm, float(np.floor(dry.plan.tempo.feasible_bpm)))
     scale = spec.tempo_bpm / bpm
     notes = [Note(n.pitch, n.onset_s * scale, n.offset_s * scale, n.velocity) for n in spec.to_notes()]
     at = write_song(tmp_path / f"{name}-at.mid", notes, tempo_bpm=bpm)
-    assert play_song(at, data_dir=tmp_path, dry_run=True, rig=RIGID, finger="rigid", tempo="written").plan.summary()["skipped"] == 0
-    result = play_song(at, data_dir=tmp_path, rig=RIGID, finger="rigid", tempo="written", seed=0)
+    assert play_song(at, data_dir=tmp_path, dry_run=True, rig=rig, finger="rigid", tempo="written").plan.summary()["skipped"] == 0
+    result = play_song(at, data_dir=tmp_path, rig=rig, finger="rigid", tempo="written", seed=0)
     assert result.plan.tempo is not None and result.score is not None
     assert result.plan.tempo.played_bpm == pytest.approx(bpm, rel=1e-4)
     print(f"rigid {name} at {bpm:g} bpm: F1 {result.score.f1:.3f}, onset RMS {result.score.onset_rms_ms:.1f} ms")

@@ -294,12 +294,18 @@ def save_predictor(model: LearnedPredictor, path: Path, *, cv: pd.DataFrame | No
 
 def load_learned(path: Path, sidecar: dict[str, Any]) -> LearnedPredictor:
     """Load the estimator a sidecar names, after checking its hash (a changed file is refused)."""
-    blob = Path(path).parent / str(sidecar.get("estimator_file", ""))
+    name = sidecar.get("estimator_file")
+    # A plain file name beside the sidecar: never a path elsewhere, nothing the OS chokes on.
+    if (not isinstance(name, str) or not name or len(name) > 255 or "\x00" in name
+            or Path(name).name != name or name in (".", "..")):
+        raise InputError(f"estimator_file should be a file name beside the predictor, got {str(name)[:40]!r}",
+                         str(path))
+    blob = Path(path).parent / name
     if not blob.is_file():
-        raise InputError(f"estimator file {blob.name} named by the predictor is missing", str(path))
+        raise InputError(f"estimator file {blob.name!r} named by the predictor is missing", str(path))
     digest = hashlib.sha256(blob.read_bytes()).hexdigest()
     if digest != sidecar.get("estimator_sha256"):
-        raise InputError(f"estimator file {blob.name} does not match its recorded sha256", str(path))
+        raise InputError(f"estimator file {blob.name!r} does not match its recorded sha256", str(path))
     model = joblib.load(blob)
     if not isinstance(model, LearnedPredictor):
         raise InputError("the estimator file does not hold a pianobot predictor", str(blob))
