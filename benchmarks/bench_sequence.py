@@ -47,7 +47,7 @@ def study_log(ks: tuple[int, ...]) -> dict[str, Any]:
                               "--data", tmp, "--json"], check=True, capture_output=True, text=True).stdout
         run_id = json.loads(out)["run_id"]
         table = stroke_table(load_trials([run_id], Path(tmp)))
-    cv = cross_validate_sequence(table, ks=ks, per_note=("gp",), folds=5, workers=1)
+    cv = cross_validate_sequence(table, ks=ks, per_note=("gp",), folds=5, workers=2)
     seq = cv[cv["model"].str.startswith("sequence")].sort_values(["on_velocity_rmse", "k"])
     best = seq.iloc[0]
     k0 = cv.set_index("model").loc["sequence k=0"]
@@ -86,9 +86,10 @@ def main() -> None:
     args = parser.parse_args()
     ks = (0, 2) if args.quick else (0, 1, 2, 3)
     result: dict[str, Any] = {"benchmark": "sequence"}
-    result["seq_data"] = study_log(ks) if SEQ_LOG.is_file() else {"skipped": "fixture seq_data.txt absent"}
-    result["sim_world"] = sim_world(24 if args.quick else 36, ks)
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
+    result["seq_data"] = study_log(ks) if SEQ_LOG.is_file() else {"skipped": "fixture seq_data.txt absent"}
+    RESULTS.write_text(json.dumps(result, indent=2))  # written after each part: the log's figures first
+    result["sim_world"] = sim_world(24 if args.quick else 36, ks)
     RESULTS.write_text(json.dumps(result, indent=2))
     print(json.dumps(result, indent=2))
 
