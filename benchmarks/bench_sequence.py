@@ -5,7 +5,8 @@
    keystroke-log`: cross-validation grouped by sequence (5 folds), the per-note models (GP)
    and the sequence model with k = 0, 1, 2, 3 previous strokes, on the same folds. Errors:
    on-velocity RMSE/MAE (MIDI), inter-onset interval RMSE (previous note-on → this note-on, s),
-   MIDI hold RMSE (s). `context_gain` is the best k's relative change against k = 0.
+   MIDI hold RMSE (s). `chosen_k` is what `fit` saves (`choose_k`); `context_gain_vs_k0` is its relative
+   change against k = 0, per error.
 2. The simulated world where context matters (own-world suite, reported apart): sequence-mode
    strokes on a `World` whose finger stiffness drifts by up to 30 % between sequences and stays
    within one; per-note GP against the sequence model on held-out sequences.
@@ -39,6 +40,7 @@ def _records(cv: Any) -> list[dict[str, Any]]:
 def study_log(ks: tuple[int, ...]) -> dict[str, Any]:
     from pianobot.analysis.learn.run import load_trials
     from pianobot.analysis.sequence.evaluate import _per_note, cross_validate_sequence
+    from pianobot.analysis.sequence.fit import choose_k
     from pianobot.analysis.sequence.model import SequenceModel
     from pianobot.analysis.sequence.strokes import stroke_table
 
@@ -47,11 +49,11 @@ def study_log(ks: tuple[int, ...]) -> dict[str, Any]:
                               "--data", tmp, "--json"], check=True, capture_output=True, text=True).stdout
         run_id = json.loads(out)["run_id"]
         table = stroke_table(load_trials([run_id], Path(tmp)))
-    cv = cross_validate_sequence(table, ks=ks, per_note=("gp",), folds=5, workers=1)
-    seq = cv[cv["model"].str.startswith("sequence")].sort_values(["on_velocity_rmse", "k"])
-    best = seq.iloc[0]
-    k0 = cv.set_index("model").loc["sequence k=0"]
-    gp = cv.set_index("model").loc["per-note gp"]
+    cv = cross_validate_sequence(table, ks=ks, per_note=("gp",), folds=5, workers=2)
+    rows = cv.set_index("model")
+    chosen = choose_k(cv)
+    best = rows.loc[f"sequence k={chosen}"]
+    k0, gp = rows.loc["sequence k=0"], rows.loc["per-note gp"]
     t0 = time.perf_counter()
     SequenceModel(2).fit(table)
     seq_s = time.perf_counter() - t0
@@ -59,7 +61,7 @@ def study_log(ks: tuple[int, ...]) -> dict[str, Any]:
     _per_note("gp", table, table, 0)
     gp_s = time.perf_counter() - t0
     return {
-        "strokes": table.n, "sequences": table.n_sequences, "cv": _records(cv), "best_k": int(best["k"]),
+        "strokes": table.n, "sequences": table.n_sequences, "cv": _records(cv), "chosen_k": chosen,
         "context_gain_vs_k0": {m: float(best[m] / k0[m] - 1.0) for m in ("on_velocity_rmse", "ioi_rmse_s", "hold_rmse_s")},
         "best_vs_per_note_gp": {m: float(best[m] / gp[m] - 1.0) for m in ("on_velocity_rmse", "ioi_rmse_s")},
         "fit_s": {"sequence_k2": seq_s, "per_note_gp": gp_s, "ratio_sequence_over_gp": seq_s / gp_s},
@@ -86,9 +88,10 @@ def main() -> None:
     args = parser.parse_args()
     ks = (0, 2) if args.quick else (0, 1, 2, 3)
     result: dict[str, Any] = {"benchmark": "sequence"}
-    result["seq_data"] = study_log(ks) if SEQ_LOG.is_file() else {"skipped": "fixture seq_data.txt absent"}
-    result["sim_world"] = sim_world(24 if args.quick else 36, ks)
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
+    result["seq_data"] = study_log(ks) if SEQ_LOG.is_file() else {"skipped": "fixture seq_data.txt absent"}
+    RESULTS.write_text(json.dumps(result, indent=2))  # written after each part: the log's figures first
+    result["sim_world"] = sim_world(24 if args.quick else 36, ks)
     RESULTS.write_text(json.dumps(result, indent=2))
     print(json.dumps(result, indent=2))
 

@@ -164,6 +164,9 @@ def register(app: typer.Typer) -> None:
         if "sequence" in kinds:
             from pianobot.cli.sequence_fit import fit_sequence_command
 
+            if plot is not None:
+                raise InputError("--plot draws per-note maps; it is not available with --model sequence", "--plot")
+
             fit_sequence_command(runs, data, kinds, out_dir, folds, context, json_out, no_progress)
             return
         writable(plot, "--plot")

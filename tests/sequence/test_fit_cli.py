@@ -46,3 +46,11 @@ def test_a_bad_context_is_one_line_and_exit_2(
                                  "--context", "one,two"], capsys, monkeypatch)
     assert code == 2
     assert err.strip().count("\n") == 0 and "--context" in err
+
+
+def test_plot_is_refused_with_the_sequence_model(
+    tmp_path: Path, data_dir: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    code, _, err = invoke_cli(["fit", "nosuchrun", "--data", str(data_dir), "--model", "sequence",
+                               "--plot", str(tmp_path / "maps.png")], capsys, monkeypatch)
+    assert code == 2 and "--plot" in err and not (tmp_path / "maps.png").exists()

@@ -110,3 +110,14 @@ def test_unfitted_model_and_hopeless_data_are_refused(trials: pd.DataFrame) -> N
         stroke_table(trials.assign(on_velocity=np.nan, status="silent"))
     with pytest.raises(ValueError):
         SequenceModel(-1)
+
+
+def test_the_chosen_context_weighs_loudness_and_timing_alike() -> None:
+    from pianobot.analysis.sequence.fit import choose_k
+
+    cv = pd.DataFrame({"model": ["per-note gp", "sequence k=0", "sequence k=1", "sequence k=2"],
+                       "k": [None, 0, 1, 2], "on_velocity_rmse": [10.3, 9.4, 9.8, 9.85],
+                       "ioi_rmse_s": [1.26, 1.11, 0.52, 0.52], "lead_rmse_s": [np.nan] * 4})
+    assert choose_k(cv) == 1  # timing halves, loudness 4 % worse; k=2 is no better than k=1
+    cv["ioi_rmse_s"] = [1.26, 1.11, 1.11, 1.12]
+    assert choose_k(cv) == 0  # context helps nothing
