@@ -1,13 +1,13 @@
 """The one drawing of progress: a rich display on stderr, one line per task, fit to the terminal.
 
 Columns: spinner, what is being done, bar, done/total, elapsed, wall-clock ETA, and a note (the
-current item, a sweep's lab-time ETA). On a narrow terminal the description and the note give
+current item, a sweep's lab-time ETA); a stage of unknown length shows no count and no ETA. On a narrow terminal the description and the note give
 way (cut with "…"); counts and times never do.
 """
 
 from __future__ import annotations
 
-from rich.console import Console
+from rich.console import Console, RenderableType
 from rich.progress import (
     BarColumn,
     MofNCompleteColumn,
@@ -39,16 +39,28 @@ class ShrinkingText(ProgressColumn):
         return Text(str(value), style=self._style, no_wrap=True, overflow="ellipsis")
 
 
+class Counted(ProgressColumn):
+    """A column that only means something with a known total (count, ETA): blank without one,
+    so a stage of unknown length reads "spinner, what, pulse, elapsed" and not "0/? ETA -:--:--"."""
+
+    def __init__(self, inner: ProgressColumn) -> None:
+        super().__init__(table_column=inner.get_table_column())
+        self._inner = inner
+
+    def render(self, task: Task) -> RenderableType:
+        return self._inner.render(task) if task.total is not None else Text("")
+
+
 def rich_display(console: Console) -> Progress:
     """A (not yet started) rich Progress with pianobot's columns, drawing on `console`."""
     return Progress(
         SpinnerColumn(),
         ShrinkingText("description", "bold"),
         BarColumn(bar_width=12),
-        MofNCompleteColumn(),
+        Counted(MofNCompleteColumn()),
         TimeElapsedColumn(),
-        TextColumn("ETA"),
-        TimeRemainingColumn(),
+        Counted(TextColumn("ETA")),
+        Counted(TimeRemainingColumn()),
         ShrinkingText("note", "dim"),
         console=console,
         transient=False,

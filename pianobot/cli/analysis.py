@@ -8,10 +8,6 @@ from typing import Annotated
 import pandas as pd
 import typer
 
-from pianobot.analysis.fit_run import fit_runs, load_trials
-from pianobot.analysis.identify_run import identify_runs
-from pianobot.analysis.plausibility import Interval, as_dicts, identify_findings, store_findings
-from pianobot.analysis.predictors import PhysicsPredictor, load_predictor
 from pianobot.analysis.static_stiffness import (
     STUDY_COMPRESSION_M,
     force_log_levels,
@@ -33,8 +29,10 @@ from pianobot.cli.common import (
     writable,
 )
 from pianobot.errors import InputError
-from pianobot.reports.command_figures import identified_model, k1_by_level, learned_maps, save_png
-from pianobot.reports.run_report import build_run_report
+from pianobot.store import load_run
+
+# The analysis and report modules load scikit-learn, scipy.optimize and matplotlib (seconds on a
+# busy machine): each command imports only what it uses, after its progress line is up.
 
 PlotOption = Annotated[Path | None, typer.Option("--plot", help="Also write a figure here (PNG).")]
 RunIds = Annotated[list[str], typer.Argument(help="Run ids (or unique prefixes).")]
@@ -43,7 +41,7 @@ RunIds = Annotated[list[str], typer.Argument(help="Run ids (or unique prefixes).
 def keystrokes_per_level(runs: list[str], data: Path, vacuum_kpa: float | None, fitted: int) -> dict[float, int]:
     """Keystrokes per vacuum level (kPa) of the runs' usable trials; a single level gets the
     number the fit actually used."""
-    trials = load_trials(runs, data)
+    trials = pd.concat([load_run(run, data).trials for run in runs], ignore_index=True)
     if "status" in trials:
         trials = trials[trials["status"].isin(["ok", "silent"])]
     fallback = 0.0 if vacuum_kpa is None else -abs(vacuum_kpa)
@@ -80,7 +78,16 @@ def register(app: typer.Typer) -> None:
         static = static_stiffness_from_logs(levels, compression_m=compression_m) if levels else None
         progress = command_progress(json_out, no_progress)
         # identify_runs reports no steps yet: an elapsed-time spinner shows the fits are alive.
-        with progress.task(f"identify: held-out fit, full fit and {bootstrap} bootstrap refits"):
+        with progress.task(f"identify: fits and {bootstrap} bootstrap refits"):
+            from pianobot.analysis.identify_run import identify_runs
+            from pianobot.analysis.plausibility import (
+                Interval,
+                as_dicts,
+                identify_findings,
+                store_findings,
+            )
+            from pianobot.reports.command_figures import identified_model, k1_by_level, save_png
+
             result = identify_runs(runs, data, out=out, coupling=coupling, bootstrap=bootstrap, seed=seed,
                                    x0_source=x0_source, vacuum_kpa=vacuum_kpa, static=static)
         findings = identify_findings(result.fit.params, [Interval(e.name, e.value, e.unit, e.ci95)
@@ -104,7 +111,8 @@ def register(app: typer.Typer) -> None:
         console = output_console()
         console.print(f"held-out RMS x2: identified {1e3 * result.holdout_rms_identified_m:.4f} mm, "
                       f"published {1e3 * result.holdout_rms_published_m:.4f} mm")
-        peaks = ", ".join(f"{hz:.2f} Hz at {level} kPa" for level, hz in result.peak_hz.items())
+        peaks = ", ".join((f"{hz:.2f} Hz" if hz > 0 else "none (largest at 0 Hz)") + f" at {level} kPa"
+                          for level, hz in result.peak_hz.items())
         console.print(f"x2/x0 resonance peak: {peaks}")
         if result.damping is not None:
             d = result.damping
@@ -130,21 +138,31 @@ def register(app: typer.Typer) -> None:
         runs: RunIds,
         data: DataDir = DEFAULT_DATA,
         json_out: JsonFlag = False,
-        model: Annotated[list[str] | None, typer.Option("--model", help="gp | poly | spline | mlp | physics (repeatable).")] = None,
+        model: Annotated[list[str] | None, typer.Option("--model", help="gp | poly | spline | mlp | physics | sequence (repeatable; with sequence, the others are its per-note baselines).")] = None,
         out_dir: Annotated[Path, typer.Option("--out-dir", help="Folder for the saved predictors.")] = Path("models"),
         folds: Annotated[int, typer.Option(min=2, help="Grouped CV folds.")] = 5,
         physics_model: Annotated[Path | None, typer.Option(help="Model file for --model physics.")] = None,
         plot: PlotOption = None,
         no_progress: NoProgressFlag = False,
+        context: Annotated[str, typer.Option("--context", help="With --model sequence: previous strokes k to compare, e.g. 0,1,2,3.")] = "0,1,2,3",
     ) -> None:
         """Cross-validate learned maps to on-velocity, hold and silence; save each as a predictor."""
         kinds = model or ["gp"]
+        if "sequence" in kinds:
+            from pianobot.cli.sequence_fit import fit_sequence_command
+
+            fit_sequence_command(runs, data, kinds, out_dir, folds, context, json_out, no_progress)
+            return
         writable(plot, "--plot")
+        progress = command_progress(json_out, no_progress)
+        with progress.task("fit: loading scikit-learn"):
+            from pianobot.analysis.fit_run import fit_runs, load_trials
+            from pianobot.analysis.plausibility import as_dicts
+            from pianobot.analysis.predictors import PhysicsPredictor, load_predictor
+            from pianobot.reports.command_figures import learned_maps, save_png
         result = fit_runs(runs, data, kinds=kinds, out_dir=out_dir, folds=folds,
-                          physics_model=physics_model, progress=command_progress(json_out, no_progress))
+                          physics_model=physics_model, progress=progress)
         table, saved = result.cv, result.saved
-        for finding in result.findings:
-            print_warning(finding.text())
         if plot is not None:
             predictors = {kind: load_predictor(path) for kind, path in saved.items()}
             if "physics" in kinds:
@@ -152,12 +170,16 @@ def register(app: typer.Typer) -> None:
                                          else PhysicsPredictor.published())
             save_png(learned_maps(load_trials(runs, data), predictors), plot)
         if json_out:
+            for finding in result.findings:
+                print_warning(finding.text())
             emit_json({"cv": table.to_dict(orient="records"), "saved": {k: str(v) for k, v in saved.items()},
                        "warnings": as_dicts(result.findings), "plot": None if plot is None else str(plot)})
             return
         print_cv(table, saved)
         if plot is not None:
             say_written("figure", plot)
+        for finding in result.findings:  # last, beside the numbers they qualify
+            print_warning(finding.text())
 
     @app.command()
     def report(
@@ -171,6 +193,11 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Write one self-contained HTML report (figures embedded, no network)."""
         progress = command_progress(json_out, no_progress)
+        with progress.task("report: loading matplotlib" + (" and scikit-learn" if compare else "")):
+            from pianobot.reports.run_report import build_run_report
+
+            if compare:
+                from pianobot.analysis.fit_run import fit_runs
         cv = fit_runs(runs, data, kinds=["poly", "spline"], out_dir=None, progress=progress).cv if compare else None
         path = build_run_report(runs, data, out, model_file=model, cv_table=cv, progress=progress)
         if json_out:

@@ -11,6 +11,8 @@ from pianobot.cli.common import (
     DEFAULT_DATA,
     DataDir,
     JsonFlag,
+    NoProgressFlag,
+    command_progress,
     emit_json,
     print_fields,
     say,
@@ -22,7 +24,6 @@ from pianobot.io.force_log import DEFAULT_GAIN_N, DEFAULT_OFFSET_N, DEFAULT_RATE
 from pianobot.io.importers import ImportResult, import_force_log, import_keystroke_log, import_mocap
 from pianobot.io.keystroke_layouts import LAYOUT_CHOICES
 from pianobot.io.named_keys import DEFAULT_NOTE_OCTAVE
-from pianobot.progress import progress_display
 
 imports = typer.Typer(
     help="Import old data (keystroke logs, force logs, Motive mocap CSV) as runs.",
@@ -59,6 +60,7 @@ def keystroke_log(
     ] = DEFAULT_NOTE_OCTAVE,
     data: DataDir = DEFAULT_DATA,
     json: JsonFlag = False,
+    no_progress: NoProgressFlag = False,
 ) -> None:
     """Import a dict-per-line keystroke log (control lists or named keys).
 
@@ -69,7 +71,7 @@ def keystroke_log(
     declared = columns.split(",") if columns is not None else None
     result = import_keystroke_log(file, data, layout=layout, columns=declared, layout_file=layout_file,
                                   finger=finger, note_octave=note_octave,
-                                  progress=progress_display(not json))  # fmt: skip
+                                  progress=command_progress(json, no_progress))  # fmt: skip
     _show(result, json, data)
 
 
@@ -90,10 +92,12 @@ def force_log(
     ] = None,
     data: DataDir = DEFAULT_DATA,
     json: JsonFlag = False,
+    no_progress: NoProgressFlag = False,
 ) -> None:
     """Import an `Analog reading = N` force capture; one trial per press (burst)."""
     calibration = Calibration(gain_n=gain_n, offset_n=offset_n, rate_hz=rate_hz)
-    _show(import_force_log(file, data, calibration=calibration, align_run=align_run), json, data)
+    _show(import_force_log(file, data, calibration=calibration, align_run=align_run,
+                           progress=command_progress(json, no_progress)), json, data)
 
 
 @imports.command("mocap")
@@ -125,6 +129,7 @@ def mocap(
     ] = None,
     data: DataDir = DEFAULT_DATA,
     json: JsonFlag = False,
+    no_progress: NoProgressFlag = False,
 ) -> None:
     """Import a Motive CSV take: keystrokes segmented from the arm marker, or aligned to a run.
 
@@ -143,6 +148,7 @@ def mocap(
         min_coverage=min_coverage,
         up_axis=up_axis,
         vacuum_kpa=vacuum_kpa,
+        progress=command_progress(json, no_progress),
     )
     if plot is not None:
         from pianobot.reports.command_figures import plot_mocap_run

@@ -23,10 +23,19 @@ from pianobot.io.mocap import MocapTake, read_mocap
 from pianobot.io.mocap_align import ClockAlignment, run_arm_trace, starts_offset, xcorr_offset
 from pianobot.io.mocap_segment import rest_level, segment_take
 from pianobot.io.run_output import ImportResult, file_sha256, run_dir, trial_ids, write_run
+from pianobot.progress import NO_PROGRESS, Progress
 from pianobot.store import load_run
 
 SAMPLE_PRE_S = 0.2  # mocap samples kept before each keystroke's motion start
 SAMPLE_POST_S = 0.5  # ... and after its end (the key rings after release)
+
+
+def _size(path: Path) -> str:
+    """The file's size for a progress line (MB), or "" when it cannot be read."""
+    try:
+        return f"{path.stat().st_size / 1e6:.1f} MB"
+    except OSError:
+        return "?"
 
 
 def import_force_log(
@@ -35,6 +44,7 @@ def import_force_log(
     calibration: Calibration | None = None,
     align_run: str | None = None,
     rule: BurstRule | None = None,
+    progress: Progress = NO_PROGRESS,
 ) -> ImportResult:
     """Import a force capture as a new run: one trial per burst (press) with its peak force.
 
@@ -43,7 +53,8 @@ def import_force_log(
     """
     path, data_dir = Path(path), Path(data_dir)
     calibration = calibration or Calibration()
-    force = read_force_log(path, calibration, rule)
+    with progress.task(f"reading the force log ({_size(path)})"):
+        force = read_force_log(path, calibration, rule)
     bursts = force.bursts.copy()
     extra: dict[str, Any] = {"bursts": len(bursts), "rate_hz": calibration.rate_hz}
     meta_align: dict[str, Any] | None = None
@@ -98,7 +109,7 @@ def import_force_log(
         "skipped_lines": [{"line": n, "reason": r} for n, r in skipped],
         "aligned_to": meta_align,
     }
-    run_id = write_run(data_dir, f"import-{path.stem}", meta, trials, None, None)
+    run_id = write_run(data_dir, f"import-{path.stem}", meta, trials, None, None, progress=progress)
     return ImportResult(run_id, "force-log", len(trials), 0, skipped, extra, run_dir(data_dir, run_id))
 
 
@@ -110,6 +121,7 @@ def import_mocap(
     min_coverage: float = 0.5,
     up_axis: str = "y",
     vacuum_kpa: float | None = None,
+    progress: Progress = NO_PROGRESS,
 ) -> ImportResult:
     """Import a Motive take: a new run with one trial per keystroke, or aligned to `run_id`.
 
@@ -122,8 +134,11 @@ def import_mocap(
     path, data_dir = Path(path), Path(data_dir)
     if vacuum_kpa is not None and not (math.isfinite(vacuum_kpa) and -100.0 <= vacuum_kpa <= 0.0):
         raise InputError(f"vacuum is a gauge pressure in [-100, 0] kPa, got {vacuum_kpa:g}", "--vacuum-kpa")
-    take = read_mocap(path, markers, min_coverage, up_axis)
-    strokes = segment_take(take)
+    # Stages without a count: each shows its elapsed time (a long take reads for tens of seconds).
+    with progress.task(f"reading the take ({_size(path)})"):
+        take = read_mocap(path, markers, min_coverage, up_axis)
+    with progress.task("segmenting keystrokes"):
+        strokes = segment_take(take)
     sha = file_sha256(path)
     meta: dict[str, Any] = {
         "source": {"file": path.name, "sha256": sha, "format": "motive-csv"},
@@ -146,7 +161,7 @@ def import_mocap(
         samples = _stroke_samples(
             take, strokes, trials["trial_id"].tolist(), strokes["t_start_s"].to_numpy(), 0.0
         )
-        new_id = write_run(data_dir, f"import-{path.stem}", meta, trials, samples, None)
+        new_id = write_run(data_dir, f"import-{path.stem}", meta, trials, samples, None, progress=progress)
         return ImportResult(new_id, "mocap", len(trials), 0, (), extra, run_dir(data_dir, new_id))
     run = load_run(run_id, data_dir)
     trials = run.trials
@@ -174,6 +189,7 @@ def import_mocap(
         base,
         samples.drop(columns=["run_id"], errors="ignore"),
         midi,
+        progress=progress,
     )
     extra.update(
         clock_offset_s=alignment.clock_offset_s, derived_from=run.run_id, method=alignment.method

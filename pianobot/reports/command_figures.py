@@ -87,7 +87,12 @@ def learned_maps(trials: pd.DataFrame, predictors: Mapping[str, _Predicts]) -> F
         label_axes(ax, speed, loud)
     for ax in axes[len(levels):]:
         ax.set_axis_off()
-    axes[0].legend(fontsize=7)
+    # One legend naming every kind of mark, even those only some panels have (silent keystrokes).
+    shown: dict[str, object] = {}
+    for ax in axes[:len(levels)]:
+        for handle, label in zip(*ax.get_legend_handles_labels(), strict=True):
+            shown.setdefault(label, handle)
+    axes[0].legend(list(shown.values()), list(shown), fontsize=7)
     fig.suptitle("Learned on-velocity maps against the measured keystrokes", fontsize=10)
     return fig
 

@@ -9,7 +9,7 @@ the ETA.
 
 from __future__ import annotations
 
-from contextlib import ExitStack
+from contextlib import AbstractContextManager, ExitStack
 from typing import Any
 
 from pianobot.durations import format_duration
@@ -32,6 +32,12 @@ def describe_parameters(parameters: dict[str, Any]) -> str:
         if name in parameters:
             parts.append(f"{fmt.format(parameters[name] * scale)} {unit}")
     return " · ".join(parts)
+
+
+def stage(enabled: bool, description: str) -> AbstractContextManager[Task]:
+    """A row for work before the trials start (expanding the plan, opening the rig): seconds on a
+    large spec or a cold simulator, which would otherwise pass in silence."""
+    return progress_display(enabled).task(f"sweep: {description}")
 
 
 class ProgressBar:

@@ -22,7 +22,7 @@ from pianobot.plan.approach import apply_approach
 from pianobot.rig import Rig, open_rig
 from pianobot.rig.errors import DeviceUnavailable
 from pianobot.run.parallel import SweepSetup, run_parallel
-from pianobot.run.progress import ProgressBar
+from pianobot.run.progress import ProgressBar, stage
 from pianobot.run.records import Subscriber
 from pianobot.run.runner import BLOCK_TRIALS, RetryPolicy, Runner, SessionResult
 from pianobot.run.signals import SignalHandlers, StopControl
@@ -150,7 +150,8 @@ def run_sweep(
     else:
         if spec_path is None:
             raise InputError("give a spec file (or --resume RUN_ID)", "SPEC")
-        prepared = prepare_sweep(spec_path, seed=seed, rig_path=rig_path)
+        with stage(progress, "expanding the plan"):
+            prepared = prepare_sweep(spec_path, seed=seed, rig_path=rig_path)
     with ExitStack() as stack:
         if writer is not None:
             stack.enter_context(writer)
@@ -160,7 +161,8 @@ def run_sweep(
                 return _outcome(writer, None, resumed=True)
         # The rig opens before the run folder exists: an unreachable device leaves nothing.
         try:
-            rig = stack.enter_context(open_rig(prepared.rig, seed=prepared.seed, world=world))
+            with stage(progress, "opening the rig"):
+                rig = stack.enter_context(open_rig(prepared.rig, seed=prepared.seed, world=world))
         except DeviceUnavailable as exc:
             raise InputError(f"device unavailable: {exc}", "rig") from None
         if writer is None:

@@ -102,6 +102,7 @@ def test_identify_warns_on_implausible_keys_and_stores_the_warnings(
     assert {"no_resonance", "stiffness_slope", "few_keystrokes"} <= {w["check"] for w in stored}
     assert len(warnings) == len(stored) and all("likely cause" in w for w in warnings)
     assert any("falls with vacuum" in w for w in warnings)
+    assert "none (largest at 0 Hz)" in proc.stdout and "0.00 Hz" not in proc.stdout
     assert f"figure written to {plot}" in " ".join(proc.stdout.split()) and plot.stat().st_size > 10_000
     # The study's own keys, five speeds at each of two levels: nothing to warn about.
     trials, samples = linear_keystrokes(MSDParams(), seed=3, speeds_mps=(0.015, 0.025, 0.035, 0.045, 0.055),

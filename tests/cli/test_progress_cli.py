@@ -51,6 +51,8 @@ def test_sweep_draws_wall_clock_and_lab_eta_on_a_terminal(monkeypatch: pytest.Mo
                           terminal=True)
     assert code == 0
     assert "sweep" in err and "16/16" in err and "ETA" in err and "lab " in err
+    # The work before the first trial (seconds for a large spec or a cold simulator) has its rows.
+    assert "sweep: expanding the plan" in err and "sweep: opening the rig" in err
     assert "ETA" not in out  # progress never lands on stdout
 
 
@@ -90,3 +92,34 @@ def test_fit_progress_counts_folds_times_models(quick_run: tuple[Path, str], tmp
     assert code == 0 and json.loads(out)["cv"]
     assert "ETA" not in err and "cross-validation" not in err
     assert all(line.startswith("warning: ") for line in err.splitlines())
+
+
+def test_import_mocap_shows_its_stages_on_a_terminal_only(zhang2022: Path, data_dir: Path,
+                                                          monkeypatch: pytest.MonkeyPatch,
+                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    base = ["import", "mocap", str(zhang2022 / "zzz" / "zzz40.csv"), "--vacuum-kpa", "-40", "--data", str(data_dir)]
+    code, out, err = _run(base, monkeypatch, capsys, terminal=True)
+    assert code == 0 and "reading the take (2.4 MB)" in err and "segmenting keystrokes" in err
+    assert "writing the run" in err and "reading" not in out
+    for quiet in (["--json"], ["--no-progress"]):
+        code, out, err = _run([*base, *quiet], monkeypatch, capsys, terminal=True)
+        assert code == 0 and err == ""
+
+
+def test_identify_is_visibly_alive_on_a_terminal_and_silent_under_json(data_dir: Path, tmp_path: Path,
+                                                                        monkeypatch: pytest.MonkeyPatch,
+                                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    sys.path.insert(0, str(ROOT / "tests" / "analysis"))
+    from _synthetic_runs import linear_keystrokes, write_run
+
+    from pianobot.physics.msd import MSDParams
+
+    trials, samples = linear_keystrokes(MSDParams(), seed=0, levels_kpa=(-40.0,),
+                                        speeds_mps=(0.015, 0.025, 0.035, 0.045, 0.055))
+    run = write_run(data_dir, trials, samples)
+    base = ["identify", run, "--data", str(data_dir), "--bootstrap", "2", "--out", str(tmp_path / "m.json")]
+    code, _, err = _run(base, monkeypatch, capsys, terminal=True)
+    assert code == 0 and "identify: fits and 2 bootstrap refits" in err and "0/?" not in err
+    code, out, err = _run([*base, "--json"], monkeypatch, capsys, terminal=True)
+    assert code == 0 and json.loads(out)["parameters"]
+    assert "identify:" not in err and all(line.startswith("warning: ") for line in err.splitlines())

@@ -180,3 +180,23 @@ def test_quantities_scale_si_to_millimetres() -> None:
     assert quantity("depth_m").heading == "pressing depth (mm)" and quantity("depth_m").shown(0.02) == 20.0
     assert quantity("down_velocity_mps").heading == "arm down velocity (mm/s)"
     assert quantity("key_travel_m").unit == "mm" and quantity("peak_hz").heading == "peak (Hz)"
+
+
+def test_every_figure_of_a_built_report_is_labelled(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The report as built (not only the figure functions alone): each embedded figure's axes."""
+    from pianobot.reports import html, run_report
+
+    seen: list[tuple[str, Figure]] = []
+    embed = html.figure_html
+
+    def capture(fig: Figure, caption: str = "", **kwargs: object) -> str:
+        seen.append((caption, fig))
+        return embed(fig, caption, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(run_report, "figure_html", capture)
+    outcome = run_sweep(ROOT / "experiments" / "quickstart.yaml", data_dir=tmp_path, progress=False)
+    model = save_model(KeystrokeModel.study(), tmp_path / "model.json")
+    build_run_report([outcome.run_id], tmp_path, tmp_path / "r.html", model_file=model)
+    assert len(seen) >= 6
+    assert [(caption, unlabelled_axes(fig)) for caption, fig in seen
+            if unlabelled_axes(fig)] == []

@@ -151,7 +151,10 @@ def test_a_slider_at_30_percent_is_warned_before_motion_and_is_no_stall(
     finally:
         arm.close()
     assert record.arm is not None and record.arm.x0_m is not None
-    assert record.arm.x0_m.max() == pytest.approx(0.03, abs=1e-6)
+    # The press went to full depth. Its bottom is one instant (no hold), and a loaded host
+    # misses cycles (gaps in the trace), so the deepest sample may be up to ~30 ms before it:
+    # 0.5 * (1.0 m/s^2 * 0.3^2) * 0.033^2 = 5e-5 m. A stopped or stalled press is mm short.
+    assert record.arm.x0_m.max() == pytest.approx(0.03, abs=5e-5)
     assert any("speed scaling fell to 0.30" in w for w in record.warnings)
 
 

@@ -1,0 +1,74 @@
+"""`pianobot fit RUN… --model sequence`: grouped-CV of the sequence model by k, then save one.
+
+The saved model uses the k with the lowest cross-validated on-velocity RMSE (ties: the smaller
+k), so the file a user gets is the one the evaluation supports; the CV table travels with it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from pianobot.analysis.fit_run import load_trials
+from pianobot.analysis.sequence.evaluate import DEFAULT_KS, cross_validate_sequence
+from pianobot.analysis.sequence.files import save_sequence_model
+from pianobot.analysis.sequence.model import SequenceModel
+from pianobot.analysis.sequence.strokes import stroke_table
+from pianobot.errors import InputError
+from pianobot.progress import NO_PROGRESS, Progress
+
+
+@dataclass(frozen=True)
+class SequenceFit:
+    """The CV table (per-note baselines and the sequence model per k), the chosen k and the file."""
+
+    cv: pd.DataFrame
+    k: int
+    saved: Path | None
+    n_strokes: int
+    n_sequences: int
+
+    def context_gain(self) -> dict[str, float]:
+        """Relative error change of the chosen k against k = 0 (negative: context helps)."""
+        rows = {str(r["model"]): r for r in self.cv.to_dict(orient="records")}
+        base, best = rows.get("sequence k=0"), rows[f"sequence k={self.k}"]
+        if base is None:
+            return {}
+        out = {}
+        for m in ("on_velocity_rmse", "ioi_rmse_s", "lead_rmse_s"):
+            b, v = float(base[m]), float(best[m])
+            if np.isfinite(b) and b > 0 and np.isfinite(v):
+                out[m] = v / b - 1.0
+        return out
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"model": "sequence", "k": self.k, "n_strokes": self.n_strokes,
+                "n_sequences": self.n_sequences, "saved": None if self.saved is None else str(self.saved),
+                "context_gain": self.context_gain(), "cv": self.cv.to_dict(orient="records")}
+
+
+def fit_sequence_runs(
+    run_ids: Sequence[str], data_dir: Path, *, out_dir: Path | None, ks: Sequence[int] = DEFAULT_KS,
+    per_note: Sequence[str] = ("gp",), folds: int = 5, seed: int = 0, workers: int | None = None,
+    progress: Progress = NO_PROGRESS,
+) -> SequenceFit:
+    """Cross-validate, choose k, fit on every stroke and save `sequence.json` under `out_dir`."""
+    if not ks or min(ks) < 0:
+        raise InputError(f"context lengths must be >= 0, got {list(ks)}", "--context")
+    table = stroke_table(load_trials(run_ids, data_dir))
+    cv = cross_validate_sequence(table, ks=ks, per_note=per_note, folds=folds, seed=seed,
+                                 workers=workers, progress=progress)
+    seq = cv[cv["model"].str.startswith("sequence")]
+    k = int(seq.sort_values(["on_velocity_rmse", "k"], kind="stable").iloc[0]["k"])
+    saved = None
+    if out_dir is not None:
+        with progress.task("fit on every stroke", total=1) as task:
+            model = SequenceModel(k, seed).fit(table)
+            task.advance()
+        saved = save_sequence_model(model, Path(out_dir) / "sequence.json", cv=cv, runs=list(run_ids))
+    return SequenceFit(cv, k, saved, table.n, table.n_sequences)
