@@ -24,3 +24,12 @@ def data_dir(tmp_path: Path) -> Path:
     path = tmp_path / "data"
     path.mkdir()
     return path
+
+
+@pytest.fixture(autouse=True)
+def _split_work_in_process(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Commands under test run their split work (bootstrap refits, discovery candidates, sweep
+    blocks) in the test process: a Dask cluster per test would cost more than the work.
+    tests/test_executor.py passes explicit settings and checks that clusters give the same
+    results."""
+    monkeypatch.setenv("PIANOBOT_WORKERS", "1")

@@ -81,11 +81,18 @@ def _disconnect(link: Any) -> None:
         pass
 
 
-def measured_rate_hz(receive: Any, window_s: float = 0.1) -> float | None:
-    """The rate the RTDE stream really has: the smallest step between distinct timestamps."""
+def measured_rate_hz(receive: Any, window_s: float = 0.1, max_wait_s: float = 1.0) -> float | None:
+    """The rate the RTDE stream really has: the smallest step between distinct timestamps.
+
+    Reads for `window_s`, longer (up to `max_wait_s`) until a few packages were seen: a busy
+    host may read only one or two in a short window.
+    """
     seen: list[float] = []
-    deadline = time.monotonic() + window_s
-    while time.monotonic() < deadline and len(seen) < 50:
+    start = time.monotonic()
+    while len(seen) < 50:
+        elapsed = time.monotonic() - start
+        if elapsed >= max_wait_s or (elapsed >= window_s and len(seen) >= 4):
+            break
         ts = float(receive.getTimestamp())
         if not seen or ts != seen[-1]:
             seen.append(ts)

@@ -119,7 +119,7 @@ def test_identify_is_visibly_alive_on_a_terminal_and_silent_under_json(data_dir:
     run = write_run(data_dir, trials, samples)
     base = ["identify", run, "--data", str(data_dir), "--bootstrap", "2", "--out", str(tmp_path / "m.json")]
     code, _, err = _run(base, monkeypatch, capsys, terminal=True)
-    assert code == 0 and "identify: fits and 2 bootstrap refits" in err and "0/?" not in err
+    assert code == 0 and "identify: held-out fit" in err and "bootstrap refits" in err and "0/?" not in err
     code, out, err = _run([*base, "--json"], monkeypatch, capsys, terminal=True)
     assert code == 0 and json.loads(out)["parameters"]
     assert "identify:" not in err and all(line.startswith("warning: ") for line in err.splitlines())

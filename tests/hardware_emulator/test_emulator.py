@@ -81,6 +81,10 @@ def test_movel_follows_urs_trapezoid(ur_emulator: EmulatorFactory) -> None:
         target = [*start[:2], start[2] - 0.03, *start[3:]]
         t0 = receive.getTimestamp()
         assert control.moveL(target, 0.05, 0.4)  # synchronous: returns on arrival
+        # The receive stream may deliver the arrival cycle a little after moveL returns.
+        deadline = time.monotonic() + 2.0
+        while abs(receive.getActualTCPPose()[2] - target[2]) > 1e-9 and time.monotonic() < deadline:
+            time.sleep(0.002)
         assert receive.getActualTCPPose()[2] == pytest.approx(target[2], abs=1e-9)
         truth = ur.truth_between(t0, receive.getTimestamp())
     t = np.array([ts for ts, _ in truth])
