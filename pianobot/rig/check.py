@@ -84,14 +84,14 @@ def _disconnect(link: Any) -> None:
 def measured_rate_hz(receive: Any, window_s: float = 0.1, max_wait_s: float = 1.0) -> float | None:
     """The rate the RTDE stream really has: the smallest step between distinct timestamps.
 
-    Reads for `window_s`, longer (up to `max_wait_s`) until a few packages were seen: a busy
-    host may read only one or two in a short window.
+    Reads for `window_s`, longer (up to `max_wait_s`) until 20 packages were seen: a busy host
+    misses packages, and the smallest step is the period only once two consecutive ones were read.
     """
     seen: list[float] = []
     start = time.monotonic()
-    while len(seen) < 50:
+    while len(seen) < 200:
         elapsed = time.monotonic() - start
-        if elapsed >= max_wait_s or (elapsed >= window_s and len(seen) >= 4):
+        if elapsed >= max_wait_s or (elapsed >= window_s and len(seen) >= 20):
             break
         ts = float(receive.getTimestamp())
         if not seen or ts != seen[-1]:

@@ -43,8 +43,10 @@ TOLERANCE_S = 0.010
 # A non-realtime JACK server on a loaded machine can stall a cycle by tens of milliseconds (the OS
 # scheduler, not pianobot), so the script may be replayed; a timestamping fault in pianobot
 # (stamping on read, by count, or with mido's zero `time`) fails every replay.
-REPLAYS = 3
+REPLAYS = 5
 DELIVERY_WAIT_S = 5.0
+# An overloaded non-realtime server can also drop a cycle's MIDI (an xrun): such a replay is
+# retried too, but what it did deliver must still be the script's events, in order.
 
 PLAYER = r"""
 import json, sys, time
@@ -108,7 +110,7 @@ class Replay:
     @property
     def timing_errors_s(self) -> list[float]:
         """Each event's latency minus the median latency: relative timing errors."""
-        latencies = [e.t_s - t for e, t in zip(self.events, self.sent_s, strict=True)]
+        latencies = [e.t_s - self.sent_s[i] for i, e in _match_in_order(self.events)]
         typical = statistics.median(latencies)
         return [latency - typical for latency in latencies]
 
@@ -139,6 +141,29 @@ def _play(process: subprocess.Popen[str], keyboard: MidiKeyboard) -> list[Replay
     return replays
 
 
+def _expected(event: MidiEvent, fields: dict[str, Any]) -> bool:
+    if event.note != fields["note"]:
+        return False
+    if fields["velocity"] == 0:
+        return (event.type, event.velocity) == ("note_off", 0)
+    return (event.type, event.velocity) == (fields["type"], fields["velocity"])
+
+
+def _match_in_order(events: list[MidiEvent]) -> list[tuple[int, MidiEvent]]:
+    """Each recorded event with the index of the script note it is, matched in order (greedy:
+    a dropped note is skipped); stops at the first event that matches no later note."""
+    matched: list[tuple[int, MidiEvent]] = []
+    i = 0
+    for event in events:
+        while i < len(NOTES) and not _expected(event, NOTES[i]):
+            i += 1
+        if i == len(NOTES):
+            break
+        matched.append((i, event))
+        i += 1
+    return matched
+
+
 @pytest.mark.jack
 def test_records_every_note_with_script_timing(
     player: tuple[subprocess.Popen[str], str],
@@ -152,16 +177,12 @@ def test_records_every_note_with_script_timing(
     finally:
         keyboard.close()
 
-    for replay in replays:  # every replay: every note, in order, with the right type/velocity
-        assert len(replay.events) == len(NOTES)
-        for event, fields in zip(replay.events, NOTES, strict=True):
-            assert event.note == fields["note"]
-            if fields["velocity"] == 0:
-                assert (event.type, event.velocity) == ("note_off", 0)
-            else:
-                assert (event.type, event.velocity) == (fields["type"], fields["velocity"])
+    for replay in replays:  # every replay: the script's notes, in order, with type and velocity
+        matched = _match_in_order(replay.events)
+        assert len(matched) == len(replay.events), "an event that is not the script's, or out of order"
         # Both processes read the same monotonic clock: an event is stamped after it was sent.
-        assert min(e.t_s - t for e, t in zip(replay.events, replay.sent_s, strict=True)) > -0.001
+        assert min(e.t_s - replay.sent_s[i] for i, e in matched) > -0.001
+    assert len(replays[-1].events) == len(NOTES), "no replay delivered every note"
     # Relative timing: every event is within 10 ms of the script's timing (on a replay the
     # scheduler did not stall).
     worst_s = [max(map(abs, r.timing_errors_s)) for r in replays]
