@@ -67,7 +67,7 @@ def assert_refused(code: int, err: str, *mentions: str) -> str:
     return lines[0]
 
 
-def refused(args: list[str | Path], data_dir: Path, capsys: pytest.CaptureFixture[str],
+def assert_cli_refused(args: list[str | Path], data_dir: Path, capsys: pytest.CaptureFixture[str],
             monkeypatch: pytest.MonkeyPatch, *mentions: str) -> str:
     """Run the CLI, assert a one-line refusal that left `data_dir` as it was; the line."""
     with unchanged(data_dir):

@@ -20,7 +20,7 @@ import pytest
 
 import pianobot.run.sweep as sweep_module
 from pianobot.store import check_run, load_run
-from robustness.harness import cli, copy_tree, only_run, refused, tree_digest
+from robustness.harness import assert_cli_refused, cli, copy_tree, only_run, tree_digest
 
 Damage = Callable[[Path], None]
 
@@ -82,7 +82,7 @@ def test_resume_refuses_a_damaged_run_before_the_rig_opens(
         raise AssertionError("the rig was opened for a damaged run")
 
     monkeypatch.setattr(sweep_module, "open_rig", no_motion)
-    line = refused(["sweep", "--resume", run.name, "--data", data], data, capsys, monkeypatch,
+    line = assert_cli_refused(["sweep", "--resume", run.name, "--data", data], data, capsys, monkeypatch,
                    f"run {run.name} is damaged", "pianobot runs repair")
     assert len(line) < 400
 
@@ -92,9 +92,9 @@ def test_show_report_and_list_name_the_damage(
     capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     kind, data, run, _, _ = damaged
-    refused(["runs", "show", run.name, "--data", data], data, capsys, monkeypatch, "is damaged")
+    assert_cli_refused(["runs", "show", run.name, "--data", data], data, capsys, monkeypatch, "is damaged")
     out_file = tmp_path / "report.html"
-    refused(["report", run.name, "--data", data, "--out", out_file], data, capsys, monkeypatch,
+    assert_cli_refused(["report", run.name, "--data", data, "--out", out_file], data, capsys, monkeypatch,
             "is damaged")
     assert not out_file.exists()
     code, out, err = cli(["runs", "--data", data, "--json"], capsys, monkeypatch)
@@ -173,7 +173,7 @@ def test_a_part_with_other_bytes_is_caught_by_its_checksum(
     part.write_bytes(bytes(data))
     code, out, _ = cli(["runs", "check", run.name, "--data", killed_run], capsys, monkeypatch)
     assert code == 1 and ("SHA-256 differs" in out or "unreadable" in out)
-    refused(["sweep", "--resume", run.name, "--data", killed_run], killed_run, capsys, monkeypatch,
+    assert_cli_refused(["sweep", "--resume", run.name, "--data", killed_run], killed_run, capsys, monkeypatch,
             "is damaged")
 
 

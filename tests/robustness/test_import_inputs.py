@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 
 from pianobot.store import list_runs, load_run
-from robustness.harness import cli, refused
+from robustness.harness import assert_cli_refused, cli
 
 FIXTURES = Path(__file__).resolve().parents[3] / "shared" / "fixtures" / "zhang2022"
 LOG = FIXTURES / "data" / "soft" / "ctrl_midi" / "soft_60_angle_45.txt"
@@ -68,7 +68,7 @@ def test_a_capture_without_presses_stores_no_run(data: Path, tmp_path: Path,
                                                  monkeypatch: pytest.MonkeyPatch) -> None:
     flat = tmp_path / "flat.txt"
     flat.write_text("Analog reading = 10\n" * 500)
-    refused(["import", "force-log", flat, "--data", data], data, capsys, monkeypatch, "no press found")
+    assert_cli_refused(["import", "force-log", flat, "--data", data], data, capsys, monkeypatch, "no press found")
 
 
 def test_a_50_mb_line_is_not_a_motive_export(data: Path, tmp_path: Path,
@@ -77,7 +77,7 @@ def test_a_50_mb_line_is_not_a_motive_export(data: Path, tmp_path: Path,
     take = tmp_path / "oneline.csv"
     with open(take, "w") as handle:
         handle.write("Format Version,1.21,Take Name,x," + "A" * 50_000_000)
-    refused(["import", "mocap", take, "--data", data], data, capsys, monkeypatch, str(take), "CSV")
+    assert_cli_refused(["import", "mocap", take, "--data", data], data, capsys, monkeypatch, str(take), "CSV")
 
 
 def test_time_reversed_frames_are_refused(zhang2022: Path, data: Path, tmp_path: Path,
@@ -87,7 +87,7 @@ def test_time_reversed_frames_are_refused(zhang2022: Path, data: Path, tmp_path:
     header = next(i for i, line in enumerate(text) if line.startswith("Frame,"))
     reversed_take = tmp_path / "reversed.csv"
     reversed_take.write_text("\n".join(text[: header + 1] + text[header + 1:][::-1]) + "\n")
-    refused(["import", "mocap", reversed_take, "--data", data], data, capsys, monkeypatch,
+    assert_cli_refused(["import", "mocap", reversed_take, "--data", data], data, capsys, monkeypatch,
             "time runs backwards", "time order")
 
 
@@ -95,7 +95,7 @@ def test_time_reversed_frames_are_refused(zhang2022: Path, data: Path, tmp_path:
 def test_an_import_of_a_folder_or_device_is_refused(kind: str, data: Path, tmp_path: Path,
                                                     capsys: pytest.CaptureFixture[str],
                                                     monkeypatch: pytest.MonkeyPatch) -> None:
-    refused(["import", kind, tmp_path, "--data", data], data, capsys, monkeypatch, "is a folder")
+    assert_cli_refused(["import", kind, tmp_path, "--data", data], data, capsys, monkeypatch, "is a folder")
     if Path("/dev/zero").exists():
-        refused(["import", kind, "/dev/zero", "--data", data], data, capsys, monkeypatch,
+        assert_cli_refused(["import", kind, "/dev/zero", "--data", data], data, capsys, monkeypatch,
                 "not a regular file")

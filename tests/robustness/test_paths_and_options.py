@@ -17,9 +17,9 @@ import pytest
 from robustness.harness import (
     QUICKSTART,
     as_unprivileged,
+    assert_cli_refused,
     assert_refused,
     only_run,
-    refused,
     unchanged,
 )
 
@@ -39,7 +39,7 @@ def test_data_that_is_a_file_is_refused(command: str, tmp_path: Path, capsys: py
         "resume": ["sweep", "--resume", "20260101-000000-x-0000"],
         "import": ["import", "keystroke-log", log],
     }[command]
-    refused([*args, "--data", not_a_folder], tmp_path, capsys, monkeypatch, "is a file, not a folder")
+    assert_cli_refused([*args, "--data", not_a_folder], tmp_path, capsys, monkeypatch, "is a file, not a folder")
 
 
 @pytest.fixture()
@@ -88,7 +88,7 @@ def test_a_bad_seed_stores_no_run(seed: str, tmp_path: Path, capsys: pytest.Capt
                                   monkeypatch: pytest.MonkeyPatch) -> None:
     data = tmp_path / "data"
     data.mkdir()
-    refused(["sweep", QUICKSTART, "--seed", seed, "--data", data], data, capsys, monkeypatch, "--seed")
+    assert_cli_refused(["sweep", QUICKSTART, "--seed", seed, "--data", data], data, capsys, monkeypatch, "--seed")
     assert not (data / "runs").exists()
 
 
@@ -109,7 +109,7 @@ def test_a_non_finite_number_option_is_refused(args: list[str], option: str, tmp
     log = tmp_path / "capture.txt"
     log.write_text("Analog reading = 10\n" * 100)
     full = [a.replace("{log}", str(log)) for a in args]
-    refused([*full, "--data", data], data, capsys, monkeypatch, option, "finite")
+    assert_cli_refused([*full, "--data", data], data, capsys, monkeypatch, option, "finite")
 
 
 def test_a_min_coverage_outside_0_1_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str],
@@ -118,7 +118,7 @@ def test_a_min_coverage_outside_0_1_is_refused(tmp_path: Path, capsys: pytest.Ca
     data.mkdir()
     take = tmp_path / "take.csv"
     take.write_text("Format Version,1.21\n")
-    refused(["import", "mocap", take, "--min-coverage", "1.5", "--data", data], data, capsys, monkeypatch,
+    assert_cli_refused(["import", "mocap", take, "--min-coverage", "1.5", "--data", data], data, capsys, monkeypatch,
             "--min-coverage", "[0, 1]")
 
 
@@ -153,6 +153,6 @@ def test_usage_errors_are_one_line(tmp_path: Path, capsys: pytest.CaptureFixture
                                    monkeypatch: pytest.MonkeyPatch) -> None:
     data = tmp_path / "data"
     data.mkdir()
-    refused(["sweep", QUICKSTART, "--bogus", "--data", data], data, capsys, monkeypatch, "--bogus")
-    refused(["no-such-command", "--data", data], data, capsys, monkeypatch, "no-such-command")
-    refused(["runs", "show", "--data", data], data, capsys, monkeypatch, "Missing argument")
+    assert_cli_refused(["sweep", QUICKSTART, "--bogus", "--data", data], data, capsys, monkeypatch, "--bogus")
+    assert_cli_refused(["no-such-command", "--data", data], data, capsys, monkeypatch, "no-such-command")
+    assert_cli_refused(["runs", "show", "--data", data], data, capsys, monkeypatch, "Missing argument")

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from pianobot.store import load_run
-from robustness.harness import QUICKSTART, cli, only_run, refused
+from robustness.harness import QUICKSTART, assert_cli_refused, cli, only_run
 
 OTHER_RIG = "kind: sim\nsettle_s: {between_presses_s: 2.0}\n"
 
@@ -19,7 +19,7 @@ def test_resuming_on_another_rig_is_refused(killed_run: Path, tmp_path: Path,
     rig = tmp_path / "slow.yaml"
     rig.write_text(OTHER_RIG)
     run = only_run(killed_run).name
-    refused(["sweep", QUICKSTART, "--resume", run, "--rig", rig, "--data", killed_run], killed_run,
+    assert_cli_refused(["sweep", QUICKSTART, "--resume", run, "--rig", rig, "--data", killed_run], killed_run,
             capsys, monkeypatch, "--rig", "differs", "settle_s.between_presses_s: 0.5 → 2.0",
             "--rig-override")
 
@@ -38,7 +38,7 @@ def test_a_rig_file_edited_since_the_run_started_is_another_rig(
     assert code == 0, err
     run = json.loads(out)["run_id"]
     rig.write_text("kind: sim\nsettle_s: {after_vacuum_change_s: 1.0}\n")
-    refused(["sweep", spec, "--resume", run, "--data", data], data, capsys, monkeypatch,
+    assert_cli_refused(["sweep", spec, "--resume", run, "--data", data], data, capsys, monkeypatch,
             "settle_s.after_vacuum_change_s: 5.0 → 1.0")
 
 

@@ -9,7 +9,7 @@ import pytest
 
 from pianobot.plan import count_trials, expand
 from pianobot.spec import load_spec
-from robustness.harness import refused
+from robustness.harness import assert_cli_refused
 
 GRID = """\
 name: big
@@ -32,7 +32,7 @@ def test_a_huge_grid_is_refused_with_its_count_and_lab_time(
 ) -> None:
     spec = tmp_path / "big.yaml"
     spec.write_text(GRID.format(n=num))
-    line = refused(["sweep", spec, "--data", completed_run, *(["--dry-run"] if dry_run else [])],
+    line = assert_cli_refused(["sweep", spec, "--data", completed_run, *(["--dry-run"] if dry_run else [])],
                    completed_run, capsys, monkeypatch, f"plans {count} trials", "of lab time",
                    "limit of 200,000", "--max-trials")
     assert "years" in line or "days" in line
@@ -43,7 +43,7 @@ def test_the_limit_is_configurable(completed_run: Path, tmp_path: Path,
                                    monkeypatch: pytest.MonkeyPatch) -> None:
     spec = tmp_path / "grid.yaml"
     spec.write_text(GRID.format(n=3))  # 81 trials
-    refused(["sweep", spec, "--max-trials", "80", "--data", completed_run], completed_run, capsys,
+    assert_cli_refused(["sweep", spec, "--max-trials", "80", "--data", completed_run], completed_run, capsys,
             monkeypatch, "plans 81 trials", "limit of 80")
 
 
@@ -76,7 +76,7 @@ def test_a_keystroke_log_beyond_the_line_limit_is_refused_before_parsing(
     monkeypatch.setattr(keystroke_log, "MAX_LOG_LINES", 1000)  # the real limit is 10⁶ lines
     log = tmp_path / "huge.txt"
     log.write_text("{'control': [60, 45, 0.5, 0.03, 0.04, 0.05, 0], 'midi': []}\n" * 1001)
-    refused(["import", "keystroke-log", log, "--data", completed_run], completed_run, capsys,
+    assert_cli_refused(["import", "keystroke-log", log, "--data", completed_run], completed_run, capsys,
             monkeypatch, "has more than 1,000 lines", "split it into sessions")
 
 
@@ -105,5 +105,5 @@ def test_a_song_beyond_the_note_limit_is_refused(completed_run: Path, tmp_path: 
     monkeypatch.setattr(midifile, "MAX_SONG_NOTES", 500)  # the real limit is 100,000 notes
     song = tmp_path / "long.mid"
     song.write_bytes(_song(501))
-    refused(["play", song, "--dry-run", "--data", completed_run], completed_run, capsys, monkeypatch,
+    assert_cli_refused(["play", song, "--dry-run", "--data", completed_run], completed_run, capsys, monkeypatch,
             "has 501 notes", "up to 500 notes")

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from robustness.harness import QUICKSTART, refused
+from robustness.harness import QUICKSTART, assert_cli_refused
 
 SPEC = """\
 name: hostile
@@ -62,7 +62,7 @@ def test_a_hostile_spec_is_refused_in_one_line(
     spec = tmp_path / "hostile.yaml"
     spec.write_text(text)
     args: list[str | Path] = ["sweep", spec, "--data", completed_run, *(["--dry-run"] if dry_run else [])]
-    refused(args, completed_run, capsys, monkeypatch, str(spec), *mentions)
+    assert_cli_refused(args, completed_run, capsys, monkeypatch, str(spec), *mentions)
 
 
 RIGS: dict[str, tuple[str, tuple[str, ...]]] = {
@@ -84,7 +84,7 @@ def test_a_hostile_rig_file_is_refused_in_one_line(
     text, mentions = RIGS[case]
     rig = tmp_path / "rig.yaml"
     rig.write_text(text)
-    refused(["sweep", QUICKSTART, "--rig", rig, "--data", completed_run], completed_run, capsys,
+    assert_cli_refused(["sweep", QUICKSTART, "--rig", rig, "--data", completed_run], completed_run, capsys,
             monkeypatch, *mentions)
 
 
@@ -99,5 +99,5 @@ def test_a_spec_that_is_not_a_yaml_file_is_refused(
         path.write_bytes(b"\xff\xfe\x00\x01" * 100)
     if target == "/dev/zero" and not path.exists():
         pytest.skip("no /dev/zero")
-    refused(["sweep", path, "--dry-run", "--data", completed_run], completed_run, capsys, monkeypatch,
+    assert_cli_refused(["sweep", path, "--dry-run", "--data", completed_run], completed_run, capsys, monkeypatch,
             str(path))
