@@ -21,15 +21,7 @@ from pianobot.reports.html import Section, figure_html, paragraph, table_html, w
 
 def gap_cell(gap: Gap) -> str:
     """A held-out gap in a table cell (mm, or MIDI outcomes)."""
-    if math.isfinite(gap.position_m):
-        return f"{1e3 * gap.position_m:.3g} mm"
-    parts = []
-    if math.isfinite(gap.on_velocity):
-        parts.append(f"vel {gap.on_velocity:.2g}")
-    if math.isfinite(gap.hold_s):
-        parts.append(f"hold {1e3 * gap.hold_s:.3g} ms")
-    parts.append(f"{gap.sounded_mismatch} sound")
-    return ", ".join(parts)
+    return gap.text(short=True)
 
 
 def candidate_frame(result: DiscoveryResult, index: int) -> pd.DataFrame:

@@ -47,16 +47,19 @@ class Gap:
     def primary(self) -> float:
         return self.position_m if math.isfinite(self.position_m) else self.on_velocity
 
-    def text(self) -> str:
-        """The gap in words with units (mm for positions)."""
+    def text(self, *, short: bool = False) -> str:
+        """The gap in words with units (mm for positions); `short` for a table cell."""
         if math.isfinite(self.position_m):
+            if short:
+                return f"{1e3 * self.position_m:.3g} mm"
             return f"{1e3 * self.position_m:.3g} mm systematic (RMS {1e3 * self.position_rms_m:.3g} mm, noise {1e3 * self.sigma_m:.2g} mm)"
         parts = []
         if math.isfinite(self.on_velocity):
-            parts.append(f"on-velocity {self.on_velocity:.3g} MIDI")
+            parts.append(f"vel {self.on_velocity:.2g}" if short else f"on-velocity {self.on_velocity:.3g} MIDI")
         if math.isfinite(self.hold_s):
             parts.append(f"hold {1e3 * self.hold_s:.3g} ms")
-        parts.append(f"{self.sounded_mismatch} of {self.n_keystrokes} sound/silence wrong")
+        parts.append(f"{self.sounded_mismatch} sound" if short
+                     else f"{self.sounded_mismatch} of {self.n_keystrokes} sound/silence wrong")
         return ", ".join(parts)
 
     def to_dict(self) -> dict[str, Any]:
