@@ -42,7 +42,7 @@ from pianobot.rig import open_rig
 from pianobot.rig.errors import ConnectionLost, SafetyStop, SafetyViolation
 from pianobot.rig.protocols import MidiEvent
 from pianobot.run import TrialData, read_keystroke
-from pianobot.run.readout import failed_trial, midi_table, samples_table, trials_table
+from pianobot.run.rows import failed_trial, midi_table, samples_table, trials_table
 from pianobot.spec import RigSpec
 from pianobot.store import RunWriter
 
