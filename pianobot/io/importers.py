@@ -21,7 +21,7 @@ from pianobot.io.force_log import BurstRule, Calibration, align_to_note_ons, rea
 from pianobot.io.keystroke_import import import_keystroke_log
 from pianobot.io.mocap import MocapTake, read_mocap
 from pianobot.io.mocap_align import ClockAlignment, run_arm_trace, starts_offset, xcorr_offset
-from pianobot.io.mocap_segment import rest_level, segment_take
+from pianobot.io.mocap_segment import rest_level_before, segment_take
 from pianobot.io.run_output import ImportResult, file_sha256, run_dir, trial_ids, write_run
 from pianobot.progress import NO_PROGRESS, Progress
 from pianobot.store import load_run
@@ -271,7 +271,7 @@ def _stroke_samples(
         piece = {"trial_id": trial_id, "source": "mocap", "t_s": t[window] - start + offset_s}
         for column, x in signals.items():
             piece[column] = (
-                (x[window] - rest_level(t, x, first))
+                (x[window] - rest_level_before(t, x, first))
                 if x is not None
                 else np.full(int(window.sum()), np.nan)
             )
