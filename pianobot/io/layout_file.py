@@ -18,7 +18,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from pianobot.io.keystroke_layouts import Layout, declared_layout
+from pianobot.io.keystroke_layouts import ControlLayout, declared_layout
 from pianobot.spec.loader import load_model
 
 
@@ -42,7 +42,7 @@ class LayoutFile(BaseModel):
     )
 
 
-def load_layout_file(path: Path | str) -> Layout:
+def load_layout_file(path: Path | str) -> ControlLayout:
     """The layout a YAML layout file declares; InputError names the file and the YAML path."""
     spec = load_model(path, LayoutFile)
     return declared_layout(
