@@ -17,7 +17,7 @@ import numpy as np
 import pandas as pd
 
 from pianobot.errors import InputError
-from pianobot.io.force_log import BurstRule, Calibration, align_to_note_ons, read_force_log
+from pianobot.io.force_log import BurstRule, ForceCalibration, align_to_note_ons, read_force_log
 from pianobot.io.keystroke_import import import_keystroke_log
 from pianobot.io.mocap import MocapTake, read_mocap
 from pianobot.io.mocap_align import ClockAlignment, run_arm_trace, starts_offset, xcorr_offset
@@ -41,7 +41,7 @@ def _size(path: Path) -> str:
 def import_force_log(
     path: Path | str,
     data_dir: Path | str,
-    calibration: Calibration | None = None,
+    calibration: ForceCalibration | None = None,
     align_run: str | None = None,
     rule: BurstRule | None = None,
     progress: Progress = NO_PROGRESS,
@@ -52,7 +52,7 @@ def import_force_log(
     and each burst names the trial whose note-on it matched (`matched_trial_id`).
     """
     path, data_dir = Path(path), Path(data_dir)
-    calibration = calibration or Calibration()
+    calibration = calibration or ForceCalibration()
     with progress.task(f"reading the force log ({_size(path)})"):
         force = read_force_log(path, calibration, rule)
     bursts = force.bursts.copy()

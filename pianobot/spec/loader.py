@@ -234,7 +234,7 @@ def _write_atomically(path: Path, text: str) -> None:
         raise
 
 
-def load_model(path: str | Path, model: type[ModelT]) -> ModelT:
+def load_yaml_model(path: str | Path, model: type[ModelT]) -> ModelT:
     """Any YAML file validated into a pydantic model, with the spec's one-line errors."""
     label = str(path)
     data, root = _read_yaml(Path(path))
