@@ -15,7 +15,7 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from pianobot.run.readout import SampleChunk, TrialData, samples_table
+from pianobot.run.rows import SampleChunk, TrialData, samples_table
 from pianobot.store import RunWriter, load_run
 from pianobot.store.schema import TABLE_SCHEMAS
 
