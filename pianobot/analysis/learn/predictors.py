@@ -1,7 +1,7 @@
 """The interface `play` uses to choose strokes: control parameters in, MIDI outcome out.
 
-A `StrokePredictor` maps press parameters (vacuum, down velocity, acceleration, depth, distance,
-hold, up velocity) to the expected MIDI outcome: on-velocity, probability of a silent keystroke,
+A `StrokePredictor` maps press parameters (the parameter table's `PREDICTOR_INPUTS`: vacuum and
+the arm's motion) to the expected MIDI outcome: on-velocity, probability of a silent keystroke,
 the lead time from motion start to note-on and the MIDI hold time. Its `inverse` answers the
 question `play` asks per note: "which down velocity gives on-velocity v here?".
 
@@ -25,30 +25,22 @@ from pianobot.errors import InputError
 from pianobot.physics.model import MODEL_SCHEMA, KeystrokeModel, load_model
 from pianobot.physics.piano import PianoParams, key_events
 from pianobot.physics.simulate import simulate_presses
-from pianobot.physics.trajectory import Press
+from pianobot.plan.trial import press_from
+from pianobot.spec.parameters import PREDICTOR_INPUTS, input_default, missing_value
 
 FloatArray = npt.NDArray[np.float64]
 
-#: Columns a predictor reads (missing ones take `DEFAULT_INPUTS`).
-INPUT_COLUMNS: tuple[str, ...] = (
-    "vacuum_kpa",
-    "down_velocity_mps",
-    "acceleration_mps2",
-    "depth_m",
-    "distance_m",
-    "hold_s",
-    "up_velocity_mps",
-)
+#: Columns a predictor reads (missing ones take `DEFAULT_INPUTS`): the parameter table's
+#: predictor inputs, in its order.
+INPUT_COLUMNS: tuple[str, ...] = PREDICTOR_INPUTS
 #: Columns every predictor returns, in this order.
 OUTPUT_COLUMNS: tuple[str, ...] = ("on_velocity", "p_silent", "lead_s", "midi_hold_s")
 
-#: Values used for inputs a caller leaves out (the study's fixed settings).
+#: Values used for inputs a caller leaves out: the parameter table's defaults (a sweep's trial
+#: gets the same), its model stand-in where a sweep must say (depth); the up velocity follows
+#: the down velocity and the down velocity must be given.
 DEFAULT_INPUTS: dict[str, float] = {
-    "vacuum_kpa": 0.0,
-    "acceleration_mps2": 1.0,
-    "depth_m": 0.03,
-    "distance_m": 0.05,
-    "hold_s": 0.0,
+    name: value for name in INPUT_COLUMNS if (value := input_default(name)) is not None
 }
 
 
@@ -91,13 +83,13 @@ def complete_inputs(frame: pd.DataFrame) -> pd.DataFrame:
     if "down_velocity_mps" not in frame.columns:
         raise InputError("a predictor needs the column down_velocity_mps", "predict")
     out = pd.DataFrame(index=frame.index)
+    given = {name: frame[name].astype(float) for name in INPUT_COLUMNS if name in frame.columns}
     for name in INPUT_COLUMNS:
-        if name in frame.columns:
-            out[name] = frame[name].astype(float)
-        elif name == "up_velocity_mps":
-            out[name] = frame["down_velocity_mps"].astype(float)
-        else:
-            out[name] = DEFAULT_INPUTS[name]
+        if name in given:
+            out[name] = given[name]
+        else:  # the followed column (up ← down), else the table's default
+            missing = missing_value(name, given)
+            out[name] = DEFAULT_INPUTS[name] if missing is None else missing
     return out
 
 
@@ -193,8 +185,7 @@ class PhysicsPredictor:
         out = pd.DataFrame(index=frame.index, columns=list(OUTPUT_COLUMNS), dtype=float)
         if full.empty:
             return out
-        cols = ("distance_m", "depth_m", "down_velocity_mps", "up_velocity_mps", "acceleration_mps2", "hold_s")
-        presses = [Press(*(float(x) for x in row)) for row in full[list(cols)].to_numpy(float)]
+        presses = [press_from(dict(zip(full.columns, row, strict=True))) for row in full.to_numpy(float)]
         vacuum = full["vacuum_kpa"].to_numpy(float)
         piano = self.model.readout_params()
         values = np.full((len(presses), 4), np.nan)
