@@ -1,4 +1,4 @@
-"""The physics predictor satisfies the protocol and inverts its own forward map."""
+"""The physics predictor satisfies the protocol, and the contract's one inversion inverts it."""
 
 from __future__ import annotations
 
@@ -8,11 +8,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from pianobot.analysis.learn.files import load_predictor
+from pianobot.analysis.learn.physical import PhysicsPredictor
 from pianobot.analysis.learn.predictors import (
     OUTPUT_COLUMNS,
-    PhysicsPredictor,
+    LoudnessCurve,
     StrokePredictor,
-    load_predictor,
 )
 from pianobot.errors import InputError
 from pianobot.physics.model import KeystrokeModel, save_model
@@ -27,9 +28,10 @@ def test_physics_predictor_forward_and_inverse(tmp_path: Path) -> None:
     assert list(out.columns) == list(OUTPUT_COLUMNS)
     assert out["on_velocity"].iloc[1] > out["on_velocity"].iloc[0]
     assert (out["lead_s"] > 0).all()
-    lo, hi = pred.velocity_range(max_down_velocity_mps=0.08, **fixed)
+    curve = LoudnessCurve.tabulate(pred, np.geomspace(0.005, 0.08, 60), **fixed)
+    lo, hi = curve.velocity_range
     targets = np.linspace(lo + 0.5, hi - 0.5, 4)
-    speeds = pred.inverse(targets, **fixed)
+    speeds = curve.inverse(targets, strict=True)
     back = pred.predict(pd.DataFrame({"down_velocity_mps": speeds, **fixed}))["on_velocity"].to_numpy()
     assert np.max(np.abs(back - targets)) <= 1.0
 

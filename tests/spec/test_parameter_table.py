@@ -46,10 +46,6 @@ ALLOWED: dict[tuple[str, str], str] = {
     ("cli/play.py", "PLAN_COLUMNS"): "headings of the played plan's columns (issue 16 owns play)",
     ("play/report.py", "_warmup"): "the warm-up table's columns, a choice (issue 16 owns play/)",
     ("play/figure.py", "warmup_fit_figure"): "a stroke's geometry columns (issue 16 owns play/)",
-    ("io/keystroke_layouts.py", "PARAMETER_SLOTS"): "to derive",
-    ("io/keystroke_layouts.py", "_POSITIVE"): "to derive",
-    ("io/keystroke_outcome.py", "PARAMETER_COLUMNS"): "to derive",
-    ("io/named_keys.py", "NUMERIC_COLUMNS"): "to derive",
 }
 
 
