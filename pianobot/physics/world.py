@@ -43,7 +43,7 @@ FloatArray = npt.NDArray[np.float64]
 DEFAULT_CURVE: dict[str, float] = {"curve_exponent": 2.0, "curve_saturation": 1.0}
 
 
-class MocapConfig(BaseModel):
+class MocapObservation(BaseModel):
     """Motion capture observation model."""
 
     model_config = ConfigDict(extra="forbid")
@@ -64,7 +64,7 @@ class WorldConfig(BaseModel):
         None, description="effect -> {form, params}; null = the default world's effects"
     )
     piano: dict[str, float] = Field(default_factory=dict, description="PianoParams overrides")
-    mocap: MocapConfig = Field(default_factory=MocapConfig)
+    mocap: MocapObservation = Field(default_factory=MocapObservation)
     arm_rate_hz: Literal[125, 500] = Field(500, description="UR controller (RTDE) rate")
     arm_noise_m: float = Field(1e-6, ge=0, description="TCP position noise")
     midi_jitter_s: float = Field(5e-4, ge=0, description="MIDI timestamp jitter (uniform)")

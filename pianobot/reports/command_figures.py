@@ -100,7 +100,7 @@ def learned_maps(trials: pd.DataFrame, predictors: Mapping[str, _Predicts]) -> F
 
 def mocap_take(samples: pd.DataFrame, trials: pd.DataFrame) -> Figure:
     """A Motive take as imported: the whole take with each keystroke shaded, then all of them
-    overlaid from motion start, coloured by arm speed (a mis-segmented keystroke stands out)."""
+    overlaid from motion start, coloured by arm speed (a keystroke split at the wrong place stands out)."""
     fig = new_figure(FULL_WIDTH_IN, 6.0)
     whole, overlaid = fig.subplots(2, 1)
     style_axes(whole)

@@ -16,7 +16,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
-from pianobot.analysis.greybox.phases import STAGE_NAMES, segment_keystroke
+from pianobot.analysis.greybox.stages import STAGE_NAMES, find_stages
 from pianobot.reports.style import percentile_band
 
 FloatArray = npt.NDArray[np.float64]
@@ -29,7 +29,7 @@ def stage_edges(t_s: FloatArray, x0: FloatArray, x1: FloatArray, x2: FloatArray,
                 distance_m: float) -> FloatArray:
     """The six stage boundaries (s) of traces that are relative to rest.
 
-    `segment_keystroke` takes each trace's rest level from its first 5 % of samples, but a sweep's
+    `find_stages` takes each trace's rest level from its first 5 % of samples, but a sweep's
     traces start at motion start (the arm is already moving), which would move the rest level
     into the approach. The traces here are relative to rest already, so that rest is shown to
     it explicitly: zeros for the length of 5 % of the trace before the first sample.
@@ -39,7 +39,7 @@ def stage_edges(t_s: FloatArray, x0: FloatArray, x1: FloatArray, x2: FloatArray,
     dt = float(np.median(np.diff(t))) if t.size > 1 else 1.0
     tt = np.r_[t[0] - dt * np.arange(pad, 0, -1), t]
     rest = np.zeros(pad)
-    found = segment_keystroke(tt, np.r_[rest, x2], x0_m=np.r_[rest, x0], x1_m=np.r_[rest, x1],
+    found = find_stages(tt, np.r_[rest, x2], x0_m=np.r_[rest, x0], x1_m=np.r_[rest, x1],
                               distance_m=distance_m if distance_m > 0 else None)
     return np.asarray(np.maximum(found.boundaries_s, t[0]), dtype=np.float64)
 

@@ -17,7 +17,6 @@ from __future__ import annotations
 import time
 from typing import Any
 
-from pianobot.run.readout import TrialData, midi_table, samples_table, trials_table
 from pianobot.run.records import (
     BlockEnded,
     Record,
@@ -28,6 +27,7 @@ from pianobot.run.records import (
     TrialStarted,
     TrialStopped,
 )
+from pianobot.run.rows import TrialData, midi_table, samples_table, trials_table
 from pianobot.store import RunWriter
 
 

@@ -1,4 +1,6 @@
-"""`pianobot fit`: learned maps from press parameters to MIDI outcome, cross-validated and saved.
+"""Training the learned maps (press parameters → MIDI outcome): grouped CV, fitting, saving.
+
+`run` is the `pianobot fit` command's entry; this module holds the work it calls.
 
 Targets: the note-on velocity and the MIDI hold time of sounded keystrokes, the lead from motion
 start to note-on (`t_on_s`), and the probability that a keystroke is silent. Cross-validation is

@@ -1,7 +1,7 @@
 """From what a keystroke produced to the rows of the trials, samples and midi tables.
 
-MIDI outcome (the study's readout): the first note-on of the trial's note in the keystroke's time
-window gives `on_velocity` and `t_on_s`; the next note-off of that note gives `off_velocity` and
+MIDI outcome (what the piano reported): the first note-on of the trial's note in the keystroke's
+time window gives `on_velocity` and `t_on_s`; the next note-off of that note gives `off_velocity` and
 `t_off_s`; `midi_hold_s` is the time between them. No note-on means `silent`: a result (the
 finger was too slow or too soft to sound the key), not a failure. Times in the trials and
 samples tables are relative to motion start; MIDI events keep the run clock.

@@ -1,4 +1,4 @@
-"""Keystroke segmentation: the study's five stages from arm, fingertip and key traces.
+"""The study's five keystroke stages, found in arm, fingertip and key traces.
 
 The stages (Zhang et al. 2022, five-stage keystroke figure):
 
@@ -111,7 +111,7 @@ def rest_level(t_s: FloatArray, x: FloatArray) -> float:
     return float(v[np.argmax(finite)])
 
 
-def segment_keystroke(
+def find_stages(
     t_s: npt.ArrayLike,
     x2_m: npt.ArrayLike,
     *,
@@ -192,7 +192,7 @@ def stage_labels(t_s: FloatArray, x2_m: FloatArray, x0_m: FloatArray | None = No
     t = np.broadcast_to(np.asarray(t_s, dtype=np.float64), (n, T))
     out = np.full((n, T), -1, dtype=np.int64)
     for i in range(n):
-        stages = segment_keystroke(
+        stages = find_stages(
             t[i], x2[i], x0_m=None if x0_m is None else x0_m[i], x1_m=None if x1_m is None else x1_m[i],
             distance_m=None if distance_m is None else float(distance_m[i]))
         names = stages.label(t[i])
