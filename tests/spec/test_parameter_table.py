@@ -42,8 +42,8 @@ ALLOWED: dict[tuple[str, str], str] = {
     # Not yet derived (owned by other issues this session; see the issue-18 report):
     ("analysis/greybox/keystrokes.py", "COMMAND_FIELDS"): "issue 10's keystroke container",
     ("analysis/greybox/load.py", "SCHEDULE_COLUMNS"): "issue 10's loader",
-    ("play/plan.py", "PLAN_COLUMNS"): "the played plan's column order (issue 16 owns play/)",
-    ("cli/play.py", "PLAN_COLUMNS"): "headings of the played plan's columns (issue 16 owns play)",
+    ("play/song_plan.py", "SONG_PLAN_COLUMNS"): "the song plan's column order (issue 16 owns play/)",
+    ("cli/play.py", "SONG_PLAN_TABLE"): "headings of the song plan's columns (issue 16 owns play)",
     ("play/report.py", "_warmup"): "the warm-up table's columns, a choice (issue 16 owns play/)",
     ("play/figure.py", "warmup_fit_figure"): "a stroke's geometry columns (issue 16 owns play/)",
 }
