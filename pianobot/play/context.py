@@ -29,16 +29,16 @@ import pandas as pd
 
 from pianobot.analysis.sequence.files import SEQUENCE_SCHEMA, load_sequence_model
 from pianobot.analysis.sequence.model import SequenceModel
+from pianobot.spec.parameters import PARAMETER_NAMES
 
 FloatArray = npt.NDArray[np.float64]
 
 #: Least relative cut of the cross-validated error (chosen k against k = 0) for a target's
 #: context to be used.
 MIN_GAIN = 0.02
-#: The plan's columns under the names the sequence model's controls carry.
-CONTROLS = {"note": "pitch", "vacuum_kpa": "vacuum_kpa", "down_velocity_mps": "down_velocity_mps",
-            "up_velocity_mps": "up_velocity_mps", "acceleration_mps2": "acceleration_mps2",
-            "depth_m": "depth_m", "distance_m": "distance_m", "hold_s": "hold_s"}
+#: The plan's columns under the names the sequence model's controls carry (the plan calls the
+#: note its pitch).
+CONTROLS = {name: "pitch" if name == "note" else name for name in PARAMETER_NAMES}
 #: Targets the planner corrects, with the cross-validation column that decides.
 USED: dict[str, str] = {"on_velocity": "on_velocity_rmse", "lead_s": "lead_rmse_s"}
 
