@@ -27,6 +27,7 @@ from pianobot.spec import (
     clean_value,
     default_value,
 )
+from pianobot.spec.parameters import missing_value
 
 # About 5 days of non-stop keystrokes on the real rig at ~2 s each (the study's grid is 2,025);
 # a plan this size takes ~110 MB in memory. `pianobot sweep --max-trials N` raises it.
@@ -104,7 +105,8 @@ def _sampled_columns(spec: ExperimentSpec, rng: np.random.Generator, k: int) -> 
             columns[name] = np.full(k, held[name])
         elif (default := default_value(name, spec)) is not None:
             columns[name] = np.full(k, default)
-    columns.setdefault("up_velocity_mps", columns.get("down_velocity_mps", np.full(k, np.nan)))
-    for name in PARAMETERS:
-        columns.setdefault(name, np.full(k, np.nan))
+    for name in PARAMETERS:  # what is left follows another parameter (up ← down), else unknown
+        if name not in columns:
+            followed = missing_value(name, columns)
+            columns[name] = np.full(k, np.nan) if followed is None else np.array(followed, dtype=np.float64)
     return columns
