@@ -40,14 +40,14 @@ from typing import Any
 
 import numpy as np
 
-from pianobot.analysis.learn.predictors import PhysicsPredictor
+from pianobot.analysis.learn.physical import PhysicsPredictor
 from pianobot.io.midifile import read_song, write_song
 from pianobot.physics.world import World, WorldConfig
 from pianobot.play import PlayResult, PlaySettings, play_rig, play_song
 from pianobot.play.geometry import fastest_geometry
 from pianobot.play.library import PP, TEST_SONGS, SongSpec, etude
 from pianobot.play.naive import plan_naive
-from pianobot.play.plan import plan_model
+from pianobot.play.song_plan import plan_model
 from pianobot.play.strokes import stroke_tables
 
 HERE = Path(__file__).resolve().parent

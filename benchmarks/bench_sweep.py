@@ -3,6 +3,8 @@
     python benchmarks/bench_sweep.py            # grid, 10,000 random, Dask 2 vs 1, lab time
     python benchmarks/bench_sweep.py --large    # also 100,000 random trials and 1,000,000 for RSS
     python benchmarks/bench_sweep.py --quick    # small sizes, to check the script itself
+    python benchmarks/bench_sweep.py --only random --random-trials 1000 --baseline main
+                                                # beside the pianobot of another git revision
 
 Every sweep stores every stream (MIDI, arm, mocap and the simulated truth). Figures:
 
@@ -93,21 +95,62 @@ def _timed(fn: Any) -> tuple[Any, float, float]:
     return out, time.perf_counter() - wall, time.process_time() - cpu
 
 
-def raw_simulator(trials: list[Any], rig: Any, seed: int) -> dict[str, float]:
-    """The batch integrator alone on the sweep's own presses: what the physics costs."""
+def raw_simulator(trials: list[Any], rig: Any, seed: int, repeat: int = 2) -> dict[str, float]:
+    """The batch integrator alone on the sweep's own presses: what the physics costs.
+
+    Sorted by length into batches of 64 (what the simulator does best); one untimed pass first
+    (kernels compiled or loaded from numba's cache, memory touched), then the best of `repeat`.
+    """
     from pianobot.rig.sim import make_world
 
     world = make_world(rig.world, seed)
     items = sorted(((t.press(), t.vacuum_kpa) for t in trials), key=lambda x: world._horizon_s(x[0]))
-    world.simulate([items[0][0]], items[0][1])  # compile / load the kernels first
 
     def run() -> None:
         for i in range(0, len(items), 64):
             chunk = items[i : i + 64]
             world.simulate([p for p, _ in chunk], [v for _, v in chunk])
 
-    _, wall, cpu = _timed(run)
+    run()
+    times = [_timed(run)[1:] for _ in range(max(1, repeat))]
+    wall = min(t[0] for t in times)
+    cpu = min(t[1] for t in times)
     return {"trials_per_s_wall": len(items) / wall, "trials_per_s_cpu": len(items) / cpu}
+
+
+PHASES = {  # (module, owner, method): what a simulated sweep spends its CPU on
+    "physics (prefetch: the block's truth in batches)": ("pianobot.rig.station", "Rig", "prepare"),
+    "keystrokes (station, observation, readout, records)": ("pianobot.run.runner", "Runner", "run_block"),
+    "parts (tables, encoding, writes, journal)": ("pianobot.run.sink", "StoreSink", "flush"),
+    "compaction (check, read parts, one file per table)": ("pianobot.store.writer", "RunWriter", "compact"),
+}
+
+
+def phase_timer() -> tuple[dict[str, float], Any]:
+    """CPU seconds per phase of a sweep (wrapping the methods above); call the second item to undo."""
+    import importlib
+
+    spent = dict.fromkeys(PHASES, 0.0)
+    undo = []
+    for label, (module, owner, name) in PHASES.items():
+        cls = getattr(importlib.import_module(module), owner)
+        original = getattr(cls, name)
+
+        def timed(*args: Any, _f: Any = original, _label: str = label, **kwargs: Any) -> Any:
+            cpu = time.process_time()
+            try:
+                return _f(*args, **kwargs)
+            finally:
+                spent[_label] += time.process_time() - cpu
+
+        setattr(cls, name, timed)
+        undo.append((cls, name, original))
+
+    def restore() -> None:
+        for cls, name, original in undo:
+            setattr(cls, name, original)
+
+    return spent, restore
 
 
 def storage_floor(run_path: Path, trials: int, block: int = 128) -> dict[str, float]:
@@ -202,8 +245,9 @@ def _grid_spec(folder: Path, speeds: int) -> Path:
     return spec
 
 
-def scenario_random(samples: int, lean: bool = False) -> dict[str, Any]:
-    """A long random sweep, every stream: throughput against the raw simulator, RSS along it."""
+def scenario_random(samples: int, lean: bool = False, breakdown: bool = True) -> dict[str, Any]:
+    """A long random sweep, every stream: throughput against the raw simulator, RSS along it,
+    and (`breakdown`) the CPU per trial of each phase (physics, keystrokes, parts, compaction)."""
     from pianobot.executor import ExecutorSettings
     from pianobot.run import TrialDone, prepare_sweep, run_sweep
 
@@ -223,11 +267,16 @@ def scenario_random(samples: int, lean: bool = False) -> dict[str, Any]:
             if isinstance(record, TrialDone) and int(record.data.row["index"]) % step == 0:
                 rss.append((int(record.data.row["index"]), round(_rss_mb(), 1)))
 
-        outcome, wall, cpu = _timed(lambda: run_sweep(
-            spec, data_dir=folder / "data", progress=False, subscribers=[sample],
-            executor=ExecutorSettings(workers=1)))
+        spent, restore = phase_timer() if breakdown else ({}, lambda: None)
+        try:
+            outcome, wall, cpu = _timed(lambda: run_sweep(
+                spec, data_dir=folder / "data", progress=False, subscribers=[sample],
+                executor=ExecutorSettings(workers=1)))
+        finally:
+            restore()
         peak_rss_mb = _peak_rss_mb()
         floor = storage_floor(outcome.path, outcome.trials) if samples <= 20_000 else None
+        rows = floor["rows"] if floor is not None else None
         return {
             "trials": samples, "status": outcome.status, "completed": outcome.trials,
             "world": "default, truth at 200 Hz, arm at 125 Hz" if lean else "default",
@@ -239,6 +288,12 @@ def scenario_random(samples: int, lean: bool = False) -> dict[str, Any]:
             "ratio_to_raw_simulator_cpu": round(samples / cpu / raw["trials_per_s_cpu"], 3),
             "storing_samples_only_trials_per_s_cpu": (
                 None if floor is None else round(floor["trials_per_s_cpu"], 1)),
+            "storing_samples_only_vs_raw_simulator_cpu": (
+                None if floor is None else round(floor["trials_per_s_cpu"] / raw["trials_per_s_cpu"], 3)),
+            "sample_rows_per_trial": None if rows is None else round(rows / samples),
+            "cpu_us_per_trial": round(cpu / samples * 1e6),
+            "raw_simulator_cpu_us_per_trial": round(1e6 / raw["trials_per_s_cpu"]),
+            "breakdown_cpu_us_per_trial": {k: round(v / samples * 1e6) for k, v in spent.items()},
             "peak_rss_mb": round(peak_rss_mb, 1),
             "rss_mb_by_trial": rss,
             "rss_growth_mb_after_first_tenth": round(rss[-1][1] - rss[1][1], 1) if len(rss) > 2 else None,
@@ -298,14 +353,131 @@ def scenario_lab_time() -> dict[str, Any]:
         "depth_at_contact_speeds_h": round(in_contact_s / 3600, 3),
         "depth_at_contact_speeds_vs_study": round(in_contact_s / study_s, 3),
         "fast_breakdown_s": {k: round(v, 1) for k, v in fast.to_dict().items()},
+        "fast_presses_h": _press_parts_h(with_fast_approach(trials, rig)),
         "approach_settings": rig.approach.model_dump(),
+        "settle_from_physics": _settle_from_physics(trials, rig, study_s, fast.total_s),
     }
 
 
-def _child(name: str, *flags: str) -> dict[str, Any]:
-    """Run one scenario in a fresh interpreter and return its JSON."""
+def _press_parts_h(trials: list[Any]) -> dict[str, float]:
+    """Where a fast plan's press time goes (hours over the plan)."""
+    from pianobot.physics.trajectory import contact_time_s, press_timing
+
+    parts = dict.fromkeys(("fast_approach", "spec_motion_before_contact", "down_in_contact",
+                           "hold", "up_until_clear", "fast_retract"), 0.0)
+    for t in trials:
+        press = t.press()
+        tm = press_timing(press)
+        contact = contact_time_s(press)
+        parts["fast_approach"] += tm.t_down_start_s
+        parts["spec_motion_before_contact"] += contact - tm.t_down_start_s
+        parts["down_in_contact"] += tm.t_down_end_s - contact
+        parts["hold"] += tm.t_hold_end_s - tm.t_down_end_s
+        parts["up_until_clear"] += tm.t_lifted_s - tm.t_hold_end_s
+        parts["fast_retract"] += tm.t_end_s - tm.t_lifted_s
+    return {k: round(v / 3600, 3) for k, v in parts.items()}
+
+
+def _settle_from_physics(trials: list[Any], rig: Any, study_s: float, fast_s: float) -> dict[str, Any]:
+    """What a per-trial settle worked out from the finger's own mode would save, and whether
+    the contact state stays within noise with it (simulated, on a spread of the grid's trials).
+
+    The free finger (fingertip mass m1 on the arm through k0, c0) rings at ω0 = √(k0/m1) and
+    decays with τ = 2·m1/c0. A step Δa in the arm's acceleration leaves a fingertip speed swing
+    of Δa/ω0; the fast move's stop and the spec move's start are two such steps (a_travel +
+    a_spec, worst case in phase). The contact state is within noise once that swing has decayed
+    below max(2 % of the contact speed, the speed noise of two mocap frames):
+    settle = τ · ln(swing / tolerance).
+    """
+    import math
+
+    import numpy as np
+
+    from pianobot.physics.approach import ApproachSettings, plan_fast_moves
+    from pianobot.physics.msd import MSDParams
+    from pianobot.physics.trajectory import Press, contact_speed_mps, press_duration_s
+    from pianobot.physics.world import World
+    from pianobot.plan.approach import approach_settings
+
+    finger = MSDParams()
+    base = approach_settings(rig)
+    mocap = World.default().config.mocap
+    noise_mps = math.sqrt(2.0) * mocap.noise_m * mocap.rate_hz
+    tau_s = 2.0 * finger.m1_kg / finger.c0_over_c1 / finger.c1_nspm
+
+    def settle_s(t: Any) -> float:
+        k0 = finger.at(t.vacuum_kpa).k0_npm
+        swing = (base.acceleration_mps2 + t.acceleration_mps2) / math.sqrt(k0 / finger.m1_kg)
+        tolerance = max(0.02 * contact_speed_mps(t.press()), noise_mps)
+        return max(0.0, tau_s * math.log(swing / tolerance))
+
+    settles = np.array([settle_s(t) for t in trials])
+    c = {n: np.array([getattr(t, n) for t in trials], dtype=float) for n in (
+        "distance_m", "depth_m", "down_velocity_mps", "up_velocity_mps", "acceleration_mps2")}
+    per_trial = ApproachSettings(base.velocity_mps, base.acceleration_mps2, base.clearance_m,
+                                 settles)  # type: ignore[arg-type]  (columns broadcast)
+    moves = plan_fast_moves(c["distance_m"], c["depth_m"], c["down_velocity_mps"],
+                            c["up_velocity_mps"], c["acceleration_mps2"], per_trial)
+    presses = [Press(t.distance_m, t.depth_m, t.down_velocity_mps, t.up_velocity_mps,
+                     t.acceleration_mps2, t.hold_s, approach_m=float(a), retract_m=float(r),
+                     travel_velocity_mps=base.velocity_mps,
+                     travel_acceleration_mps2=base.acceleration_mps2)
+                 for t, a, r in zip(trials, moves.approach_m, moves.retract_m, strict=True)]
+    fixed = plan_fast_moves(c["distance_m"], c["depth_m"], c["down_velocity_mps"],
+                            c["up_velocity_mps"], c["acceleration_mps2"], base)
+    saved_s = sum(
+        press_duration_s(Press(t.distance_m, t.depth_m, t.down_velocity_mps, t.up_velocity_mps,
+                               t.acceleration_mps2, t.hold_s, approach_m=float(a), retract_m=float(r),
+                               travel_velocity_mps=base.velocity_mps,
+                               travel_acceleration_mps2=base.acceleration_mps2))
+        for t, a, r in zip(trials, fixed.approach_m, fixed.retract_m, strict=True)
+    ) - sum(press_duration_s(p) for p in presses)
+    # The check: simulated fingertip speed at contact, per-trial settle against the spec's press.
+    world = World.default(seed=3)
+    picks = sorted({(t.down_velocity_mps, t.acceleration_mps2, t.vacuum_kpa, t.depth_m): i
+                    for i, t in enumerate(trials)}.values())[::max(1, len(trials) // 60)]
+    spec = [trials[i].press() for i in picks]
+    vac = [trials[i].vacuum_kpa for i in picks]
+    keys = [f"k{i}" for i in picks]
+    blocks = [f"{v:g}" for v in vac]
+    plain = world.keystrokes(spec, vac, keys=keys, blocks=blocks)
+    quick = world.keystrokes([presses[i] for i in picks], vac, keys=keys, blocks=blocks)
+    worst = 0.0
+    for p, a, b in zip(spec, plain, quick, strict=True):
+        va, vb = _tip_speed_at_contact(a, p.distance_m), _tip_speed_at_contact(b, p.distance_m)
+        tolerance = max(0.02 * abs(va), noise_mps)
+        worst = max(worst, abs(vb - va) / tolerance)
+    return {
+        "tau_s": round(tau_s, 3), "settle_s_range": [round(float(settles.min()), 2),
+                                                     round(float(settles.max()), 2)],
+        "settle_s_mean": round(float(settles.mean()), 2),
+        "saved_h": round(saved_s / 3600, 3),
+        "fast_vs_study": round((fast_s - saved_s) / study_s, 3),
+        "checked_trials": len(picks),
+        "worst_tip_speed_error_in_tolerances": round(worst, 2),  # <= 1: within noise
+    }
+
+
+def _tip_speed_at_contact(stroke: Any, distance_m: float) -> float:
+    """The fingertip's true speed when it meets the key (its truth trace)."""
+    import numpy as np
+
+    t = np.asarray(stroke.truth_t_s)
+    gap = np.asarray(stroke.truth_x1_m) - np.asarray(stroke.truth_x2_m)
+    k = int(np.argmax(gap >= distance_m))
+    f = (distance_m - gap[k - 1]) / (gap[k] - gap[k - 1])
+    v1 = np.gradient(np.asarray(stroke.truth_x1_m), t)
+    return float(v1[k - 1] + f * (v1[k] - v1[k - 1]))
+
+
+def _child(name: str, *flags: str, code: Path | None = None) -> dict[str, Any]:
+    """Run one scenario in a fresh interpreter and return its JSON; `code`: a folder holding
+    another version of the `pianobot` package to run it with (a baseline)."""
     args = [sys.executable, __file__, "--scenario", name, *flags]
-    done = subprocess.run(args, capture_output=True, text=True, check=False)
+    env = dict(os.environ)
+    if code is not None:
+        env["PYTHONPATH"] = os.pathsep.join([str(code), *filter(None, [env.get("PYTHONPATH")])])
+    done = subprocess.run(args, capture_output=True, text=True, check=False, env=env)
     if done.returncode != 0:
         raise SystemExit(f"scenario {name} failed:\n{done.stderr}")
     result: dict[str, Any] = json.loads(done.stdout.strip().splitlines()[-1])
@@ -315,17 +487,46 @@ def _child(name: str, *flags: str) -> dict[str, Any]:
 SCENARIOS = ("grid", "random", "random_large", "rss_1m", "dask", "lab_time")
 
 
+def _export(ref: str, into: Path) -> Path:
+    """The `pianobot` package as of git revision `ref`, unpacked into `into`."""
+    archive = subprocess.run(["git", "-C", str(REPO), "archive", ref, "pianobot"],
+                             capture_output=True, check=False)
+    if archive.returncode != 0:
+        raise SystemExit(f"cannot export {ref!r}: {archive.stderr.decode().strip()}")
+    subprocess.run(["tar", "-x", "-C", str(into)], input=archive.stdout, check=True)
+    return into
+
+
+def _with_baseline(result: dict[str, Any], base: dict[str, Any], ref: str) -> dict[str, Any]:
+    """The baseline's figures beside the result's, and the ratios of their throughputs."""
+    result["baseline"] = {"ref": ref, **{k: base.get(k) for k in (
+        "trials_per_s_wall", "trials_per_s_cpu", "raw_simulator_trials_per_s_cpu",
+        "ratio_to_raw_simulator_cpu", "breakdown_cpu_us_per_trial", "peak_rss_mb",
+        "bytes_on_disk")}}
+    for clock in ("wall", "cpu"):
+        result[f"speedup_over_baseline_{clock}"] = round(
+            result[f"trials_per_s_{clock}"] / base[f"trials_per_s_{clock}"], 2)
+    return result
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="small sizes, to check the script")
     parser.add_argument("--large", action="store_true", help="also 100,000 and 1,000,000 trials")
     parser.add_argument("--scenario", choices=SCENARIOS, help=argparse.SUPPRESS)
+    parser.add_argument("--only", help="comma-separated scenarios (grid, random, dask, lab_time)")
+    parser.add_argument("--baseline", metavar="REF",
+                        help="also run grid and random with the pianobot of git revision REF "
+                             "(e.g. main), interleaved, and report the speed-up over it")
+    parser.add_argument("--random-trials", type=int, default=None,
+                        help="trials of the random sweep (default 10,000; 1,000 with --quick)")
     args = parser.parse_args()
     quick = ("--quick",) if args.quick else ()
+    random_trials = args.random_trials or (1_000 if args.quick else 10_000)
     if args.scenario is not None:
         runners = {
             "grid": lambda: scenario_grid(args.quick),
-            "random": lambda: scenario_random(1_000 if args.quick else 10_000),
+            "random": lambda: scenario_random(random_trials),
             "random_large": lambda: scenario_random(100_000),
             "rss_1m": lambda: scenario_random(1_000_000, lean=True),
             "dask": lambda: scenario_dask(args.quick),
@@ -342,8 +543,19 @@ def main() -> None:
         results["random_100k"] = _child("random_large")
         results["rss_1m"] = _child("rss_1m")
     else:
-        for name in ("grid", "random", "dask", "lab_time"):
-            results[name] = _child(name, *quick)
+        flags = (*quick, "--random-trials", str(random_trials))
+        names = args.only.split(",") if args.only else ["grid", "random", "dask", "lab_time"]
+        with tempfile.TemporaryDirectory(prefix="pianobot-baseline-") as tmp:
+            code = _export(args.baseline, Path(tmp)) if args.baseline else None
+            for name in names:
+                if code is not None and name in ("grid", "random"):
+                    base = _child(name, *flags, code=code)  # interleaved: baseline, this, baseline
+                    results[name] = _child(name, *flags)
+                    again = _child(name, *flags, code=code)
+                    best = max((base, again), key=lambda r: r["trials_per_s_cpu"])
+                    results[name] = _with_baseline(results[name], best, args.baseline)
+                else:
+                    results[name] = _child(name, *flags)
     results["machine"]["load_average_end"] = os.getloadavg()
     text = json.dumps(results, indent=2)
     print(text)

@@ -20,7 +20,12 @@ from pianobot.cli.common import (
     writable,
 )
 from pianobot.errors import InputError
-from pianobot.io.force_log import DEFAULT_GAIN_N, DEFAULT_OFFSET_N, DEFAULT_RATE_HZ, Calibration
+from pianobot.io.force_log import (
+    DEFAULT_GAIN_N,
+    DEFAULT_OFFSET_N,
+    DEFAULT_RATE_HZ,
+    ForceCalibration,
+)
 from pianobot.io.importers import ImportResult, import_force_log, import_keystroke_log, import_mocap
 from pianobot.io.keystroke_layouts import LAYOUT_CHOICES
 from pianobot.io.named_keys import DEFAULT_NOTE_OCTAVE
@@ -95,7 +100,7 @@ def force_log(
     no_progress: NoProgressFlag = False,
 ) -> None:
     """Import an `Analog reading = N` force capture; one trial per press (burst)."""
-    calibration = Calibration(gain_n=gain_n, offset_n=offset_n, rate_hz=rate_hz)
+    calibration = ForceCalibration(gain_n=gain_n, offset_n=offset_n, rate_hz=rate_hz)
     _show(import_force_log(file, data, calibration=calibration, align_run=align_run,
                            progress=command_progress(json, no_progress)), json, data)
 

@@ -32,7 +32,7 @@ from pianobot.play.warmup import WarmUpFailed
 
 # (column, heading with unit, scale, format, priority): priority 0 always shows, the highest
 # number is dropped first on a narrow terminal (`--json` keeps every column, plan_notes).
-PLAN_COLUMNS: tuple[tuple[str, str, float, str, int], ...] = (
+SONG_PLAN_TABLE: tuple[tuple[str, str, float, str, int], ...] = (
     ("note_index", "#", 1.0, "d", 0),
     ("pitch", "pitch", 1.0, "d", 0),
     ("onset_s", "onset (s)", 1.0, ".2f", 0),
@@ -75,7 +75,7 @@ def _tempo_line(result: PlayResult) -> str:
 
 def _print_plan(result: PlayResult) -> None:
     notes = result.plan.notes
-    specs = [c for c in PLAN_COLUMNS if c[0] in notes.columns]
+    specs = [c for c in SONG_PLAN_TABLE if c[0] in notes.columns]
     columns = [Column(head, prio, "left" if name in ("status", "reason") else "right",
                       wrap=name == "reason") for name, head, _, _, prio in specs]
     rows = [[_fmt(row[name], scale, spec) for name, _, scale, spec, _ in specs]

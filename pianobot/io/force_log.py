@@ -44,7 +44,7 @@ BURST_COLUMNS = (
 
 
 @dataclass(frozen=True)
-class Calibration:
+class ForceCalibration:
     """Linear reading → force map and the sample rate."""
 
     gain_n: float = DEFAULT_GAIN_N
@@ -71,7 +71,7 @@ class ForceLog:
     """A parsed capture: `samples` (t_s, reading, force_n), `bursts` (one row per press)."""
 
     path: Path
-    calibration: Calibration
+    calibration: ForceCalibration
     samples: pd.DataFrame
     bursts: pd.DataFrame
     baseline_n: float
@@ -81,7 +81,7 @@ class ForceLog:
 
 def read_force_log(
     path: Path | str,
-    calibration: Calibration | None = None,
+    calibration: ForceCalibration | None = None,
     rule: BurstRule | None = None,
 ) -> ForceLog:
     """Parse a capture and segment its bursts.
@@ -92,7 +92,7 @@ def read_force_log(
     """
     path = Path(path)
     where = str(path)
-    calibration = calibration or Calibration()
+    calibration = calibration or ForceCalibration()
     rule = rule or BurstRule()
     if not (calibration.rate_hz > 0 and math.isfinite(calibration.rate_hz)):
         raise InputError(f"sample rate should be > 0 Hz, got {calibration.rate_hz}", "--rate-hz")

@@ -17,11 +17,11 @@ import numpy as np
 import pandas as pd
 
 from pianobot.errors import InputError
-from pianobot.io.force_log import BurstRule, Calibration, align_to_note_ons, read_force_log
+from pianobot.io.force_log import BurstRule, ForceCalibration, align_to_note_ons, read_force_log
 from pianobot.io.keystroke_import import import_keystroke_log
 from pianobot.io.mocap import MocapTake, read_mocap
 from pianobot.io.mocap_align import ClockAlignment, run_arm_trace, starts_offset, xcorr_offset
-from pianobot.io.mocap_segment import rest_level, segment_take
+from pianobot.io.mocap_segment import rest_level_before, segment_take
 from pianobot.io.run_output import ImportResult, file_sha256, run_dir, trial_ids, write_run
 from pianobot.progress import NO_PROGRESS, Progress
 from pianobot.store import load_run
@@ -41,7 +41,7 @@ def _size(path: Path) -> str:
 def import_force_log(
     path: Path | str,
     data_dir: Path | str,
-    calibration: Calibration | None = None,
+    calibration: ForceCalibration | None = None,
     align_run: str | None = None,
     rule: BurstRule | None = None,
     progress: Progress = NO_PROGRESS,
@@ -52,7 +52,7 @@ def import_force_log(
     and each burst names the trial whose note-on it matched (`matched_trial_id`).
     """
     path, data_dir = Path(path), Path(data_dir)
-    calibration = calibration or Calibration()
+    calibration = calibration or ForceCalibration()
     with progress.task(f"reading the force log ({_size(path)})"):
         force = read_force_log(path, calibration, rule)
     bursts = force.bursts.copy()
@@ -271,7 +271,7 @@ def _stroke_samples(
         piece = {"trial_id": trial_id, "source": "mocap", "t_s": t[window] - start + offset_s}
         for column, x in signals.items():
             piece[column] = (
-                (x[window] - rest_level(t, x, first))
+                (x[window] - rest_level_before(t, x, first))
                 if x is not None
                 else np.full(int(window.sum()), np.nan)
             )

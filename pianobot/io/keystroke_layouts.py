@@ -34,24 +34,19 @@ import numpy.typing as npt
 import pandas as pd
 
 from pianobot.errors import InputError
+from pianobot.spec.parameters import PARAMETERS
 
 FloatArray = npt.NDArray[np.float64]
 RIGID_STIFFNESS_CODE = 10000.0  # the value the study wrote in the vacuum slot for the rigid finger
 UP_TRAVELS = ("distance+depth", "depth")
 SKIP = "skip"
-# Columns a layout's slot may fill (the spec's parameter names plus what old scripts also logged).
-PARAMETER_SLOTS = (
-    "vacuum_kpa",
-    "finger_angle_deg",
-    "acceleration_mps2",
-    "up_acceleration_mps2",
-    "down_velocity_mps",
-    "up_velocity_mps",
-    "depth_m",
-    "distance_m",
-    "hold_s",
-    "move_velocity_mps",
-    "move_acceleration_mps2",
+# What old scripts logged beyond the parameter table: a separate up acceleration and the
+# sideways move's speed and acceleration (kept as extra columns of the trials table, in this order).
+LOGGED_EXTRAS = ("up_acceleration_mps2", "move_velocity_mps", "move_acceleration_mps2")
+# Columns a layout's slot may fill: the parameter table's numbers (the note, a key, is read
+# apart) plus what old scripts also logged.
+PARAMETER_SLOTS: tuple[str, ...] = (
+    *(name for name, p in PARAMETERS.items() if not p.integer), *LOGGED_EXTRAS
 )
 SLOT_NAMES = (*PARAMETER_SLOTS, "velocity_mps", "note", SKIP)
 # The names old scripts used for the same values (named-key logs, and accepted in --columns).
@@ -82,7 +77,7 @@ _UNIT_SUFFIXES = ("_m", "_s", "_mps", "_mps2", "_kpa", "_deg", "_hz", "_n")
 
 
 @dataclass(frozen=True)
-class Layout:
+class ControlLayout:
     """The meaning of each slot of a `control` list.
 
     `velocity_mps` fills both speeds (the study used one speed down and up); `vacuum_kpa` takes
@@ -176,10 +171,10 @@ _PAPER = (
     "distance_m",
     "hold_s",
 )
-LAYOUTS: dict[str, Layout] = {
-    "soft-2022": Layout("soft-2022", _PAPER, "soft"),
-    "rigid-2022": Layout("rigid-2022", _PAPER, "rigid", rigid_code=True),
-    "rigid-2022-acc": Layout(
+LAYOUTS: dict[str, ControlLayout] = {
+    "soft-2022": ControlLayout("soft-2022", _PAPER, "soft"),
+    "rigid-2022": ControlLayout("rigid-2022", _PAPER, "rigid", rigid_code=True),
+    "rigid-2022-acc": ControlLayout(
         "rigid-2022-acc",
         (
             "finger_angle_deg",
@@ -191,7 +186,7 @@ LAYOUTS: dict[str, Layout] = {
         ),
         "rigid",
     ),
-    "rigid-2022-pretest": Layout(
+    "rigid-2022-pretest": ControlLayout(
         "rigid-2022-pretest",
         (
             "finger_angle_deg",
@@ -203,7 +198,7 @@ LAYOUTS: dict[str, Layout] = {
         ),
         "rigid",
     ),
-    "sweep-2021": Layout(
+    "sweep-2021": ControlLayout(
         "sweep-2021",
         ("finger_angle_deg", "down_velocity_mps", "up_velocity_mps", "distance_m", "hold_s"),
         "soft",
@@ -234,14 +229,9 @@ _RANGES: dict[str, tuple[float, float]] = {
     "hold_s": (0.0, 10.0),
     "note": (0.0, 127.0),
 }
+# Speeds and accelerations: a moveL at 0 never happened, so a 0 there means another layout.
 _POSITIVE = {
-    "acceleration_mps2",
-    "up_acceleration_mps2",
-    "move_acceleration_mps2",
-    "velocity_mps",
-    "down_velocity_mps",
-    "up_velocity_mps",
-    "move_velocity_mps",
+    *(name for name, p in PARAMETERS.items() if p.exclusive_minimum), *LOGGED_EXTRAS, "velocity_mps"
 }
 
 
@@ -273,7 +263,7 @@ def declared_layout(
     name: str = "declared",
     up_travel: str = "distance+depth",
     where: str = "--columns",
-) -> Layout:
+) -> ControlLayout:
     """A user's layout from its column names (validated: known names, no duplicates).
 
     Raises InputError naming the bad column and, for a near miss, the name that was meant.
@@ -309,10 +299,10 @@ def declared_layout(
         raise InputError(f"finger should be soft or rigid, got {finger!r}", where)
     if up_travel not in UP_TRAVELS:
         raise InputError(f"up_travel should be one of {UP_TRAVELS}, got {up_travel!r}", where)
-    return Layout(name, tuple(names), finger, up_travel=up_travel, declared=True)
+    return ControlLayout(name, tuple(names), finger, up_travel=up_travel, declared=True)
 
 
-def choose_layout(choice: str, lengths: dict[int, int], plausible: dict[str, int]) -> Layout | None:
+def choose_layout(choice: str, lengths: dict[int, int], plausible: dict[str, int]) -> ControlLayout | None:
     """The candidate layout of `choice` that fits the most control lists plausibly.
 
     Args:
@@ -328,7 +318,7 @@ def choose_layout(choice: str, lengths: dict[int, int], plausible: dict[str, int
         return LAYOUTS[names[0]]
     total = max(sum(lengths.values()), 1)
     best: tuple[float, float] | None = None
-    chosen: Layout | None = None
+    chosen: ControlLayout | None = None
     for name in names:
         layout = LAYOUTS[name]
         same_length = lengths.get(len(layout.slots), 0)

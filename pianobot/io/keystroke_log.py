@@ -28,7 +28,7 @@ from pianobot.errors import InputError
 from pianobot.io.keystroke_layouts import (
     LAYOUT_CHOICES,
     LAYOUTS,
-    Layout,
+    ControlLayout,
     choose_layout,
     declared_layout,
     layouts_tried,
@@ -151,7 +151,7 @@ def _bounded(lines: Iterator[tuple[int, str]], where: str) -> Iterator[tuple[int
 
 def _declared(
     layout: str, columns: list[str] | None, layout_file: Path | str | None, finger: str | None
-) -> Layout | None:
+) -> ControlLayout | None:
     if columns is not None and layout_file is not None:
         raise InputError("give either --columns or --layout-file, not both", "--columns")
     if (columns is not None or layout_file is not None) and layout != "auto":
@@ -171,7 +171,7 @@ def _declared(
 
 
 def _positional(
-    parsed: LogLines, choice: str, declared: Layout | None, finger: str | None, where: str
+    parsed: LogLines, choice: str, declared: ControlLayout | None, finger: str | None, where: str
 ) -> tuple[LogRecords, str]:
     counts = (
         np.frombuffer(parsed.n_control, dtype=np.int32).astype(np.int64)

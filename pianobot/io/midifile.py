@@ -27,9 +27,8 @@ from typing import Any
 
 from pianobot.errors import InputError
 from pianobot.output import write_output
+from pianobot.physics.keyboard import HIGHEST_NOTE, LOWEST_NOTE
 
-LOWEST_NOTE = 21  # A0
-HIGHEST_NOTE = 108  # C8
 DRUM_CHANNEL = 9  # channel 10 in 1-based numbering
 DEFAULT_TEMPO_US = 500_000  # 120 bpm until the first set_tempo
 PERFORMANCE_TICKS_PER_BEAT = 1000

@@ -1,4 +1,4 @@
-"""Keystroke segmentation of a mocap take from the arm marker.
+"""Segmenting a mocap take into keystrokes (one per press of the arm marker).
 
 Each press is a down-and-up excursion of the arm. The arm's downward displacement is measured
 from a slowly varying rest level (a rolling low percentile, so a mocap drift of a fraction of a
@@ -151,7 +151,7 @@ def _noise_sd(lift: FloatArray) -> float:
     return float(1.4826 * np.median(np.abs(d - np.median(d))) / math.sqrt(2))
 
 
-def rest_level(t: FloatArray, x: FloatArray, start: int) -> float:
+def rest_level_before(t: FloatArray, x: FloatArray, start: int) -> float:
     """Median of `x` over REST_WINDOW_S before frame `start` (or the first frames of the take)."""
     window = (t >= t[start] - REST_WINDOW_S) & (t <= t[start])
     values = x[window & np.isfinite(x)]
@@ -166,7 +166,7 @@ def _travel(t: FloatArray, x: FloatArray | None, start: int, end: int) -> float:
     segment = x[start : end + 1]
     if not np.isfinite(segment).any():
         return math.nan
-    return float(np.nanmax(segment) - rest_level(t, x, start))
+    return float(np.nanmax(segment) - rest_level_before(t, x, start))
 
 
 def _peak_speed(t: FloatArray, x: FloatArray | None, start: int, end: int) -> float:

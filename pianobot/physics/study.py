@@ -1,4 +1,4 @@
-"""The study's MIDI readout of the linear model, reproduced.
+"""The study's outcomes of the linear model (trigger speed and hold time), reproduced.
 
 The original MATLAB scripts drove the state-space model (Simulink, fixed step dt = 1 ms) with a
 constant-speed ramp: the arm goes down `depth` at `vel` (no acceleration phase), holds, and comes
@@ -15,7 +15,7 @@ one is used: the same sample whenever the key descends monotonically to the trig
 for these parameters), and still the descent when a slow key only triggers late.
 
 The scripts also used other numbers than the published ones (k2 halved to 150.6 N/m);
-`STUDY_SCRIPT_PARAMS` holds them, and `readout` uses them unless told otherwise.
+`STUDY_SCRIPT_PARAMS` holds them, and `study_outcomes` uses them unless told otherwise.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ FloatArray = npt.NDArray[np.float64]
 STUDY_SCRIPT_PARAMS = MSDParams(k2_npm=150.6)  # forward_control.m: k2 = 0.3012 N/mm × 0.5
 STUDY_DT_S = 1e-3
 
-READOUT_COLUMNS = ("vacuum_kpa", "velocity_mps", "on_speed_mps", "hold_s")
+STUDY_OUTCOME_COLUMNS = ("vacuum_kpa", "velocity_mps", "on_speed_mps", "hold_s")
 
 
 def study_arm_input(
@@ -58,7 +58,7 @@ def study_arm_input(
     return t, x0[0]
 
 
-def key_readout(
+def study_key_outcome(
     x2_m: npt.ArrayLike, threshold_m: float, dt_s: float = STUDY_DT_S
 ) -> tuple[FloatArray, FloatArray]:
     """Trigger speed and hold time of key traces (last axis is time), the study's way.
@@ -85,7 +85,7 @@ def key_readout(
     return on_speed.reshape(shape), hold.astype(np.float64).reshape(shape)
 
 
-def readout(
+def study_outcomes(
     vacuum_kpa: npt.ArrayLike,
     velocity_mps: npt.ArrayLike,
     *,
@@ -95,7 +95,7 @@ def readout(
     params: MSDParams | None = None,
     dt_s: float = STUDY_DT_S,
 ) -> pd.DataFrame:
-    """The study's readout (trigger speed and hold) of the linear model for many settings.
+    """The study's outcomes (trigger speed and hold) of the linear model for many settings.
 
     Args:
         vacuum_kpa, velocity_mps: broadcast against each other with numpy rules, one row per
@@ -104,7 +104,7 @@ def readout(
         depth_m, hold_s: arm ramp depth and hold (the finger starts on the key).
         threshold_m: trigger depth of the key.
         params: model parameters; default `STUDY_SCRIPT_PARAMS` (the study's script values).
-        dt_s: sampling step of the readout (the study's 1 ms).
+        dt_s: sampling step of the simulation (the study's 1 ms).
 
     Returns:
         DataFrame with columns vacuum_kpa, velocity_mps, on_speed_mps (NaN when the key never
@@ -128,10 +128,10 @@ def readout(
         t, x0 = study_arm_input(depth_m, float(v), hold_s, dt_s)
         batch = _stack([systems[p] for p in vac[rows].tolist()])
         y = lsim_uniform(batch, t, x0[None, None, :])
-        on_speed[rows], hold[rows] = key_readout(y[:, 1, :], threshold_m, dt_s)
+        on_speed[rows], hold[rows] = study_key_outcome(y[:, 1, :], threshold_m, dt_s)
     return pd.DataFrame(
         {"vacuum_kpa": vac, "velocity_mps": vel, "on_speed_mps": on_speed, "hold_s": hold},
-        columns=list(READOUT_COLUMNS),
+        columns=list(STUDY_OUTCOME_COLUMNS),
     )
 
 

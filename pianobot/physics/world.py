@@ -43,7 +43,7 @@ FloatArray = npt.NDArray[np.float64]
 DEFAULT_CURVE: dict[str, float] = {"curve_exponent": 2.0, "curve_saturation": 1.0}
 
 
-class MocapConfig(BaseModel):
+class MocapObservation(BaseModel):
     """Motion capture observation model."""
 
     model_config = ConfigDict(extra="forbid")
@@ -64,7 +64,7 @@ class WorldConfig(BaseModel):
         None, description="effect -> {form, params}; null = the default world's effects"
     )
     piano: dict[str, float] = Field(default_factory=dict, description="PianoParams overrides")
-    mocap: MocapConfig = Field(default_factory=MocapConfig)
+    mocap: MocapObservation = Field(default_factory=MocapObservation)
     arm_rate_hz: Literal[125, 500] = Field(500, description="UR controller (RTDE) rate")
     arm_noise_m: float = Field(1e-6, ge=0, description="TCP position noise")
     midi_jitter_s: float = Field(5e-4, ge=0, description="MIDI timestamp jitter (uniform)")
@@ -202,10 +202,10 @@ class World:
             batch = self.simulate([k[0] for k in chunk], [k[1] for k in chunk],
                                   [wanted[k] for k in chunk])
             for j, k in enumerate(chunk):
+                # Views into the batch: it lives until its last keystroke is taken (one block).
                 own = output_count(self._horizon_s(k[0]), self.config.out_dt_s)
-                truth[k] = _Truth(batch.t_s[:own].copy(), batch.x0_m[j, :own].copy(),
-                                  batch.x1_m[j, :own].copy(), batch.x2_m[j, :own].copy(),
-                                  batch.v2_mps[j, :own].copy())
+                truth[k] = _Truth(batch.t_s[:own], batch.x0_m[j, :own], batch.x1_m[j, :own],
+                                  batch.x2_m[j, :own], batch.v2_mps[j, :own])
         self._truth = truth
 
     def keystroke(
@@ -233,8 +233,8 @@ class World:
         truth = self._take(press, vacuum_kpa, block)
         duration = _rest_time(truth.t_s, truth.x1_m, truth.x2_m,
                               press_duration_s(press, self.model.arm_profile))
-        keep = truth.t_s <= duration + 1e-9
-        return SettledTruth(float(duration), truth.t_s[keep], truth.x0_m[keep], truth.x2_m[keep])
+        keep = int(np.searchsorted(truth.t_s, duration + 1e-9, side="right"))
+        return SettledTruth(float(duration), truth.t_s[:keep], truth.x0_m[:keep], truth.x2_m[:keep])
 
     def _take(self, press: Press, vacuum_kpa: float, block: str | None) -> _Truth:
         """A keystroke's truth: prefetched (once per time it was prefetched for) or simulated."""
@@ -280,10 +280,11 @@ class World:
         rng = np.random.default_rng([self.seed, _seed_of(key)])
         t_end = press_duration_s(press, self.model.arm_profile)
         duration = _rest_time(truth.t_s, truth.x1_m, truth.x2_m, t_end)
-        keep = truth.t_s <= duration + 1e-9
-        t = truth.t_s[keep]
-        x0, x1, x2 = truth.x0_m[keep], truth.x1_m[keep], truth.x2_m[keep]
-        v2 = truth.v2_mps[keep]
+        # The samples up to `duration` (t_s is increasing): views, not copies.
+        keep = int(np.searchsorted(truth.t_s, duration + 1e-9, side="right"))
+        t = truth.t_s[:keep]
+        x0, x1, x2 = truth.x0_m[:keep], truth.x1_m[:keep], truth.x2_m[:keep]
+        v2 = truth.v2_mps[:keep]
 
         # Read on the run clock, so timestamps fall on its 1 ms MIDI ticks.
         midi, _ = key_events(t0_s + t, x2, self._readout, note=note, rng=rng)

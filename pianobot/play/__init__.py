@@ -19,10 +19,10 @@ from pianobot.play.adapt import OnlineAdapter
 from pianobot.play.dynamics import DynamicsMap
 from pianobot.play.naive import plan_naive
 from pianobot.play.perform import Performance, Performer
-from pianobot.play.plan import Plan, plan_model
 from pianobot.play.score import Score, score_performance
 from pianobot.play.session import PlayResult, load_song, play_rig, play_song
 from pianobot.play.settings import PlaySettings
+from pianobot.play.song_plan import SongPlan, plan_model
 from pianobot.play.tempo import Feasibility, TempoChoice, TempoRequest
 from pianobot.play.warmup import WarmUp
 
@@ -31,7 +31,7 @@ __all__ = [
     "Feasibility",
     "OnlineAdapter",
     "Performance",
-    "Plan",
+    "SongPlan",
     "PlayResult",
     "PlaySettings",
     "Score",

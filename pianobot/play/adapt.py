@@ -33,7 +33,7 @@ import numpy.typing as npt
 from pianobot.play.corrections import RLS2, LocalCorrection
 
 if TYPE_CHECKING:  # the plan imports nothing from here; annotations only
-    from pianobot.play.plan import Plan
+    from pianobot.play.song_plan import SongPlan
 
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
@@ -176,7 +176,7 @@ class OnlineAdapter:
         return same[-LOCAL_WINDOW:]
 
 
-def adapted_stroke(adapter: OnlineAdapter, plan: Plan, row: Any, earliest_s: float, origin_s: float,
+def adapted_stroke(adapter: OnlineAdapter, plan: SongPlan, row: Any, earliest_s: float, origin_s: float,
                    following: Any | None) -> tuple[float, float, float, float]:
     """Down velocity, hold, expected on-velocity and lead of a note under the corrected model.
 
@@ -209,7 +209,7 @@ def adapted_stroke(adapter: OnlineAdapter, plan: Plan, row: Any, earliest_s: flo
     return speed, hold, float(forecast.velocity[k]), lead
 
 
-def _forecast(adapter: OnlineAdapter, plan: Plan, row: Any) -> Forecast:
+def _forecast(adapter: OnlineAdapter, plan: SongPlan, row: Any) -> Forecast:
     """The adapter's corrected model over a fine grid of down velocities at the row's vacuum."""
     table = plan.tables[float(row.vacuum_kpa)]
     grid = np.linspace(table.speeds_mps[0], table.speeds_mps[-1], FEASIBILITY_GRID)

@@ -24,8 +24,8 @@ from pianobot.errors import InputError
 from pianobot.io.midifile import Note
 from pianobot.plan import key_change_s
 from pianobot.play.geometry import envelope_limits, fastest_geometry, vacuum_levels
-from pianobot.play.plan import PLAN_COLUMNS, Plan
 from pianobot.play.settings import PlaySettings
+from pianobot.play.song_plan import SONG_PLAN_COLUMNS, SongPlan
 from pianobot.play.tempo import TempoRequest, written_only
 from pianobot.spec import RigSpec
 
@@ -33,7 +33,7 @@ DEMO_MPS_PER_VELOCITY = 0.001  # the demo's speed per MIDI velocity unit
 
 
 def plan_naive(notes: Sequence[Note], settings: PlaySettings, rig: RigSpec, *,
-               tempo: TempoRequest | None = None, written_bpm: float = 120.0) -> Plan:
+               tempo: TempoRequest | None = None, written_bpm: float = 120.0) -> SongPlan:
     """The demo's plan: speed 0.001·v m/s (clipped to the envelope), start at the onset."""
     if not notes:
         raise InputError("the song has no playable notes", "SONG")
@@ -68,5 +68,5 @@ def plan_naive(notes: Sequence[Note], settings: PlaySettings, rig: RigSpec, *,
         "predicted_release_s": nan, "move_s": move, "vacuum_change_s": 0.0, "start_s": start,
         "busy_s": busy, "late_s": start - onset, "tempo_limit_bpm": nan, "status": "play",
         "reason": ["" if late <= 0 else f"late by {late * 1e3:.0f} ms" for late in start - onset],
-    }, columns=list(PLAN_COLUMNS))
-    return Plan("naive", frame, settings, None, {}, (), geometry, choice)
+    }, columns=list(SONG_PLAN_COLUMNS))
+    return SongPlan("naive", frame, settings, None, {}, (), geometry, choice)

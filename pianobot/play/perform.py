@@ -35,14 +35,14 @@ from pianobot.physics.trajectory import Press, press_duration_s
 from pianobot.plan import Trial
 from pianobot.play.adapt import OnlineAdapter, adapted_stroke
 from pianobot.play.geometry import stroke_trial
-from pianobot.play.plan import Plan
+from pianobot.play.song_plan import SongPlan
 from pianobot.play.warmup import SETTLE_S as WARMUP_SETTLE_S
 from pianobot.progress import NO_PROGRESS, Progress
 from pianobot.rig import open_rig
 from pianobot.rig.errors import ConnectionLost, SafetyStop, SafetyViolation
 from pianobot.rig.protocols import MidiEvent
 from pianobot.run import TrialData, read_keystroke
-from pianobot.run.readout import failed_trial, midi_table, samples_table, trials_table
+from pianobot.run.rows import failed_trial, midi_table, samples_table, trials_table
 from pianobot.spec import RigSpec
 from pianobot.store import RunWriter
 
@@ -160,7 +160,7 @@ class Performer:
 
     # -- the song ---------------------------------------------------------------------------
 
-    def play(self, plan: Plan, adapter: OnlineAdapter | None = None) -> Performance:
+    def play(self, plan: SongPlan, adapter: OnlineAdapter | None = None) -> Performance:
         """Play `plan` note by note (see the module doc); the run is finished afterwards."""
         frame = plan.notes.assign(trial_id=[trial_id_for(self.song_key, int(i)) for i in plan.notes["note_index"]])
         played = frame[frame["status"] == "play"]
@@ -262,7 +262,7 @@ class Performer:
 class _SongLoop:
     """The note loop of `Performer.play`: timing, keystrokes, adaptation."""
 
-    def __init__(self, performer: Performer, plan: Plan, origin_s: float, adapter: OnlineAdapter | None) -> None:
+    def __init__(self, performer: Performer, plan: SongPlan, origin_s: float, adapter: OnlineAdapter | None) -> None:
         self.p, self.plan, self.origin_s, self.adapter = performer, plan, origin_s, adapter
 
     def note(self, row: Any, following: Any | None) -> dict[str, Any]:

@@ -16,8 +16,8 @@ import pandas as pd
 from pianobot.io.midifile import Note
 from pianobot.play.figure import piano_roll_figure, warmup_fit_figure
 from pianobot.play.perform import Performance
-from pianobot.play.plan import Plan
 from pianobot.play.score import Score
+from pianobot.play.song_plan import SongPlan
 from pianobot.play.warmup import WarmUp
 from pianobot.reports.html import (
     Section,
@@ -47,7 +47,7 @@ def _rows(items: Any) -> list[tuple[str, Any]]:
     return [(str(k), _fmt(v)) for k, v in items]
 
 
-def write_play_report(path: Path, *, performance: Performance, plan: Plan, score: Score, target: list[Note],
+def write_play_report(path: Path, *, performance: Performance, plan: SongPlan, score: Score, target: list[Note],
                       warmup: WarmUp | None, model: str, title: str) -> Path:
     """Write the play run's report to `path` (see the module doc)."""
     sections = [_performance(performance, plan, score, target, title), _tempo(plan)]
@@ -58,7 +58,7 @@ def write_play_report(path: Path, *, performance: Performance, plan: Plan, score
                       subtitle=f"{plan.planner} planner, {model}")
 
 
-def _performance(performance: Performance, plan: Plan, score: Score, target: list[Note], title: str) -> Section:
+def _performance(performance: Performance, plan: SongPlan, score: Score, target: list[Note], title: str) -> Section:
     section = Section("Performance")
     scores = score.to_dict()
     rows: list[tuple[str, Any]] = [
@@ -80,7 +80,7 @@ def _performance(performance: Performance, plan: Plan, score: Score, target: lis
     return section
 
 
-def _tempo(plan: Plan) -> Section:
+def _tempo(plan: SongPlan) -> Section:
     section = Section("Tempo and plan")
     summary = plan.summary()
     tempo = summary["tempo"] or {}
@@ -111,7 +111,7 @@ def _warmup(warm: WarmUp) -> Section:
     return section
 
 
-def _notes(plan: Plan, score: Score) -> Section:
+def _notes(plan: SongPlan, score: Score) -> Section:
     notes = score.per_note.assign(onset_error_ms=score.per_note["onset_error_s"] * 1e3,
                                   reason=plan.notes["reason"].to_numpy())
     return Section("Notes").add(table_html(notes[list(NOTE_COLUMNS)].reset_index(names="note"),

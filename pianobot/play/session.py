@@ -19,7 +19,9 @@ from typing import Any, Literal
 
 import pandas as pd
 
-from pianobot.analysis.learn.predictors import PhysicsPredictor, StrokePredictor, load_predictor
+from pianobot.analysis.learn.files import load_predictor
+from pianobot.analysis.learn.physical import PhysicsPredictor
+from pianobot.analysis.learn.predictors import StrokePredictor
 from pianobot.errors import InputError
 from pianobot.io.midifile import Melody, Note, Song, melody, read_song, write_performance
 from pianobot.physics.model import KeystrokeModel
@@ -28,10 +30,10 @@ from pianobot.play.dynamics import DYNAMICS_MODES, DynamicsMode
 from pianobot.play.figure import piano_roll, warmup_figure
 from pianobot.play.naive import plan_naive
 from pianobot.play.perform import Performance, Performer, trial_id_for
-from pianobot.play.plan import Plan, plan_model
 from pianobot.play.report import write_play_report
 from pianobot.play.score import Score, score_performance
 from pianobot.play.settings import Finger, PlaySettings
+from pianobot.play.song_plan import SongPlan, plan_model
 from pianobot.play.strokes import stroke_tables
 from pianobot.play.tempo import TempoRequest
 from pianobot.play.warmup import (
@@ -70,14 +72,14 @@ class PlayResult:
 
     song: Song
     melody: Melody
-    plan: Plan
+    plan: SongPlan
     performance: Performance | None  # None for a dry run
     score: Score | None
     warnings: tuple[str, ...]
     files: dict[str, str] = field(default_factory=dict)
     model: str = "published physics model"
     warmup: WarmUp | None = None
-    prior_plan: Plan | None = None  # the plan before the warm-up (its tempo is the dry run's)
+    prior_plan: SongPlan | None = None  # the plan before the warm-up (its tempo is the dry run's)
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON `play --json` prints: the score keys at the top level."""
@@ -298,7 +300,7 @@ def _at_tempo(notes: tuple[Note, ...], scale: float) -> list[Note]:
     return [Note(n.pitch, n.onset_s * scale, n.offset_s * scale, n.velocity, n.track, n.channel) for n in notes]
 
 
-def _initial_plan(design: list[Any], plan: Plan, song_key: str) -> pd.DataFrame:
+def _initial_plan(design: list[Any], plan: SongPlan, song_key: str) -> pd.DataFrame:
     """plan.parquet: the warm-up keystrokes and the song's notes (the plan before the warm-up
     when the run is created; after the warm-up, its strokes and the song as it will be played)."""
     warm = pd.DataFrame([{"trial_id": t.trial_id, "index": t.index, "phase": "warmup", "pitch": t.note,
@@ -315,7 +317,7 @@ def _write_parquet(frame: pd.DataFrame, path: Path) -> None:
     os.replace(temp, path)
 
 
-def _write_outputs(performance: Performance, target: list[Note], score: Score, plan: Plan,
+def _write_outputs(performance: Performance, target: list[Note], score: Score, plan: SongPlan,
                    plot: Path | None, label: str, warm: WarmUp | None) -> dict[str, str]:
     """performance.mid, the piano roll, the warm-up figure, report.html, score.json and the per-note table."""
     root = performance.run_path

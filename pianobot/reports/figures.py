@@ -13,7 +13,7 @@ import pandas as pd
 from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 
-from pianobot.analysis.greybox.phases import STAGE_NAMES
+from pianobot.analysis.greybox.stages import STAGE_NAMES
 from pianobot.physics.linear import frequency_response
 from pianobot.physics.msd import MSDParams
 from pianobot.reports.stage_residuals import StageResiduals, stage_edges

@@ -21,12 +21,11 @@ from typing import Any, Protocol
 
 from pianobot.rig.errors import ConnectionLost, DeviceUnavailable, RigError, SafetyViolation
 from pianobot.rig.protocols import Clock
+from pianobot.spec.rig import SIGNAL_UNIT, UR_ANALOG_SPAN
 
 POLL_PERIOD_S = 0.05
 STABLE_READINGS = 3  # consecutive in-tolerance readings that count as "settled"
 # What a UR standard analog output drives over its ratio 0..1 (V or mA).
-UR_ANALOG_SPAN = {"voltage": (0.0, 10.0), "current": (4.0, 20.0)}
-UNIT = {"voltage": "V", "current": "mA"}
 
 
 class AnalogOutput(Protocol):
@@ -63,7 +62,7 @@ class SignalSpan:
 
     @property
     def unit(self) -> str:
-        return UNIT[self.signal]
+        return SIGNAL_UNIT[self.signal]
 
     def value_for(self, vacuum_kpa: float) -> float:
         """The signal (V or mA) for a level; SafetyViolation beyond the regulator's range.

@@ -8,7 +8,6 @@ test collectors subscribe to them.
 
 from __future__ import annotations
 
-from pianobot.run.readout import SampleChunk, TrialData, read_keystroke
 from pianobot.run.records import (
     BlockEnded,
     Record,
@@ -20,6 +19,7 @@ from pianobot.run.records import (
     TrialStarted,
     TrialStopped,
 )
+from pianobot.run.rows import SampleChunk, TrialData, read_keystroke
 from pianobot.run.runner import RetryPolicy, Runner, SessionResult
 from pianobot.run.signals import StopControl
 from pianobot.run.sweep import PreparedSweep, RunOutcome, dry_run, prepare_sweep, run_sweep

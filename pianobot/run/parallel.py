@@ -28,7 +28,6 @@ from typing import Any
 from pianobot.executor import Executor
 from pianobot.rig import Rig, TrialLike, open_rig
 from pianobot.rig.errors import DeviceUnavailable
-from pianobot.run.readout import TrialData, midi_table, samples_table, trials_table
 from pianobot.run.records import (
     BlockEnded,
     Record,
@@ -40,6 +39,7 @@ from pianobot.run.records import (
     TrialStarted,
     TrialStopped,
 )
+from pianobot.run.rows import TrialData, midi_table, samples_table, trials_table
 from pianobot.run.runner import RetryPolicy, Runner, SessionResult
 from pianobot.run.signals import StopControl
 from pianobot.store import encode_part

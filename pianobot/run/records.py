@@ -11,7 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Protocol
 
-from pianobot.run.readout import TrialData
+from pianobot.run.rows import TrialData
 
 
 @dataclass(frozen=True)

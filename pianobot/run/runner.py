@@ -15,7 +15,6 @@ from dataclasses import dataclass
 
 from pianobot.rig import Rig, TrialLike
 from pianobot.rig.errors import ConnectionLost, DeviceUnavailable, SafetyStop, SafetyViolation
-from pianobot.run.readout import TrialData, failed_trial, parameters_of, read_keystroke
 from pianobot.run.records import (
     BlockEnded,
     Record,
@@ -27,6 +26,7 @@ from pianobot.run.records import (
     TrialStarted,
     TrialStopped,
 )
+from pianobot.run.rows import TrialData, failed_trial, parameters_of, read_keystroke
 from pianobot.run.signals import StopControl
 
 # Trials a batching (simulated) rig works out at once: enough for the vectorised simulator to

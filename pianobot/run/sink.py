@@ -4,7 +4,9 @@ Trials are written in batches (every `batch_trials` trials or `batch_s` wall sec
 comes first; on a simulated rig, one batch per block of trials the rig prepared together) so a 2,000-trial sim sweep is not 6,000 tiny files, while a kill -9 loses at most
 the batch in memory. Order on disk, which resume relies on:
 
-1. `started` is journalled before the arm moves (durable with the next flush);
+1. `started` is journalled before the arm moves (durable with the next flush); on a simulated
+   rig that works out blocks, a block's `started` lines are written together, right before its
+   part (nothing moves; a kill loses the block either way and resume redoes it);
 2. the batch's samples and midi parts, then its trials part, land atomically;
 3. only then are the batch's `done` lines journalled (one fsync).
 
@@ -17,7 +19,6 @@ from __future__ import annotations
 import time
 from typing import Any
 
-from pianobot.run.readout import TrialData, midi_table, samples_table, trials_table
 from pianobot.run.records import (
     BlockEnded,
     Record,
@@ -28,6 +29,7 @@ from pianobot.run.records import (
     TrialStarted,
     TrialStopped,
 )
+from pianobot.run.rows import TrialData, midi_table, samples_table, trials_table
 from pianobot.store import RunWriter
 
 
@@ -42,14 +44,18 @@ class StoreSink:
         self._last_flush = time.monotonic()
         self._lab_time_s = 0.0
         self._blocks = False  # a batching rig: one part per block (at BlockEnded), whatever it takes
+        self._started: list[tuple[str, dict[str, Any]]] = []  # a block's `started` lines, not yet written
 
     def __call__(self, record: Record) -> None:
         if isinstance(record, TrialStarted):
-            self.writer.journal_deferred(
-                "started", trial_id=record.trial_id, index=record.index, attempt=record.attempt,
-                t_s=record.t_s,
-            )
+            fields = {"trial_id": record.trial_id, "index": record.index,
+                      "attempt": record.attempt, "t_s": record.t_s}
+            if self._blocks:
+                self._started.append(("started", fields))  # journalled with the block's part
+            else:
+                self.writer.journal_deferred("started", **fields)
         elif isinstance(record, TrialRetried):
+            self._journal_started()
             self.writer.journal(
                 "retried", trial_id=record.trial_id, index=record.index, attempt=record.attempt,
                 error=record.error, backoff_s=record.backoff_s, t_s=record.t_s,
@@ -95,6 +101,7 @@ class StoreSink:
         `encoded`: the batch's parts as a worker encoded them (its records carry rows only).
         """
         self._last_flush = time.monotonic()
+        self._journal_started()
         if not self._batch:
             return
         batch, self._batch = self._batch, []
@@ -118,3 +125,9 @@ class StoreSink:
         ]
         self.writer.journal_many(events)
         self.writer.update_meta(lab_time_s=self._lab_time_s)
+
+    def _journal_started(self) -> None:
+        """Write the pending `started` lines of a block (in order, before anything after them)."""
+        if self._started:
+            started, self._started = self._started, []
+            self.writer.journal_many(started, sync=False)

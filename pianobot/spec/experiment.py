@@ -11,7 +11,7 @@ from pianobot.spec.parameters import PARAMETERS, Finger
 from pianobot.spec.sweep import GridSweep, Linspace, StrictModel, Sweep, clean_value
 
 Stream = Literal["midi", "arm", "mocap"]
-Approach = Literal["as-specified", "fast"]
+ApproachMode = Literal["as-specified", "fast"]
 SLUG_PATTERN = r"^[a-z0-9][a-z0-9_-]*$"
 SIM_RIG = "sim"
 
@@ -37,7 +37,7 @@ class ExperimentSpec(StrictModel):
     finger: Finger = Field(description="soft (vacuum-stiffened) or rigid; selects the envelope.")
     note: int = Field(57, ge=21, le=108, description="MIDI note pressed unless the sweep sets it.")
     sweep: Sweep = Field(description="The parameters to vary and how.")
-    approach: Approach = Field(
+    approach: ApproachMode = Field(
         "as-specified",
         description="as-specified: each press is the spec's two moves (the run-up at the contact "
         "speed). fast: the arm covers the run-up at travel speed and finishes the press in exactly "

@@ -6,6 +6,7 @@ value and what would be valid, with the line number; a YAML syntax error names l
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import math
 import os
@@ -13,7 +14,7 @@ import tempfile
 from collections.abc import Sequence
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, TypeVar, get_args
 
 import yaml
 from pydantic import BaseModel, ValidationError
@@ -22,6 +23,7 @@ from pianobot.errors import InputError
 from pianobot.spec.checks import Problem, spec_problems
 from pianobot.spec.experiment import SIM_RIG, ExperimentSpec
 from pianobot.spec.messages import Location, error_message, format_path
+from pianobot.spec.parameters import PARAMETER_NAMES
 from pianobot.spec.rig import RigSpec
 from pianobot.spec.yaml_safe import parse_yaml, read_text_bounded
 
@@ -67,12 +69,38 @@ def _input_error(label: str, root: yaml.Node | None, path: Location, message: st
     return InputError(f"{message}{suffix}", f"{label}: {format_path(path)}")
 
 
+@functools.cache
+def spec_keys() -> tuple[str, ...]:
+    """Every key a spec or rig file may hold (parameter names and the models' fields, nested)."""
+    names: set[str] = set(PARAMETER_NAMES)
+    for model in (ExperimentSpec, RigSpec):
+        stack: list[Any] = [model]
+        while stack:
+            cls = stack.pop()
+            for field_name, field in cls.model_fields.items():
+                names.add(field_name)
+                for arg in _model_types(field.annotation):
+                    if arg not in stack:
+                        stack.append(arg)
+    return tuple(sorted(names))
+
+
+def _model_types(annotation: Any) -> list[Any]:
+    """Pydantic model classes inside a (possibly nested) type annotation."""
+    found: list[Any] = []
+    if isinstance(annotation, type) and hasattr(annotation, "model_fields"):
+        found.append(annotation)
+    for arg in get_args(annotation):
+        found.extend(_model_types(arg))
+    return found
+
+
 def _validate(model: type[ModelT], data: Any, label: str, root: yaml.Node | None) -> ModelT:
     try:
         return model.model_validate(data)
     except ValidationError as exc:
         errors = exc.errors()
-        path, message = error_message(errors[0])
+        path, message = error_message(errors[0], spec_keys=spec_keys())
         if len(errors) > 1:
             message += f" (and {len(errors) - 1} more problem{'s' if len(errors) > 2 else ''})"
         raise _input_error(label, root, path, message) from None
@@ -206,7 +234,7 @@ def _write_atomically(path: Path, text: str) -> None:
         raise
 
 
-def load_model(path: str | Path, model: type[ModelT]) -> ModelT:
+def load_yaml_model(path: str | Path, model: type[ModelT]) -> ModelT:
     """Any YAML file validated into a pydantic model, with the spec's one-line errors."""
     label = str(path)
     data, root = _read_yaml(Path(path))

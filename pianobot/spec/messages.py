@@ -67,42 +67,18 @@ def _in_unit(name: str) -> str:
     return f" in {unit}" if unit else ""
 
 
-def _known_keys() -> list[str]:
-    from pianobot.spec.experiment import ExperimentSpec
-    from pianobot.spec.rig import RigSpec
-
-    names: set[str] = set(PARAMETER_NAMES)
-    for model in (ExperimentSpec, RigSpec):
-        stack: list[Any] = [model]
-        while stack:
-            cls = stack.pop()
-            for field_name, field in cls.model_fields.items():
-                names.add(field_name)
-                for arg in _model_types(field.annotation):
-                    if arg not in stack:
-                        stack.append(arg)
-    return sorted(names)
-
-
-def _model_types(annotation: Any) -> list[Any]:
-    """Pydantic model classes inside a (possibly nested) type annotation."""
-    from typing import get_args
-
-    found: list[Any] = []
-    if isinstance(annotation, type) and hasattr(annotation, "model_fields"):
-        found.append(annotation)
-    for arg in get_args(annotation):
-        found.extend(_model_types(arg))
-    return found
-
-
-def unknown_key_message(path: Location, key: str, known: Sequence[str] | None = None) -> str:
+def unknown_key_message(
+    path: Location, key: str, known: Sequence[str] | None = None, spec_keys: Sequence[str] = ()
+) -> str:
     """`unknown key 'depth_mm'; did you mean 'depth_m'?` (with the valid names for parameters).
 
-    `known` are the valid keys at that place, when the caller knows them.
+    `known` are the valid keys at that place, when the caller knows them; otherwise a key under
+    `params`/`fixed` is matched against the parameter names and any other against `spec_keys`
+    (every key a spec or rig file may hold: the loader, which sits above both models, passes them,
+    so this module never imports the models that import it).
     """
     in_parameters = len(path) >= 2 and path[-2] in _PARAMETER_MAPPINGS
-    pool = list(known or (PARAMETER_NAMES if in_parameters else _known_keys()))
+    pool = list(known or (PARAMETER_NAMES if in_parameters else spec_keys))
     message = f"unknown key {key!r}"
     close = difflib.get_close_matches(key, pool, n=1, cutoff=0.6)
     if close:
@@ -112,14 +88,20 @@ def unknown_key_message(path: Location, key: str, known: Sequence[str] | None = 
     return message
 
 
-def error_message(error: ErrorDetails, known: Sequence[str] | None = None) -> tuple[Location, str]:
-    """(YAML path, one-line message) for one pydantic error (`known`: valid keys, if known)."""
+def error_message(
+    error: ErrorDetails, known: Sequence[str] | None = None, spec_keys: Sequence[str] = ()
+) -> tuple[Location, str]:
+    """(YAML path, one-line message) for one pydantic error.
+
+    `known`: the valid keys at the error's place, if known; `spec_keys`: every key of a spec or rig
+    file, for "did you mean" when `known` is not given (see `unknown_key_message`).
+    """
     path = clean_location(error["loc"])
     kind, ctx, value = error["type"], error.get("ctx", {}), error.get("input")
     name = _field_name(path)
     got = f", got {_short(value)}"
     if kind == "extra_forbidden":
-        return path, unknown_key_message(path, str(path[-1]), known)
+        return path, unknown_key_message(path, str(path[-1]), known, spec_keys)
     if kind == "missing":
         if path and isinstance(path[-1], int):
             return path, "missing item: this list has too few values"

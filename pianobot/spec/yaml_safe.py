@@ -28,9 +28,7 @@ from typing import Any
 import yaml
 
 from pianobot.errors import InputError
-from pianobot.spec.messages import format_path
-
-Location = tuple[str | int, ...]
+from pianobot.spec.messages import Location, format_path
 
 MAX_BYTES = 2_000_000  # a spec is a few kB; a rig file with measured key offsets maybe 20 kB
 MAX_DEPTH = 32

@@ -10,9 +10,10 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+import numpy as np
 import pyarrow as pa
 
-from pianobot.spec.parameters import PARAMETER_NAMES
+from pianobot.spec.parameters import PARAMETER_NAMES, PARAMETERS
 
 if TYPE_CHECKING:  # pandas takes a third of a second to import: only where frames are made
     import pandas as pd
@@ -37,15 +38,7 @@ TRIALS_SCHEMA = pa.schema(
         ("index", pa.int64()),
         ("attempt", pa.int64()),
         ("status", pa.string()),
-        ("note", pa.int64()),
-        ("vacuum_kpa", pa.float64()),
-        ("down_velocity_mps", pa.float64()),
-        ("up_velocity_mps", pa.float64()),
-        ("acceleration_mps2", pa.float64()),
-        ("depth_m", pa.float64()),
-        ("distance_m", pa.float64()),
-        ("hold_s", pa.float64()),
-        ("finger_angle_deg", pa.float64()),
+        *((p.name, pa.int64() if p.integer else pa.float64()) for p in PARAMETERS.values()),
         ("t_start_s", pa.float64()),
         ("on_velocity", pa.float64()),
         ("off_velocity", pa.float64()),
@@ -87,6 +80,41 @@ TABLE_SCHEMAS: dict[str, pa.Schema] = {
     "samples": SAMPLES_SCHEMA,
     "midi": MIDI_SCHEMA,
 }
+
+# Tables whose text columns (run, trial and source ids: a few values over millions of rows) are
+# kept as dictionaries in memory and in their Parquet files, so neither a block's writer nor
+# compaction copies or hashes a string per row; readers get them back as `TABLE_SCHEMAS` says
+# (`as_declared`). A text column given as a dictionary in another table stays one, too.
+DICTIONARY_TABLES = frozenset({"samples"})
+TEXT_DICTIONARY = pa.dictionary(pa.int32(), pa.string())
+
+
+def storage_schema(name: str) -> pa.Schema:
+    """The Arrow schema of table `name`'s files: `TABLE_SCHEMAS`' with dictionary text columns
+    in `DICTIONARY_TABLES`."""
+    schema = TABLE_SCHEMAS[name]
+    if name not in DICTIONARY_TABLES:
+        return schema
+    return pa.schema([pa.field(f.name, TEXT_DICTIONARY) if pa.types.is_string(f.type) else f
+                      for f in schema], metadata=schema.metadata)
+
+
+def as_declared(table: pa.Table, name: str) -> pa.Table:
+    """`table` with dictionary text columns turned back into the strings `TABLE_SCHEMAS` declares."""
+    declared = TABLE_SCHEMAS[name]
+    for i, field in enumerate(table.schema):
+        if pa.types.is_dictionary(field.type) and field.name in declared.names and pa.types.is_string(
+            declared.field(field.name).type
+        ):
+            table = table.set_column(i, field.name, table.column(i).cast(pa.string()))
+    return table
+
+
+def _repeat_text(value: str, n_rows: int, *, dictionary: bool) -> pa.Array:
+    if not dictionary:
+        return pa.repeat(pa.scalar(value, type=pa.string()), n_rows)
+    zeros = pa.array(np.zeros(n_rows, dtype=np.int32))
+    return pa.DictionaryArray.from_arrays(zeros, pa.array([value], type=pa.string()))
 # Columns a writer may leave out (they are filled with nulls); the rest identify the row.
 _REQUIRED = {
     "trials": ("trial_id",),
@@ -125,15 +153,19 @@ def to_table(frame: pd.DataFrame | pa.Table, name: str, run_id: str) -> pa.Table
     if extra and name != "trials":
         raise ValueError(f"{name} table has unknown column(s) {extra}; allowed: {schema.names}")
     arrays: list[pa.Array | pa.ChunkedArray] = []
+    fields = []
     for column in schema:
         if column.name == "run_id":
-            # pa.repeat, not a Python list of n_rows strings (a samples part has millions).
-            arrays.append(pa.repeat(pa.scalar(run_id, type=pa.string()), n_rows))
+            # Never a Python list of n_rows strings (a samples part has millions of rows).
+            array = _repeat_text(run_id, n_rows, dictionary=name in DICTIONARY_TABLES)
         elif column.name in source.column_names:
-            arrays.append(source.column(column.name).cast(column.type))
+            array = source.column(column.name)
+            if not (pa.types.is_string(column.type) and array.type == TEXT_DICTIONARY):
+                array = array.cast(column.type)
         else:
-            arrays.append(pa.nulls(n_rows, type=column.type))
-    fields = list(schema)
+            array = pa.nulls(n_rows, type=column.type)
+        arrays.append(array)
+        fields.append(pa.field(column.name, array.type))
     for column_name in extra:
         arrays.append(source.column(column_name))
         fields.append(source.schema.field(column_name))

@@ -9,7 +9,7 @@ import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 from pianobot.store.layout import TABLE_NAMES, RunDamaged, RunPaths
-from pianobot.store.schema import TABLE_SCHEMAS, batches_of, with_metadata
+from pianobot.store.schema import TABLE_SCHEMAS, as_declared, batches_of, with_metadata
 
 # What reading a damaged Parquet file raises.
 _READ_ERRORS = (OSError, ValueError, pa.ArrowException)
@@ -88,7 +88,7 @@ def _read_run_table(paths: RunPaths, name: str, columns: list[str] | None) -> pa
         try:
             with pq.ParquetFile(compacted) as parquet:
                 held = batches_of(parquet.schema_arrow.metadata)
-                tables.append(parquet.read(columns=columns))
+                tables.append(as_declared(parquet.read(columns=columns), name))
         except FileNotFoundError:
             return _read_run_table(paths, name, columns)
         except _READ_ERRORS as exc:
@@ -96,7 +96,7 @@ def _read_run_table(paths: RunPaths, name: str, columns: list[str] | None) -> pa
     for batch in sorted(parts[name]):
         if batch in committed and batch not in held:
             try:
-                tables.append(pq.read_table(parts[name][batch], columns=columns))
+                tables.append(as_declared(pq.read_table(parts[name][batch], columns=columns), name))
             except FileNotFoundError:
                 # Compaction removed the part after we listed it; it is in the compacted file.
                 return _read_run_table(paths, name, columns)

@@ -53,6 +53,7 @@ from pianobot.store.schema import (
     SCHEMA_VERSION,
     TABLE_SCHEMAS,
     batches_of,
+    storage_schema,
     to_table,
     with_metadata,
 )
@@ -206,7 +207,7 @@ class RunWriter:
         for name, table in tables.items():  # trials last: it commits the batch
             if table is not None and (table.num_rows or name == "trials"):
                 path = self.paths.part(name, batch)
-                data = encode_parquet(with_metadata(table, name))
+                data = encode_parquet(with_metadata(table, name), part=True)
                 write_bytes_atomic(path, data)
                 files[name] = FileRecord.of_bytes(self.paths.relative(path), data, table.num_rows)
                 trials_bytes = data
@@ -256,9 +257,10 @@ class RunWriter:
         """
         self._journal.write(event, fields, sync=False)
 
-    def journal_many(self, events: list[tuple[str, dict[str, Any]]]) -> None:
-        """Append several events with one fsync (e.g. `done` for every trial of a part batch)."""
-        self._journal.write_many(events)
+    def journal_many(self, events: list[tuple[str, dict[str, Any]]], *, sync: bool = True) -> None:
+        """Append several events with one fsync (e.g. `done` for every trial of a part batch);
+        `sync=False`: durable with the next synced write (as `journal_deferred`)."""
+        self._journal.write_many(events, sync=sync)
 
     def update_meta(self, **fields: Any) -> None:
         """Merge fields into run.json (atomically); the change is journalled too."""
@@ -325,7 +327,7 @@ class RunWriter:
 
 def encode_part(table: pd.DataFrame | pa.Table, name: str, run_id: str) -> bytes:
     """One part of table `name` of run `run_id`, encoded as `RunWriter.append` would write it."""
-    return encode_parquet(with_metadata(to_table(table, name, run_id), name))
+    return encode_parquet(with_metadata(to_table(table, name, run_id), name), part=True)
 
 
 def _new_folder(base: Path, name: str) -> Path:
@@ -362,15 +364,18 @@ def _compact_table(
             write_bytes_atomic(temp, encode_parquet(with_metadata(merged, name, batches)))
         else:
             # samples and midi can be large: stream them part by part so memory stays bounded.
-            schema = with_metadata(TABLE_SCHEMAS[name].empty_table(), name, batches).schema
+            schema = with_metadata(storage_schema(name).empty_table(), name, batches).schema
             expected = 0
             with pq.ParquetWriter(temp, schema, **parquet_options(schema)) as out:
-                # Text columns (ids, sources) read as dictionaries: no million-fold string copies.
-                text = [f.name for f in schema if pa.types.is_string(f.type)]
+                # Dictionary text columns (ids, sources) stay dictionaries from part to file:
+                # no string is copied or hashed per row (parts of an older pianobot are cast).
+                text = [f.name for f in schema if pa.types.is_dictionary(f.type)]
                 for source in sources:
                     parquet = pq.ParquetFile(source, read_dictionary=text)
                     for group in range(parquet.num_row_groups):
-                        rows = parquet.read_row_group(group).cast(schema)
+                        rows = parquet.read_row_group(group)
+                        if not rows.schema.equals(schema, check_metadata=False):
+                            rows = rows.cast(schema)
                         expected += rows.num_rows
                         out.write_table(rows)
             with open(temp, "rb+") as handle:

@@ -25,7 +25,7 @@ from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
 from pianobot.analysis.greybox.load import load_keystrokes
 from pianobot.physics.model import KeystrokeModel
 from pianobot.physics.trajectory import Press
-from pianobot.physics.world import MocapConfig, World, WorldConfig
+from pianobot.physics.world import MocapObservation, World, WorldConfig
 from pianobot.store import RunWriter
 
 MOCAP_NOISE_M = 5e-6
@@ -77,7 +77,7 @@ def world_of(scenario: Scenario) -> World:
     truth = scenario.truth
     config = WorldConfig(msd=truth.msd.to_dict(), effects=truth.effects.to_dict(),
                          piano={k: v for k, v in truth.piano.to_dict().items() if k != "jitter_s"},
-                         mocap=MocapConfig(noise_m=scenario.noise_m, drop_prob=DROP_FRACTION))
+                         mocap=MocapObservation(noise_m=scenario.noise_m, drop_prob=DROP_FRACTION))
     return World(config, seed=scenario.seed)
 
 

@@ -249,7 +249,7 @@ def test_identify_writes_readout_and_damping_into_the_model_file(data_dir: Path,
 
     from _synthetic_runs import write_run
 
-    from pianobot.analysis.greybox.phases import first_crossing_s
+    from pianobot.analysis.greybox.stages import first_crossing_s
 
     trials, samples = linear_keystrokes(TRUTH, seed=4, speeds_mps=(0.01, 0.02, 0.03, 0.04, 0.05))
     # A two-sensor piano: the key's time from 0.3 mm to its trigger at 1.2 mm sets the velocity

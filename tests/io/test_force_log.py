@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from pianobot.errors import InputError
-from pianobot.io.force_log import Calibration, align_to_note_ons, read_force_log
+from pianobot.io.force_log import ForceCalibration, align_to_note_ons, read_force_log
 from pianobot.io.keystroke_log import read_keystroke_log
 
 
@@ -30,7 +30,7 @@ def test_bursts_peaks_and_calibration(tmp_path: Path) -> None:
     readings = presses(5)
     readings[100] = 3  # a one-sample spike is not a press
     path.write_text(capture(readings))
-    log = read_force_log(path, Calibration(gain_n=0.05, offset_n=0.1, rate_hz=50.0))
+    log = read_force_log(path, ForceCalibration(gain_n=0.05, offset_n=0.1, rate_hz=50.0))
     assert log.truncated_lines == (1, len(readings) + 2) and log.skipped == ()
     assert len(log.samples) == len(readings)
     assert log.samples["t_s"].iloc[-1] == pytest.approx((len(readings) - 1) / 50.0)

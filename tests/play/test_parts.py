@@ -13,9 +13,9 @@ from pianobot.io.midifile import Note
 from pianobot.play import TempoRequest, play_rig
 from pianobot.play.dynamics import DynamicsMap
 from pianobot.play.geometry import StrokeGeometry
-from pianobot.play.plan import plan_model
 from pianobot.play.score import score_performance
 from pianobot.play.settings import PlaySettings
+from pianobot.play.song_plan import plan_model
 from pianobot.play.strokes import StrokeTable
 
 

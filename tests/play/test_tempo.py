@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 from pianobot.play import PlaySettings, TempoRequest, play_rig, play_song
-from pianobot.play.plan import LOUDER_TEXT, plan_model
 from pianobot.play.session import starting_model
+from pianobot.play.song_plan import LOUDER_TEXT, plan_model
 from pianobot.play.strokes import stroke_tables
 
 SONGS = Path(__file__).resolve().parents[2] / "experiments" / "songs"

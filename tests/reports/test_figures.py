@@ -12,7 +12,7 @@ import pytest  # noqa: E402
 from _synthetic_runs import linear_sweep  # noqa: E402
 
 from pianobot.analysis.greybox.load import load_batch  # noqa: E402
-from pianobot.analysis.greybox.phases import STAGE_NAMES  # noqa: E402
+from pianobot.analysis.greybox.stages import STAGE_NAMES  # noqa: E402
 from pianobot.analysis.identify.fit import simulate_batch  # noqa: E402
 from pianobot.physics.msd import MSDParams  # noqa: E402
 from pianobot.reports import figures  # noqa: E402

@@ -1,6 +1,6 @@
 """Where a model and the held-out keystrokes disagree: by stage, by parameter region, by outcome.
 
-- **By stage** (trajectories): the study's five keystroke stages (`greybox.phases`: approach,
+- **By stage** (trajectories): the study's five keystroke stages (`greybox.stages`: approach,
   contact, press, bottom, release), found from the *measured* traces so that every model is
   judged on the same frames; per stage and signal the residual RMS, bias and systematic part
   (mm) and its lag-1 autocorrelation (≈ 0 for noise, → 1 for a smooth misfit).
@@ -24,7 +24,7 @@ import numpy.typing as npt
 
 from pianobot.analysis.greybox.fitter import TRAJECTORY_CHANNELS, GreyBoxFit
 from pianobot.analysis.greybox.noise import lag1_autocorrelation, rms, systematic_rms
-from pianobot.analysis.greybox.phases import STAGE_NAMES, stage_labels
+from pianobot.analysis.greybox.stages import STAGE_NAMES, stage_labels
 
 FloatArray = npt.NDArray[np.float64]
 

@@ -15,11 +15,11 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
-from pianobot.analysis.greybox.phases import (
+from pianobot.analysis.greybox.stages import (
     KEY_MOTION_THRESHOLD_M,
     fill_gaps,
+    find_stages,
     first_crossing_s,
-    segment_keystroke,
 )
 
 FloatArray = npt.NDArray[np.float64]
@@ -77,7 +77,7 @@ def keystroke_features(
     """
     t = np.asarray(t_s, dtype=np.float64)
     x2_raw = np.asarray(x2_m, dtype=np.float64)
-    stages = segment_keystroke(t, x2_raw, x0_m=x0_m, x1_m=x1_m, distance_m=distance_m)
+    stages = find_stages(t, x2_raw, x0_m=x0_m, x1_m=x1_m, distance_m=distance_m)
     x2 = fill_gaps(t, x2_raw)
     if not np.isfinite(x2).any():
         nan = float("nan")

@@ -34,8 +34,8 @@ import numpy as np
 import numpy.typing as npt
 
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
-from pianobot.analysis.greybox.phases import KEY_MOTION_THRESHOLD_M, fill_gaps
 from pianobot.analysis.greybox.prediction import Prediction, integration_step_s
+from pianobot.analysis.greybox.stages import KEY_MOTION_THRESHOLD_M, fill_gaps
 from pianobot.physics.effects import Effects
 from pianobot.physics.model import KeystrokeModel
 from pianobot.physics.msd import MSDParams

@@ -38,7 +38,7 @@ import pandas as pd
 
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
 from pianobot.analysis.greybox.noise import pooled_noise_m
-from pianobot.analysis.greybox.phases import rest_level
+from pianobot.analysis.greybox.stages import rest_level
 from pianobot.errors import InputError
 
 FloatArray = npt.NDArray[np.float64]

@@ -27,7 +27,7 @@ import numpy.typing as npt
 import pandas as pd
 
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
-from pianobot.analysis.greybox.phases import fill_gaps, first_crossing_s
+from pianobot.analysis.greybox.stages import fill_gaps, first_crossing_s
 from pianobot.physics.piano import PianoParams
 
 FloatArray = npt.NDArray[np.float64]

@@ -31,7 +31,7 @@ import numpy as np
 import numpy.typing as npt
 
 from pianobot.errors import InputError
-from pianobot.io.force_log import Calibration, ForceLog, read_force_log
+from pianobot.io.force_log import ForceCalibration, ForceLog, read_force_log
 
 FloatArray = npt.NDArray[np.float64]
 STUDY_COMPRESSION_M = 0.0139
@@ -130,7 +130,7 @@ def force_log_levels(items: Sequence[str]) -> dict[float, Path]:
 
 
 def static_stiffness_from_logs(logs: Mapping[float, Path], *, compression_m: float = STUDY_COMPRESSION_M,
-                               calibration: Calibration | None = None) -> StaticStiffness:
+                               calibration: ForceCalibration | None = None) -> StaticStiffness:
     """Read each level's force log (`read_force_log`) and fit the stiffness law."""
     peaks = {level: press_forces_n(read_force_log(path, calibration)).tolist() for level, path in logs.items()}
     return static_stiffness(peaks, compression_m=compression_m)

@@ -1,4 +1,6 @@
-"""The model-based planner: melody notes in, one press per note out, at a tempo the finger keeps.
+"""The song plan: melody notes in, one press per note out, at a tempo the finger keeps.
+
+(`pianobot.plan` is another thing: the trials an experiment spec expands into.)
 
 Per note the planner chooses, from the model's tabulated strokes (`StrokeTable`):
 
@@ -56,7 +58,7 @@ LOUDER_TEXT = "louder than asked to keep time"
 # A target this close to a level's reachable range is not worth a warning (half a MIDI step).
 CLIP_TOLERANCE = 0.5
 
-PLAN_COLUMNS: tuple[str, ...] = (
+SONG_PLAN_COLUMNS: tuple[str, ...] = (
     "note_index", "pitch", "written_onset_s", "onset_s", "offset_s", "song_velocity", "target_velocity",
     "vacuum_kpa", "down_velocity_mps", "up_velocity_mps", "acceleration_mps2", "depth_m",
     "distance_m", "approach_m", "hold_s", "predicted_velocity", "predicted_lead_s", "predicted_midi_hold_s",
@@ -66,8 +68,8 @@ PLAN_COLUMNS: tuple[str, ...] = (
 
 
 @dataclass(frozen=True)
-class Plan:
-    """A performance plan: one row per melody note (`PLAN_COLUMNS`), times on the played song clock.
+class SongPlan:
+    """A song plan: one row per melody note (`SONG_PLAN_COLUMNS`), times on the played song clock.
 
     `status` is "play" or "skip"; `reason` says why a note is skipped, late, louder or clipped.
     `start_s` is the planned motion start (it may be negative: the first press starts before the
@@ -211,7 +213,7 @@ def plan_model(
     tables: dict[float, StrokeTable] | None = None,
     tempo: TempoRequest | None = None,
     written_bpm: float = 120.0,
-) -> Plan:
+) -> SongPlan:
     """Plan a melody (on its written time axis at `written_bpm`) with the model's inverse.
 
     `tables` fixes the stroke configuration (one geometry, its vacuum levels); otherwise every
@@ -240,7 +242,7 @@ def plan_model(
     choice = choose_tempo(request, best.feasibility)
     scheduled = _scheduled(notes, best, choice, settings, rig, moves)
     frame = _frame(notes, best, choice, scheduled)
-    return Plan("model", frame, settings, best.dynamics, dict(best.tables), _warnings(frame, choice),
+    return SongPlan("model", frame, settings, best.dynamics, dict(best.tables), _warnings(frame, choice),
                 best.geometry, choice)
 
 
@@ -288,7 +290,7 @@ def _frame(notes: Sequence[Note], prepared: _Prepared, choice: TempoChoice, s: S
         "start_s": np.where(skipped, onset - lead, s.start_s), "busy_s": busy0 + s.hold_s,
         "late_s": s.late_s, "tempo_limit_bpm": prepared.feasibility.tempo_limit_bpm,
         "status": np.where(skipped, "skip", "play"), "reason": _reasons(prepared, s, velocity),
-    }, columns=list(PLAN_COLUMNS))
+    }, columns=list(SONG_PLAN_COLUMNS))
     return frame
 
 

@@ -1,11 +1,11 @@
-"""Five-stage segmentation and features on a simulated keystroke (with dropped frames)."""
+"""The five keystroke stages and features on a simulated keystroke (with dropped frames)."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from pianobot.analysis.greybox.features import keystroke_features
-from pianobot.analysis.greybox.phases import STAGE_NAMES, segment_keystroke
+from pianobot.analysis.greybox.stages import STAGE_NAMES, find_stages
 from pianobot.physics.linear import simulate_linear
 from pianobot.physics.msd import MSDParams
 from pianobot.physics.trajectory import Press, sample_presses
@@ -22,7 +22,7 @@ def test_stages_are_ordered_and_labelled() -> None:
     t, x0, x1, x2 = _stroke()
     x2 = x2.copy()
     x2[40:43] = np.nan  # dropped frames
-    st = segment_keystroke(t, x2, x0_m=x0, x1_m=x1)
+    st = find_stages(t, x2, x0_m=x0, x1_m=x1)
     edges = st.boundaries_s
     assert np.all(np.isfinite(edges)) and np.all(np.diff(edges) >= 0)
     assert abs(st.t_motion_s) < 0.02
@@ -44,7 +44,7 @@ def test_features_key_speed_and_travel() -> None:
 
 def test_key_that_never_moves_has_only_approach() -> None:
     t = np.linspace(0, 1, 120)
-    st = segment_keystroke(t, np.zeros_like(t), x0_m=t * 0.01)
+    st = find_stages(t, np.zeros_like(t), x0_m=t * 0.01)
     assert np.isnan(st.t_key_move_s) and np.isfinite(st.t_motion_s)
 
 
@@ -57,7 +57,7 @@ def test_hovering_finger_traces_that_start_at_motion_start_find_the_contact() ->
     ks = World.linear(0).keystroke(Press(distance_m, 0.03, 0.04, 0.04, 0.5, 0.2), -60.0, key="seg")
     t = ks.truth_t_s - ks.t0_s
     x0, x1, x2 = ks.truth_x0_m, ks.truth_x1_m, ks.truth_x2_m
-    st = segment_keystroke(t, x2, x0_m=x0, x1_m=x1, distance_m=distance_m)
+    st = find_stages(t, x2, x0_m=x0, x1_m=x1, distance_m=distance_m)
     touch = float(t[np.argmax(x1 - x2 >= distance_m)])  # the fingertip reaches the key
     assert 0.0 <= st.t_motion_s < 0.1  # a 2 % travel threshold at 0.5 m/s² is crossed late
     assert np.isfinite(st.t_contact_s) and abs(st.t_contact_s - touch) < 0.02

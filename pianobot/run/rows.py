@@ -1,7 +1,7 @@
 """From what a keystroke produced to the rows of the trials, samples and midi tables.
 
-MIDI outcome (the study's readout): the first note-on of the trial's note in the keystroke's time
-window gives `on_velocity` and `t_on_s`; the next note-off of that note gives `off_velocity` and
+MIDI outcome (what the piano reported): the first note-on of the trial's note in the keystroke's
+time window gives `on_velocity` and `t_on_s`; the next note-off of that note gives `off_velocity` and
 `t_off_s`; `midi_hold_s` is the time between them. No note-on means `silent`: a result (the
 finger was too slow or too soft to sound the key), not a failure. Times in the trials and
 samples tables are relative to motion start; MIDI events keep the run clock.
@@ -15,17 +15,16 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 import pyarrow as pa
 
+from pianobot.plan.trial import MOTION_COLUMNS
 from pianobot.rig import TrialLike
 from pianobot.rig.protocols import FloatArray, KeystrokeResult, MidiEvent, Trace
 from pianobot.store.schema import PARAMETER_COLUMNS
 
 # Trace sources each `record:` stream keeps; sim-truth rides along with any sampled stream.
 SAMPLE_STREAMS = {"arm": "arm", "mocap": "mocap"}
-# The commanded fast moves, kept as extra trials columns in a sweep with `approach: fast`: with
-# them the commanded arm motion (and so `t_on_s` etc., measured from motion start) is known.
-MOTION_COLUMNS = ("approach_m", "retract_m", "travel_velocity_mps", "travel_acceleration_mps2")
 
 
 @dataclass(frozen=True)
@@ -171,27 +170,34 @@ def trials_table(batch: Sequence[TrialData]) -> pa.Table:
 
 
 def samples_table(batch: Sequence[TrialData]) -> pa.Table | None:
-    """All sample chunks of a batch, concatenated column by column (no per-row Python)."""
+    """All sample chunks of a batch, concatenated column by column (no per-row Python).
+
+    Trial ids and sources are dictionary columns: one string per chunk, not one per row.
+    """
     chunks = [(d.trial_id, c) for d in batch for c in d.samples]
     if not chunks:
         return None
-    lengths = np.array([len(c.t_s) for _, c in chunks])
-    ids = pa.DictionaryArray.from_arrays(
-        pa.array(np.repeat(np.arange(len(chunks)), lengths)), pa.array([t for t, _ in chunks])
-    )
-    sources = pa.DictionaryArray.from_arrays(
-        pa.array(np.repeat(np.arange(len(chunks)), lengths)), pa.array([c.source for _, c in chunks])
-    )
+    lengths = np.fromiter((len(c.t_s) for _, c in chunks), dtype=np.int64, count=len(chunks))
+    trial_ids = list(dict.fromkeys(t for t, _ in chunks))
+    trial_of = {t: i for i, t in enumerate(trial_ids)}
+    source_names = list(dict.fromkeys(c.source for _, c in chunks))
+    source_of = {s: i for i, s in enumerate(source_names)}
     return pa.table(
         {
-            "trial_id": ids.cast(pa.string()),
-            "source": sources.cast(pa.string()),
+            "trial_id": _dictionary([trial_of[t] for t, _ in chunks], lengths, trial_ids),
+            "source": _dictionary([source_of[c.source] for _, c in chunks], lengths, source_names),
             "t_s": np.concatenate([c.t_s for _, c in chunks]),
             "x0_m": np.concatenate([c.x0_m for _, c in chunks]),
             "x1_m": np.concatenate([c.x1_m for _, c in chunks]),
             "x2_m": np.concatenate([c.x2_m for _, c in chunks]),
         }
     )
+
+
+def _dictionary(codes: list[int], lengths: npt.NDArray[np.int64], values: list[str]) -> pa.Array:
+    """A dictionary column: chunk k's code repeated lengths[k] times."""
+    indices = np.repeat(np.asarray(codes, dtype=np.int32), lengths)
+    return pa.DictionaryArray.from_arrays(pa.array(indices), pa.array(values, type=pa.string()))
 
 
 def midi_table(batch: Sequence[TrialData]) -> pa.Table | None:
