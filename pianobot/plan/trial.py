@@ -123,8 +123,14 @@ def press_from(values: Mapping[Any, Any]) -> Press:
     Raises:
         ValueError: the down velocity or the depth is not given.
     """
-    present = completed(values, PRESS_FIELDS)
-    return Press(**{name: float(v) for name, v in present.items()})
+    fields: dict[str, float] = {}
+    for name in PRESS_FIELDS:  # every field given (a trial, a table row): no defaults to look up
+        value = values.get(name)
+        if value is None or value != value:
+            fields = {name: float(v) for name, v in completed(values, PRESS_FIELDS).items()}
+            break
+        fields[name] = float(value)
+    return Press(**fields)
 
 
 def trial_from(trial_id: str, index: int, repeat: int, values: Mapping[Any, Any]) -> Trial:
