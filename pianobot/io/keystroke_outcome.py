@@ -19,7 +19,6 @@ from pianobot.io.keystroke_records import LogRecords
 
 IntArray = npt.NDArray[np.int64]
 
-PARAMETER_COLUMNS = PARAMETER_SLOTS
 OUTCOME_COLUMNS = ("on_velocity", "off_velocity", "t_on_s", "t_off_s", "midi_hold_s", "n_note_on")
 ASSIGNMENT_COLUMNS = ("read_line", "moved_from_line", "assignment", "assignment_evidence")
 MIDI_COLUMNS = ("index", "source_line", "session", "t_s", "type", "note", "velocity", "status")
@@ -58,7 +57,7 @@ class OutcomeTable:
             }
         )
         frame["note"] = frame["note"].where(frame["note"] >= 0).astype("Int64")
-        for column in PARAMETER_COLUMNS:
+        for column in PARAMETER_SLOTS:
             frame[column] = r.params[column].to_numpy() if column in r.params else np.nan
         for column in OUTCOME_COLUMNS:
             frame[column] = self.outcome[column]

@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 
+from pianobot.durations import format_long_duration
 from pianobot.errors import InputError
 from pianobot.plan.labtime import move_durations_s
 from pianobot.plan.trial import FloatArray
@@ -56,7 +57,7 @@ def check_size(spec: ExperimentSpec, rig: RigSpec | None = None, *,
     label = str(spec.source_path) if spec.source_path else spec.name
     estimate = estimated_lab_time_s(spec, rig, n)
     raise InputError(
-        f"plans {n:,} trials (≈ {_long_duration(estimate)} of lab time), more than the limit of "
+        f"plans {n:,} trials (≈ {format_long_duration(estimate)} of lab time), more than the limit of "
         f"{max_trials:,} trials per spec; narrow the sweep or split it, or raise the limit with "
         "--max-trials",
         f"{label}: sweep",
@@ -109,16 +110,3 @@ def _sampled_columns(spec: ExperimentSpec, rng: np.random.Generator, k: int) -> 
             followed = missing_value(name, columns)
             columns[name] = np.full(k, np.nan) if followed is None else np.array(followed, dtype=np.float64)
     return columns
-
-
-def _long_duration(seconds: float) -> str:
-    """`3 h`, `12 days`, `31,710 years`: a size people can judge at a glance."""
-    if not math.isfinite(seconds):
-        return "unknown time"
-    hours = seconds / 3600
-    if hours < 48:
-        return f"{hours:.1f} h" if hours < 10 else f"{hours:.0f} h"
-    days = hours / 24
-    if days < 730:
-        return f"{days:,.0f} days"
-    return f"{days / 365.25:,.0f} years"

@@ -30,7 +30,6 @@ from pianobot.spec.parameters import PARAMETERS, PRESS_PARAMETERS, missing_value
 
 #: Pause between one stroke's end and the next stroke's start (the sideways move), seconds.
 MOVE_S = 0.3
-PRESS_FIELDS: tuple[str, ...] = PRESS_PARAMETERS
 
 
 def random_sequences(n_sequences: int, length: int, *, notes: Sequence[int],
@@ -48,7 +47,7 @@ def random_sequences(n_sequences: int, length: int, *, notes: Sequence[int],
     for name, (lo, hi) in ranges.items():
         if not hi >= lo:
             raise ValueError(f"range of {name} is empty: [{lo}, {hi}]")
-    missing = [f for f in (*PRESS_FIELDS, "vacuum_kpa") if f not in ranges and f not in fixed
+    missing = [f for f in (*PRESS_PARAMETERS, "vacuum_kpa") if f not in ranges and f not in fixed
                and PARAMETERS[f].follows is None]
     if missing:
         raise ValueError(f"parameters neither drawn nor fixed: {', '.join(missing)}")
@@ -63,7 +62,7 @@ def random_sequences(n_sequences: int, length: int, *, notes: Sequence[int],
         frame[name] = rng.uniform(lo, hi, n)
     for name, value in fixed.items():
         frame[name] = float(value)
-    for name in PRESS_FIELDS:  # the up velocity follows the down velocity (the parameter table)
+    for name in PRESS_PARAMETERS:  # the up velocity follows the down velocity (the parameter table)
         if name not in frame:
             frame[name] = missing_value(name, {c: frame[c] for c in frame.columns})
     frame["index"] = np.arange(n)
@@ -73,7 +72,7 @@ def random_sequences(n_sequences: int, length: int, *, notes: Sequence[int],
 def play_on_world(world: World, plan: pd.DataFrame, *, stiffness_per_sequence: bool = False,
                   run_id: str = "sim-sequences") -> pd.DataFrame:
     """Play `plan` (from `random_sequences`) on `world`; the trials table of what was heard."""
-    presses = [press_from(row) for row in plan[list(PRESS_FIELDS)].to_dict("records")]
+    presses = [press_from(row) for row in plan[list(PRESS_PARAMETERS)].to_dict("records")]
     vacuum = plan["vacuum_kpa"].to_numpy(float)
     blocks: list[str | None] = ([f"sequence-{int(s)}" for s in plan["sequence_id"]] if stiffness_per_sequence
                                 else [None] * len(plan))
