@@ -261,7 +261,7 @@ def scenario_random(samples: int, lean: bool = False, breakdown: bool = True) ->
         (folder / "rig.yaml").write_text(LEAN_RIG if lean else RANDOM_RIG)
         spec = folder / "random.yaml"
         spec.write_text(RANDOM_SPEC.format(samples=samples, distance=0.0 if lean else 0.01))
-        prepared = prepare_sweep(spec)
+        prepared = prepare_sweep(spec, max_trials=samples)
         probe = prepared.trials[: min(len(prepared.trials), 5000)]
         raw = raw_simulator(probe, prepared.rig, prepared.seed)
         del prepared, probe
@@ -279,7 +279,7 @@ def scenario_random(samples: int, lean: bool = False, breakdown: bool = True) ->
         try:
             outcome, wall, cpu = _timed(lambda: run_sweep(
                 spec, data_dir=folder / "data", progress=False, subscribers=[sample],
-                executor=ExecutorSettings(workers=1)))
+                executor=ExecutorSettings(workers=1), max_trials=samples))
         finally:
             restore()
         peak_rss_mb = _peak_rss_mb()
