@@ -283,25 +283,26 @@ def scenario_random(samples: int, lean: bool = False, breakdown: bool = True) ->
         finally:
             restore()
         peak_rss_mb = _peak_rss_mb()
+        done = max(outcome.trials, 1)  # rates over the trials run (a stopped run ran fewer)
         floor = storage_floor(outcome.path, outcome.trials) if samples <= 20_000 else None
         rows = floor["rows"] if floor is not None else None
         return {
             "trials": samples, "status": outcome.status, "completed": outcome.trials,
             "world": "default, truth at 200 Hz, arm at 125 Hz" if lean else "default",
             "wall_s": round(wall, 2), "cpu_s": round(cpu, 2),
-            "trials_per_s_wall": round(samples / wall, 1), "trials_per_s_cpu": round(samples / cpu, 1),
+            "trials_per_s_wall": round(done / wall, 1), "trials_per_s_cpu": round(done / cpu, 1),
             "raw_simulator_trials_per_s_wall": round(raw["trials_per_s_wall"], 1),
             "raw_simulator_trials_per_s_cpu": round(raw["trials_per_s_cpu"], 1),
-            "ratio_to_raw_simulator_wall": round(samples / wall / raw["trials_per_s_wall"], 3),
-            "ratio_to_raw_simulator_cpu": round(samples / cpu / raw["trials_per_s_cpu"], 3),
+            "ratio_to_raw_simulator_wall": round(done / wall / raw["trials_per_s_wall"], 3),
+            "ratio_to_raw_simulator_cpu": round(done / cpu / raw["trials_per_s_cpu"], 3),
             "storing_samples_only_trials_per_s_cpu": (
                 None if floor is None else round(floor["trials_per_s_cpu"], 1)),
             "storing_samples_only_vs_raw_simulator_cpu": (
                 None if floor is None else round(floor["trials_per_s_cpu"] / raw["trials_per_s_cpu"], 3)),
-            "sample_rows_per_trial": None if rows is None else round(rows / samples),
-            "cpu_us_per_trial": round(cpu / samples * 1e6),
+            "sample_rows_per_trial": None if rows is None else round(rows / done),
+            "cpu_us_per_trial": round(cpu / done * 1e6),
             "raw_simulator_cpu_us_per_trial": round(1e6 / raw["trials_per_s_cpu"]),
-            "breakdown_cpu_us_per_trial": {k: round(v / samples * 1e6) for k, v in spent.items()},
+            "breakdown_cpu_us_per_trial": {k: round(v / done * 1e6) for k, v in spent.items()},
             "peak_rss_mb": round(peak_rss_mb, 1),
             "rss_mb_by_trial": rss,
             "rss_growth_mb_after_first_tenth": round(rss[-1][1] - rss[1][1], 1) if len(rss) > 2 else None,
