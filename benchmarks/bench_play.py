@@ -40,7 +40,7 @@ from typing import Any
 
 import numpy as np
 
-from pianobot.analysis.learn.predictors import PhysicsPredictor
+from pianobot.analysis.learn.physical import PhysicsPredictor
 from pianobot.io.midifile import read_song, write_song
 from pianobot.physics.world import World, WorldConfig
 from pianobot.play import PlayResult, PlaySettings, play_rig, play_song

@@ -172,7 +172,8 @@ def register(app: typer.Typer) -> None:
         writable(plot, "--plot")
         progress = command_progress(json_out, no_progress)
         with progress.task("fit: loading scikit-learn"):
-            from pianobot.analysis.learn.predictors import PhysicsPredictor, load_predictor
+            from pianobot.analysis.learn.files import load_predictor
+            from pianobot.analysis.learn.physical import PhysicsPredictor
             from pianobot.analysis.learn.run import fit_runs, load_trials
             from pianobot.analysis.plausibility import as_dicts
             from pianobot.reports.command_figures import learned_maps, save_png

@@ -22,6 +22,8 @@ from pianobot.physics.linear import frequency_response, peak_response
 from pianobot.physics.model import KeystrokeModel, load_model
 from pianobot.physics.trajectory import Press, press_timing
 from pianobot.physics.world import World, WorldKeystroke
+from pianobot.plan.trial import press_from
+from pianobot.spec.parameters import PARAMETERS, format_value
 
 model_app = typer.Typer(help="Inspect the keystroke model: resonance, one simulated keystroke.",
                         no_args_is_help=True)
@@ -64,15 +66,23 @@ def bode(
         say_written("figure", plot)
 
 
+def _default_help(name: str) -> str:
+    """`Default: 0.5 m/s².` from the parameter table (what a spec's trial gets when unset)."""
+    p = PARAMETERS[name]
+    if p.follows is not None:
+        return f"Default: the {PARAMETERS[p.follows].label.removeprefix('arm ')}."
+    return f"Default: {format_value(p.default or 0.0)} {p.unit}."
+
+
 @model_app.command("simulate")
 def simulate(
     vacuum_kpa: VacuumOpt = -60.0,
     down_velocity_mps: Annotated[float, typer.Option("--down-velocity-mps")] = 0.04,
     depth_m: Annotated[float, typer.Option("--depth-m")] = 0.03,
-    acceleration_mps2: Annotated[float, typer.Option("--acceleration-mps2")] = 1.0,
-    up_velocity_mps: Annotated[float | None, typer.Option("--up-velocity-mps", help="Default: the down velocity.")] = None,
-    distance_m: Annotated[float, typer.Option("--distance-m")] = 0.05,
-    hold_s: Annotated[float, typer.Option("--hold-s")] = 0.0,
+    acceleration_mps2: Annotated[float | None, typer.Option("--acceleration-mps2", help=_default_help("acceleration_mps2"))] = None,
+    up_velocity_mps: Annotated[float | None, typer.Option("--up-velocity-mps", help=_default_help("up_velocity_mps"))] = None,
+    distance_m: Annotated[float | None, typer.Option("--distance-m", help=_default_help("distance_m"))] = None,
+    hold_s: Annotated[float | None, typer.Option("--hold-s", help=_default_help("hold_s"))] = None,
     world: Annotated[str, typer.Option("--world", help="default | linear")] = "default",
     seed: Annotated[int, typer.Option("--seed")] = 0,
     plot: PlotOpt = None,
@@ -82,9 +92,9 @@ def simulate(
     """Simulate one keystroke in the simulated world; print its MIDI outcome, optionally plot it."""
     if world not in ("default", "linear"):
         raise InputError(f"expected 'default' or 'linear', got {world!r}", "--world")
-    press = Press(distance_m, depth_m, down_velocity_mps,
-                  up_velocity_mps if up_velocity_mps is not None else down_velocity_mps,
-                  acceleration_mps2, hold_s)
+    press = press_from({"distance_m": distance_m, "depth_m": depth_m, "down_velocity_mps": down_velocity_mps,
+                        "up_velocity_mps": up_velocity_mps, "acceleration_mps2": acceleration_mps2,
+                        "hold_s": hold_s})
     try:
         press_timing(press)
     except ValueError as exc:

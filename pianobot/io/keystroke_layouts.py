@@ -34,24 +34,19 @@ import numpy.typing as npt
 import pandas as pd
 
 from pianobot.errors import InputError
+from pianobot.spec.parameters import PARAMETERS
 
 FloatArray = npt.NDArray[np.float64]
 RIGID_STIFFNESS_CODE = 10000.0  # the value the study wrote in the vacuum slot for the rigid finger
 UP_TRAVELS = ("distance+depth", "depth")
 SKIP = "skip"
-# Columns a layout's slot may fill (the spec's parameter names plus what old scripts also logged).
-PARAMETER_SLOTS = (
-    "vacuum_kpa",
-    "finger_angle_deg",
-    "acceleration_mps2",
-    "up_acceleration_mps2",
-    "down_velocity_mps",
-    "up_velocity_mps",
-    "depth_m",
-    "distance_m",
-    "hold_s",
-    "move_velocity_mps",
-    "move_acceleration_mps2",
+# What old scripts logged beyond the parameter table: a separate up acceleration and the
+# sideways move's speed and acceleration (kept as extra columns of the trials table, in this order).
+LOGGED_EXTRAS = ("up_acceleration_mps2", "move_velocity_mps", "move_acceleration_mps2")
+# Columns a layout's slot may fill: the parameter table's numbers (the note, a key, is read
+# apart) plus what old scripts also logged.
+PARAMETER_SLOTS: tuple[str, ...] = (
+    *(name for name, p in PARAMETERS.items() if not p.integer), *LOGGED_EXTRAS
 )
 SLOT_NAMES = (*PARAMETER_SLOTS, "velocity_mps", "note", SKIP)
 # The names old scripts used for the same values (named-key logs, and accepted in --columns).
@@ -234,14 +229,9 @@ _RANGES: dict[str, tuple[float, float]] = {
     "hold_s": (0.0, 10.0),
     "note": (0.0, 127.0),
 }
+# Speeds and accelerations: a moveL at 0 never happened, so a 0 there means another layout.
 _POSITIVE = {
-    "acceleration_mps2",
-    "up_acceleration_mps2",
-    "move_acceleration_mps2",
-    "velocity_mps",
-    "down_velocity_mps",
-    "up_velocity_mps",
-    "move_velocity_mps",
+    *(name for name, p in PARAMETERS.items() if p.exclusive_minimum), *LOGGED_EXTRAS, "velocity_mps"
 }
 
 

@@ -14,23 +14,11 @@ import pandas as pd
 
 from pianobot.io.keystroke_assign import Presses
 from pianobot.io.keystroke_events import KIND_OFF, KIND_ON
+from pianobot.io.keystroke_layouts import PARAMETER_SLOTS
 from pianobot.io.keystroke_records import LogRecords
 
 IntArray = npt.NDArray[np.int64]
 
-PARAMETER_COLUMNS = (
-    "vacuum_kpa",
-    "finger_angle_deg",
-    "acceleration_mps2",
-    "up_acceleration_mps2",
-    "down_velocity_mps",
-    "up_velocity_mps",
-    "depth_m",
-    "distance_m",
-    "hold_s",
-    "move_velocity_mps",
-    "move_acceleration_mps2",
-)
 OUTCOME_COLUMNS = ("on_velocity", "off_velocity", "t_on_s", "t_off_s", "midi_hold_s", "n_note_on")
 ASSIGNMENT_COLUMNS = ("read_line", "moved_from_line", "assignment", "assignment_evidence")
 MIDI_COLUMNS = ("index", "source_line", "session", "t_s", "type", "note", "velocity", "status")
@@ -69,7 +57,7 @@ class OutcomeTable:
             }
         )
         frame["note"] = frame["note"].where(frame["note"] >= 0).astype("Int64")
-        for column in PARAMETER_COLUMNS:
+        for column in PARAMETER_SLOTS:
             frame[column] = r.params[column].to_numpy() if column in r.params else np.nan
         for column in OUTCOME_COLUMNS:
             frame[column] = self.outcome[column]

@@ -36,23 +36,17 @@ import numpy as np
 import pandas as pd
 
 from pianobot.errors import InputError
-from pianobot.io.keystroke_layouts import COLUMN_ALIASES, RIGID_STIFFNESS_CODE, round_grid_array
+from pianobot.io.keystroke_layouts import (
+    COLUMN_ALIASES,
+    PARAMETER_SLOTS,
+    RIGID_STIFFNESS_CODE,
+    round_grid_array,
+)
+from pianobot.spec.parameters import PARAMETERS, missing_value
 
 DEFAULT_NOTE_OCTAVE = 4  # scientific pitch notation: middle C = C4 = MIDI 60
 KEY_COLUMNS = COLUMN_ALIASES
-NUMERIC_COLUMNS = (
-    "vacuum_kpa",
-    "down_velocity_mps",
-    "up_velocity_mps",
-    "acceleration_mps2",
-    "up_acceleration_mps2",
-    "depth_m",
-    "distance_m",
-    "hold_s",
-    "finger_angle_deg",
-    "move_velocity_mps",
-    "move_acceleration_mps2",
-)
+NUMERIC_COLUMNS = PARAMETER_SLOTS
 SEQUENCE_COLUMNS = ("sequence_id", "sequence_order")
 _OWN = {*NUMERIC_COLUMNS, *SEQUENCE_COLUMNS, "note", "velocity_mps"}
 _PITCH = {"C": 0, "D": 2, "E": 4, "F": 5, "G": 7, "A": 9, "B": 11}
@@ -164,8 +158,11 @@ def named_records(
             params[column] = np.where(numbers == RIGID_STIFFNESS_CODE, np.nan, -np.abs(numbers))
         else:
             params[column] = numbers
-    if "up_velocity_mps" not in columns.values() and "velocity_mps" not in columns.values():
-        params["up_velocity_mps"] = params["down_velocity_mps"]  # the study: same speed down and up
+    logged = set(columns.values())
+    if "velocity_mps" not in logged:  # (`vel` gave both speeds)
+        for name in NUMERIC_COLUMNS:  # not logged: follows what the table says (up ← down)
+            if name not in logged and name in PARAMETERS and PARAMETERS[name].follows is not None:
+                params[name] = missing_value(name, {c: params[c] for c in params.columns})
     params = params.apply(lambda c: round_grid_array(c.to_numpy(dtype=np.float64)))
     keys = set(named)
     return NamedRecords(

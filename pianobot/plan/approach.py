@@ -17,8 +17,7 @@ from dataclasses import replace
 from pianobot.physics.approach import ApproachSettings, plan_fast_moves
 from pianobot.plan.trial import Trial, trial_columns
 from pianobot.spec import ExperimentSpec, RigSpec
-
-_NAMES = ("distance_m", "depth_m", "down_velocity_mps", "up_velocity_mps", "acceleration_mps2")
+from pianobot.spec.parameters import PRESS_PARAMETERS
 
 
 def approach_settings(rig: RigSpec) -> ApproachSettings:
@@ -31,7 +30,7 @@ def approach_settings(rig: RigSpec) -> ApproachSettings:
 def with_fast_approach(trials: Sequence[Trial], rig: RigSpec | None = None) -> list[Trial]:
     """Every trial with its fast approach and retract planned (0 where none is exact)."""
     settings = approach_settings(rig if rig is not None else RigSpec())
-    c = trial_columns(trials, _NAMES)
+    c = trial_columns(trials, PRESS_PARAMETERS)
     moves = plan_fast_moves(c["distance_m"], c["depth_m"], c["down_velocity_mps"],
                             c["up_velocity_mps"], c["acceleration_mps2"], settings)
     return [

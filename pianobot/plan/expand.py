@@ -34,6 +34,7 @@ from pianobot.spec import (
     default_value,
     resolved_spec_dict,
 )
+from pianobot.spec.parameters import missing_value
 from pianobot.spec.sweep import VALUE_DECIMALS
 
 TRIAL_ID_HEX = 16
@@ -68,14 +69,15 @@ def expand(
         positions = order[start:start + _CHUNK]
         columns = source.columns(positions // repeats)
         repeat = (positions % repeats).tolist()
-        trials += map(
-            Trial,
-            [trial_ids[k] for k in positions.tolist()],
-            range(start, start + len(positions)),
-            repeat,
-            columns["note"].astype(np.int64).tolist(),
-            *(columns[name].tolist() for name in PARAMETER_NAMES[1:]),
-        )
+        # By name: each row of parameter values becomes the Trial's keyword arguments.
+        rows = zip(*(columns[name].astype(np.int64).tolist() if PARAMETERS[name].integer
+                     else columns[name].tolist() for name in PARAMETER_NAMES), strict=True)
+        trials += [
+            Trial(trial_id, index, k, **dict(zip(PARAMETER_NAMES, row, strict=True)))
+            for trial_id, index, k, row in zip(
+                [trial_ids[k] for k in positions.tolist()],
+                range(start, start + len(positions)), repeat, rows, strict=True)
+        ]
     if rig is not None:
         raise_for_errors(check_envelope(trials, spec.finger, rig, rig_label=spec.rig), label)
     return trials
@@ -111,7 +113,7 @@ class _PointSource:
             default = default_value(name, spec)
             if default is not None:
                 self.held[name] = default
-            elif name != "up_velocity_mps":
+            elif PARAMETERS[name].follows is None:
                 raise InputError(f"{name} is not set: give it in sweep.params or sweep.fixed",
                                  f"{label}: sweep.params")
 
@@ -131,8 +133,11 @@ class _PointSource:
             columns[name] = values[points].astype(np.float64)
         for name, value in self.held.items():
             columns[name] = np.full(n, value)
-        # The study moved up at the speed it moved down; so does a spec that does not say.
-        columns.setdefault("up_velocity_mps", columns["down_velocity_mps"].copy())
+        for name in PARAMETER_NAMES:  # what is left follows another parameter (up ← down)
+            if name not in columns:
+                followed = missing_value(name, columns)
+                assert followed is not None  # a parameter without default follows one, or raised
+                columns[name] = np.array(followed, dtype=np.float64)
         return {name: columns[name] for name in PARAMETER_NAMES}
 
 

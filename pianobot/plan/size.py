@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 
+from pianobot.durations import format_long_duration
 from pianobot.errors import InputError
 from pianobot.plan.labtime import move_durations_s
 from pianobot.plan.trial import FloatArray
@@ -26,6 +27,7 @@ from pianobot.spec import (
     clean_value,
     default_value,
 )
+from pianobot.spec.parameters import missing_value
 
 # About 5 days of non-stop keystrokes on the real rig at ~2 s each (the study's grid is 2,025);
 # a plan this size takes ~110 MB in memory. `pianobot sweep --max-trials N` raises it.
@@ -55,7 +57,7 @@ def check_size(spec: ExperimentSpec, rig: RigSpec | None = None, *,
     label = str(spec.source_path) if spec.source_path else spec.name
     estimate = estimated_lab_time_s(spec, rig, n)
     raise InputError(
-        f"plans {n:,} trials (≈ {_long_duration(estimate)} of lab time), more than the limit of "
+        f"plans {n:,} trials (≈ {format_long_duration(estimate)} of lab time), more than the limit of "
         f"{max_trials:,} trials per spec; narrow the sweep or split it, or raise the limit with "
         "--max-trials",
         f"{label}: sweep",
@@ -103,20 +105,8 @@ def _sampled_columns(spec: ExperimentSpec, rng: np.random.Generator, k: int) -> 
             columns[name] = np.full(k, held[name])
         elif (default := default_value(name, spec)) is not None:
             columns[name] = np.full(k, default)
-    columns.setdefault("up_velocity_mps", columns.get("down_velocity_mps", np.full(k, np.nan)))
-    for name in PARAMETERS:
-        columns.setdefault(name, np.full(k, np.nan))
+    for name in PARAMETERS:  # what is left follows another parameter (up ← down), else unknown
+        if name not in columns:
+            followed = missing_value(name, columns)
+            columns[name] = np.full(k, np.nan) if followed is None else np.array(followed, dtype=np.float64)
     return columns
-
-
-def _long_duration(seconds: float) -> str:
-    """`3 h`, `12 days`, `31,710 years`: a size people can judge at a glance."""
-    if not math.isfinite(seconds):
-        return "unknown time"
-    hours = seconds / 3600
-    if hours < 48:
-        return f"{hours:.1f} h" if hours < 10 else f"{hours:.0f} h"
-    days = hours / 24
-    if days < 730:
-        return f"{days:,.0f} days"
-    return f"{days / 365.25:,.0f} years"

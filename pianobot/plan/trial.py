@@ -1,17 +1,24 @@
-"""One planned keystroke (`Trial`) and the plan as columns or as a table."""
+"""One planned keystroke (`Trial`), the arm motion of any named parameters (`press_from`), and
+the plan as columns or as a table.
+
+`press_from(mapping)` is the one place a `Press` is built from parameter values by name: a
+trial, a row of a trials table, a predictor's input row, a play stroke. A value not given takes
+what the parameter table says (`spec.parameters.missing_value`: the up velocity follows the down
+velocity, the others their defaults). `trial_from` builds a `Trial` by name the same way.
+"""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, fields
 from operator import attrgetter
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
 
 from pianobot.physics.trajectory import Press
-from pianobot.spec import PARAMETER_NAMES
+from pianobot.spec.parameters import PARAMETER_NAMES, PARAMETERS, PRESS_PARAMETERS, missing_value
 
 if TYPE_CHECKING:  # pandas takes a third of a second to import: only where frames are made
     import pandas as pd
@@ -21,7 +28,11 @@ FloatArray = npt.NDArray[np.float64]
 
 @dataclass(frozen=True, slots=True)  # slots: a million-trial plan is ~4x smaller in memory
 class Trial:
-    """One planned keystroke, in run order."""
+    """One planned keystroke, in run order.
+
+    The parameter fields are the parameter table's names in its order (`PARAMETER_NAMES`: a
+    test keeps them equal); build one by name with `trial_from`.
+    """
 
     trial_id: str  # stable hash of the resolved spec, the parameters and the repeat index
     index: int  # position in the run order, from 0
@@ -44,18 +55,7 @@ class Trial:
 
     def press(self) -> Press:
         """The arm motion of this trial."""
-        return Press(
-            distance_m=self.distance_m,
-            depth_m=self.depth_m,
-            down_velocity_mps=self.down_velocity_mps,
-            up_velocity_mps=self.up_velocity_mps,
-            acceleration_mps2=self.acceleration_mps2,
-            hold_s=self.hold_s,
-            approach_m=self.approach_m,
-            retract_m=self.retract_m,
-            travel_velocity_mps=self.travel_velocity_mps,
-            travel_acceleration_mps2=self.travel_acceleration_mps2,
-        )
+        return press_from({name: getattr(self, name) for name in PRESS_FIELDS})
 
     def parameters(self) -> dict[str, float]:
         """The keystroke parameters only (the trials table's parameter columns)."""
@@ -77,6 +77,69 @@ MOTION_COLUMNS: tuple[str, ...] = (
 )
 PLAN_COLUMNS: tuple[str, ...] = tuple(f.name for f in fields(Trial) if f.name not in MOTION_COLUMNS)
 FAST_PLAN_COLUMNS: tuple[str, ...] = PLAN_COLUMNS + MOTION_COLUMNS
+# Everything `press_from` reads: the motion parameters, then the commanded fast moves.
+PRESS_FIELDS: tuple[str, ...] = PRESS_PARAMETERS + MOTION_COLUMNS
+
+
+def given(values: Mapping[Any, Any], name: str) -> bool:
+    """Whether `values` gives `name` (None or NaN, as a table shows a value not logged, does not)."""
+    value = values.get(name)
+    return value is not None and value == value  # NaN is the one value unequal to itself
+
+
+def completed(values: Mapping[Any, Any], names: Sequence[str]) -> dict[str, Any]:
+    """`values` of `names`, each not given taken from the parameter table (`missing_value`).
+
+    Raises:
+        ValueError: a parameter that must be given (down velocity, depth) is not.
+    """
+    out: dict[str, Any] = {}
+    missing: list[str] = []
+    for name in names:
+        value = values.get(name)
+        if value is None or value != value:  # None or NaN: not given (inlined: the hot path)
+            missing.append(name)
+        else:
+            out[name] = value
+    for name in missing:
+        if name not in PARAMETERS:
+            continue
+        followed = PARAMETERS[name].follows
+        known = out if followed is None or followed in out or not given(values, followed) else {
+            followed: values[followed]}
+        value = missing_value(name, known)
+        if value is None:
+            raise ValueError(f"{name} is not given and has no default")
+        out[name] = value
+    return out
+
+
+def press_from(values: Mapping[Any, Any]) -> Press:
+    """The arm motion of parameter values given by name (a dict, a table row, a trial's fields).
+
+    Motion parameters not given take the parameter table's defaults (the up velocity follows
+    the down velocity); the fast-move fields (`MOTION_COLUMNS`) are read when present.
+
+    Raises:
+        ValueError: the down velocity or the depth is not given.
+    """
+    present = completed(values, PRESS_FIELDS)
+    return Press(**{name: float(v) for name, v in present.items()})
+
+
+def trial_from(trial_id: str, index: int, repeat: int, values: Mapping[Any, Any]) -> Trial:
+    """A `Trial` from parameter values by name (defaults as in `press_from`; fast-move fields
+    optional).
+
+    Raises:
+        ValueError: the down velocity or the depth is not given.
+    """
+    present = completed(values, PARAMETER_NAMES + MOTION_COLUMNS)
+    numbers: dict[str, Any] = {
+        name: int(v) if name in PARAMETERS and PARAMETERS[name].integer else float(v)
+        for name, v in present.items()
+    }
+    return Trial(trial_id, index, repeat, **numbers)
 
 
 def trial_columns(

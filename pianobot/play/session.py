@@ -19,7 +19,9 @@ from typing import Any, Literal
 
 import pandas as pd
 
-from pianobot.analysis.learn.predictors import PhysicsPredictor, StrokePredictor, load_predictor
+from pianobot.analysis.learn.files import load_predictor
+from pianobot.analysis.learn.physical import PhysicsPredictor
+from pianobot.analysis.learn.predictors import StrokePredictor
 from pianobot.errors import InputError
 from pianobot.io.midifile import Melody, Note, Song, melody, read_song, write_performance
 from pianobot.physics.model import KeystrokeModel

@@ -4,8 +4,8 @@ For one stroke configuration (vacuum and a `StrokeGeometry`: hover distance, dep
 acceleration, up velocity) the planner asks the model once for on-velocity, silence, lead
 (motion start → note-on) and MIDI hold at a grid of down velocities and two holds, then answers
 every note by interpolation (vectorised: a 20,000-note song costs a few array operations). The
-loudness curve is made monotone (running maximum over sounding speeds) so the inverse is
-single-valued and picks the slowest speed that reaches a loudness.
+loudness is inverted by the predictor contract's one inversion (`LoudnessCurve`: monotone, the
+slowest speed that reaches a loudness).
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
-from pianobot.analysis.learn.predictors import StrokePredictor
+from pianobot.analysis.learn.predictors import LoudnessCurve, StrokePredictor
 from pianobot.play.geometry import StrokeGeometry, envelope_limits, fastest_geometry, vacuum_levels
 from pianobot.play.settings import PlaySettings
 from pianobot.spec import RigSpec
@@ -61,61 +61,46 @@ class StrokeTable:
         })
         out = predictor.predict(frame)
         n = speeds.size
-        on = out["on_velocity"].to_numpy(float)[:n].copy()
-        silent = out["p_silent"].to_numpy(float)[:n] >= settings.silent_p
-        on[silent | ~np.isfinite(on)] = np.nan
+        curve = LoudnessCurve.from_outcome(speeds, out["on_velocity"].to_numpy(float)[:n],
+                                           out["p_silent"].to_numpy(float)[:n], settings.silent_p)
         lead = out["lead_s"].to_numpy(float)[:n]
         hold = out["midi_hold_s"].to_numpy(float)
         slope = (hold[n:] - hold[:n]) / h1
         slope = np.where(np.isfinite(slope) & (slope > 0.2) & (slope < 3.0), slope, FALLBACK_HOLD_SLOPE)
         busy = geometry.durations_s(speeds) + settings.recovery_s
-        return cls(float(vacuum_kpa), geometry, settings, speeds, _monotone(on), _filled(lead),
+        return cls(float(vacuum_kpa), geometry, settings, speeds, curve.velocity, _filled(lead),
                    _filled(hold[:n]), slope, busy)
 
     @property
+    def curve(self) -> LoudnessCurve:
+        """The loudness over down velocity, for the contract's inversion."""
+        return LoudnessCurve(self.speeds_mps, self.velocity)
+
+    @property
     def sounding(self) -> npt.NDArray[np.bool_]:
-        return np.isfinite(self.velocity)
+        return self.curve.sounding
 
     @property
     def sounds(self) -> bool:
         """At least two sounding speeds: a loudness range to invert."""
-        return int(self.sounding.sum()) >= 2
+        return self.curve.sounds
 
     @property
     def velocity_range(self) -> tuple[float, float]:
         """(quietest, loudest) predicted on-velocity; NaNs when nothing sounds."""
-        v = self.velocity[self.sounding]
-        return (float(v[0]), float(v[-1])) if v.size else (float("nan"), float("nan"))
+        return self.curve.velocity_range
 
     def inverse(self, target: npt.ArrayLike) -> FloatArray:
         """Down velocity giving each target on-velocity (clipped to the reachable range)."""
-        t = np.asarray(target, dtype=np.float64)
-        ok = self.sounding
-        if ok.sum() < 2:
-            return np.full(t.shape, np.nan)
-        v, s = self.velocity[ok], self.speeds_mps[ok]
-        keep = np.r_[True, np.diff(v) > 1e-9]
-        return np.asarray(np.interp(t, v[keep], s[keep]), dtype=np.float64)
+        return self.curve.inverse(target)
 
     def fastest_within(self, target: npt.ArrayLike, tolerance: float) -> FloatArray:
-        """The fastest down velocity predicted at most `tolerance` louder than each target.
-
-        Louder is faster here: the loudness curve rises with speed. A target above the
-        loudest stroke gets the fastest speed that still sounds loudest.
-        """
-        t = np.asarray(target, dtype=np.float64)
-        ok = self.sounding
-        if ok.sum() < 2:
-            return np.full(t.shape, np.nan)
-        v, s = self.velocity[ok], self.speeds_mps[ok]
-        # The last speed reaching each loudness: np.interp over the reversed flat stretches.
-        keep = np.r_[np.diff(v) > 1e-9, True]
-        return np.asarray(np.interp(t + tolerance, v[keep], s[keep]), dtype=np.float64)
+        """The fastest down velocity predicted at most `tolerance` louder than each target."""
+        return self.curve.fastest_within(target, tolerance)
 
     def predict_velocity(self, speed_mps: npt.ArrayLike) -> FloatArray:
         """Predicted on-velocity at down velocities (the monotone envelope)."""
-        ok = self.sounding
-        return np.asarray(np.interp(_f(speed_mps), self.speeds_mps[ok], self.velocity[ok]), dtype=np.float64)
+        return self.curve.predict_velocity(speed_mps)
 
     def lead(self, speed_mps: npt.ArrayLike) -> FloatArray:
         return np.asarray(np.interp(_f(speed_mps), self.speeds_mps, self.lead_s), dtype=np.float64)
@@ -157,15 +142,6 @@ def busy_s(geometry: StrokeGeometry, settings: PlaySettings, speed_mps: float, h
 
 def _f(values: npt.ArrayLike) -> FloatArray:
     return np.asarray(values, dtype=np.float64)
-
-
-def _monotone(velocity: FloatArray) -> FloatArray:
-    """Running maximum over the sounding part; NaN stays NaN (silent speeds)."""
-    out = np.full(velocity.shape, np.nan)
-    ok = np.isfinite(velocity)
-    if ok.any():
-        out[ok] = np.maximum.accumulate(velocity[ok])
-    return out
 
 
 def _filled(values: FloatArray) -> FloatArray:

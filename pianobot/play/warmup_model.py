@@ -10,16 +10,10 @@ import math
 import warnings
 
 import numpy as np
-import numpy.typing as npt
 import pandas as pd
 from sklearn.model_selection import GroupKFold
 
-from pianobot.analysis.learn.predictors import (
-    OUTPUT_COLUMNS,
-    FloatArray,
-    grid_inverse,
-    grid_velocity_range,
-)
+from pianobot.analysis.learn.predictors import OUTPUT_COLUMNS, FloatArray
 from pianobot.analysis.learn.training import LearnedPredictor, training_set
 from pianobot.errors import InputError
 
@@ -76,19 +70,6 @@ class WarmUpPredictor:
         out["lead_s"] = self.lead.predict(logged)["lead_s"].to_numpy(float) / speed
         out["midi_hold_s"] = self.hold.predict(logged)["midi_hold_s"]
         return out[list(OUTPUT_COLUMNS)]
-
-    def inverse(self, target_on_velocity: npt.ArrayLike, *, vacuum_kpa: float, acceleration_mps2: float,
-                depth_m: float, distance_m: float) -> FloatArray:
-        """Down velocity for each target on-velocity within the warm-up's speeds (NaN outside)."""
-        return grid_inverse(self, target_on_velocity, *self.speeds_mps, vacuum_kpa=vacuum_kpa,
-                            acceleration_mps2=acceleration_mps2, depth_m=depth_m, distance_m=distance_m)
-
-    def velocity_range(self, *, vacuum_kpa: float, acceleration_mps2: float, depth_m: float,
-                       distance_m: float, max_down_velocity_mps: float) -> tuple[float, float]:
-        """Sounding on-velocities reachable within the warm-up's speeds up to the cap."""
-        lo, hi = self.speeds_mps
-        return grid_velocity_range(self, lo, min(hi, max_down_velocity_mps), vacuum_kpa=vacuum_kpa,
-                                   acceleration_mps2=acceleration_mps2, depth_m=depth_m, distance_m=distance_m)
 
 
 def _logged(trials: pd.DataFrame) -> pd.DataFrame:

@@ -29,6 +29,7 @@ from pianobot.reports.style import (
     resonance_label,
     style_axes,
 )
+from pianobot.spec.parameters import PREDICTOR_INPUTS
 
 #: More vacuum levels than this are too many panels: the most populated ones are shown.
 MAX_LEVEL_PANELS = 6
@@ -76,7 +77,7 @@ def learned_maps(trials: pd.DataFrame, predictors: Mapping[str, _Predicts]) -> F
         grid = np.linspace(rows["down_velocity_mps"].min(), rows["down_velocity_mps"].max(), 60)
         typical = rows.median(numeric_only=True)
         query = pd.DataFrame({c: np.full(grid.size, typical[c]) for c in typical.index
-                              if c in ("acceleration_mps2", "depth_m", "distance_m", "hold_s", "up_velocity_mps")
+                              if c in PREDICTOR_INPUTS and c not in ("down_velocity_mps", "vacuum_kpa")
                               and np.isfinite(typical[c])})
         query["down_velocity_mps"] = grid
         query["vacuum_kpa"] = level

@@ -22,7 +22,7 @@ from pianobot.reports.style import quantity
 from pianobot.store import rig_summary
 
 #: Model parameters as a person reads them: name, symbol, unit (stiffness stays N/m, as published).
-PARAMETER_NAMES: dict[str, tuple[str, str]] = {
+MODEL_PARAMETER_LABELS: dict[str, tuple[str, str]] = {
     "m1_kg": ("fingertip mass m1", "kg"),
     "m2_kg": ("key mass m2", "kg"),
     "k1_a_npm": ("finger stiffness at 0 kPa, k1 = a + b·|p|: a", "N/m"),
@@ -152,7 +152,7 @@ def parameter_table(params: MSDParams, intervals: Mapping[str, Any] | None) -> p
                 rows.append(_parameter_row(f"k1_npm@{vacuum:g}kPa", f"finger stiffness k1 at {vacuum:g} kPa",
                                            "N/m", k1, intervals))
             continue
-        label, unit = PARAMETER_NAMES.get(key, (key, quantity(key).unit))
+        label, unit = MODEL_PARAMETER_LABELS.get(key, (key, quantity(key).unit))
         rows.append(_parameter_row(key, label, unit, value, intervals))
     return pd.DataFrame(rows)
 

@@ -27,20 +27,14 @@ POINTS_PER_STAGE = 25
 
 def stage_edges(t_s: FloatArray, x0: FloatArray, x1: FloatArray, x2: FloatArray,
                 distance_m: float) -> FloatArray:
-    """The six stage boundaries (s) of traces that are relative to rest.
+    """The six stage boundaries (s) of traces that are relative to rest (0 = at rest).
 
-    `find_stages` takes each trace's rest level from its first 5 % of samples, but a sweep's
-    traces start at motion start (the arm is already moving), which would move the rest level
-    into the approach. The traces here are relative to rest already, so that rest is shown to
-    it explicitly: zeros for the length of 5 % of the trace before the first sample.
+    A sweep's traces start at motion start, so they hold no sample at rest to estimate a rest
+    level from; they are relative to rest already and `find_stages` is told so.
     """
     t = np.asarray(t_s, dtype=np.float64)
-    pad = t.size // 19 + 3
-    dt = float(np.median(np.diff(t))) if t.size > 1 else 1.0
-    tt = np.r_[t[0] - dt * np.arange(pad, 0, -1), t]
-    rest = np.zeros(pad)
-    found = find_stages(tt, np.r_[rest, x2], x0_m=np.r_[rest, x0], x1_m=np.r_[rest, x1],
-                              distance_m=distance_m if distance_m > 0 else None)
+    found = find_stages(t, x2, x0_m=x0, x1_m=x1, distance_m=distance_m if distance_m > 0 else None,
+                        relative_to_rest=True)
     return np.asarray(np.maximum(found.boundaries_s, t[0]), dtype=np.float64)
 
 

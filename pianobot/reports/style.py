@@ -22,6 +22,7 @@ from matplotlib.figure import Figure
 from pianobot.analysis.plausibility import local_resonance_hz
 from pianobot.physics.linear import frequency_response, peak_response
 from pianobot.physics.msd import LinearParams
+from pianobot.spec.parameters import PARAMETERS
 
 #: Width of a report figure that spans the page, inches (pages are about 1,000 px at 100 dpi).
 FULL_WIDTH_IN = 8.0
@@ -47,15 +48,7 @@ class Quantity:
 
 # Column names of the dataset (units in the names) → how they are shown.
 QUANTITIES: dict[str, Quantity] = {
-    "vacuum_kpa": Quantity("vacuum", "kPa"),
-    "down_velocity_mps": Quantity("arm down velocity", "mm/s", 1e3),
-    "up_velocity_mps": Quantity("arm up velocity", "mm/s", 1e3),
-    "acceleration_mps2": Quantity("arm acceleration", "mm/s²", 1e3),
-    "depth_m": Quantity("pressing depth", "mm", 1e3),
-    "distance_m": Quantity("finger–key distance", "mm", 1e3),
-    "hold_s": Quantity("hold", "s"),
-    "finger_angle_deg": Quantity("finger angle", "°"),
-    "note": Quantity("MIDI note"),
+    **{p.name: Quantity(p.label, p.display_unit, p.display_scale) for p in PARAMETERS.values()},
     "on_velocity": Quantity("MIDI on-velocity", "1–127"),
     "off_velocity": Quantity("MIDI off-velocity", "1–127"),
     "t_on_s": Quantity("note-on after motion start", "ms", 1e3),

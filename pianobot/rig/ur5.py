@@ -38,6 +38,7 @@ from pianobot.rig.ur5_motion import GuardedMotion, Pose, fmt_pose
 from pianobot.rig.ur5_session import Links, close_link, open_links, reconnect
 from pianobot.rig.ur5_status import read_status
 from pianobot.rig.ur5_trace import TcpRecorder
+from pianobot.spec.parameters import PARAMETERS, PRESS_PARAMETERS
 from pianobot.spec.rig import UR5Config
 
 DEFAULT_KEYBOARD_AXIS = (1.0, 0.0, 0.0)  # treble towards base +x unless the rig says otherwise
@@ -45,6 +46,10 @@ TRAVEL_VELOCITY_MPS = 0.1
 TRAVEL_ACCELERATION_MPS2 = 0.5
 LATERAL_MOVE_M = 0.0005  # closer than this the arm is already over the key
 MISSED_WARNING_FRACTION = 0.1  # warn when the host missed more of the press's cycles than this
+
+# The speeds and acceleration of the moveLs: a UR5 refuses a moveL at 0 (the parameters the
+# table says must be > 0, of the arm's motion).
+_MOVE_RATES = tuple(n for n in PRESS_PARAMETERS if PARAMETERS[n].exclusive_minimum)
 
 
 class UR5Arm:
@@ -210,7 +215,7 @@ class UR5Arm:
             check_press(press)
         except ValueError as exc:
             raise SafetyViolation(str(exc)) from exc
-        for name in ("down_velocity_mps", "up_velocity_mps", "acceleration_mps2"):
+        for name in _MOVE_RATES:
             if not getattr(press, name) > 0:
                 raise SafetyViolation(f"{name} must be > 0 for a moveL, got {getattr(press, name)}")
         hover = self.key_pose(note, press.distance_m)

@@ -15,22 +15,15 @@ from typing import Any
 from pianobot.durations import format_duration
 from pianobot.progress import Progress, Task, progress_display
 from pianobot.run.records import Record, RunEnded, RunStarted, TrialDone, TrialRetried, TrialStarted
-
-# parameter → (unit shown, scale, format); lengths and speeds in mm like every other output
-_SHORT = {
-    "vacuum_kpa": ("kPa", 1.0, "{:g}"),
-    "down_velocity_mps": ("mm/s", 1e3, "{:.3g}"),
-    "acceleration_mps2": ("m/s²", 1.0, "{:.3g}"),
-    "depth_m": ("mm", 1e3, "{:.3g}"),
-}
+from pianobot.spec.parameters import PARAMETERS
 
 
 def describe_parameters(parameters: dict[str, Any]) -> str:
-    """The current trial's varied parameters in a few characters each."""
+    """The current trial's headline parameters (the table's `in_progress`) in a few characters each."""
     parts = []
-    for name, (unit, scale, fmt) in _SHORT.items():
-        if name in parameters:
-            parts.append(f"{fmt.format(parameters[name] * scale)} {unit}")
+    for p in PARAMETERS.values():
+        if p.in_progress and p.name in parameters:
+            parts.append(f"{parameters[p.name] * p.display_scale:.3g} {p.display_unit}")
     return " · ".join(parts)
 
 

@@ -46,7 +46,7 @@ def rig_changes(recorded: Any, rig: RigSpec) -> list[str]:
     return [f"{path}: {_short(old)} → {_short(value)}" for path, old, value in _diff(recorded, new, "")]
 
 
-def check_rig(meta: dict[str, Any], rig: RigSpec, rig_label: str, *, override: bool) -> list[str]:
+def check_same_rig(meta: dict[str, Any], rig: RigSpec, rig_label: str, *, override: bool) -> list[str]:
     """Refuse (InputError) a resume on another rig unless `override`; the changes, if any."""
     changes = rig_changes((meta.get("rig") or {}).get("spec"), rig)
     if changes and not override:

@@ -18,15 +18,13 @@ import numpy as np
 import numpy.typing as npt
 import pyarrow as pa
 
+from pianobot.plan.trial import MOTION_COLUMNS
 from pianobot.rig import TrialLike
 from pianobot.rig.protocols import FloatArray, KeystrokeResult, MidiEvent, Trace
 from pianobot.store.schema import PARAMETER_COLUMNS
 
 # Trace sources each `record:` stream keeps; sim-truth rides along with any sampled stream.
 SAMPLE_STREAMS = {"arm": "arm", "mocap": "mocap"}
-# The commanded fast moves, kept as extra trials columns in a sweep with `approach: fast`: with
-# them the commanded arm motion (and so `t_on_s` etc., measured from motion start) is known.
-MOTION_COLUMNS = ("approach_m", "retract_m", "travel_velocity_mps", "travel_acceleration_mps2")
 
 
 @dataclass(frozen=True)

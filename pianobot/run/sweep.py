@@ -32,7 +32,7 @@ from pianobot.rig.errors import DeviceUnavailable
 from pianobot.run.parallel import SweepSetup, run_parallel
 from pianobot.run.progress import ProgressBar, stage
 from pianobot.run.records import Subscriber
-from pianobot.run.resume import check_rig, record_rig_session, refuse_damaged
+from pianobot.run.resume import check_same_rig, record_rig_session, refuse_damaged
 from pianobot.run.runner import BLOCK_TRIALS, RetryPolicy, Runner, SessionResult
 from pianobot.run.signals import SignalHandlers, StopControl
 from pianobot.run.sink import StoreSink
@@ -258,7 +258,7 @@ def _reopen(
     prepared = prepare_sweep(path, seed=int(meta.get("seed", 0)), rig_path=rig_path,
                              max_trials=max(max_trials, planned))
     rig_label = str(rig_path) if rig_path is not None else prepared.spec.rig
-    rig_changed = check_rig(meta, prepared.rig, rig_label, override=rig_override)
+    rig_changed = check_same_rig(meta, prepared.rig, rig_label, override=rig_override)
     planned_ids = list(run.plan["trial_id"]) if len(run.plan) else []
     if planned_ids != [t.trial_id for t in prepared.trials]:
         raise InputError(f"the plan of {path} no longer matches run {run.run_id}'s plan.parquet", "--resume")

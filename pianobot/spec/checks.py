@@ -16,13 +16,18 @@ from pianobot.spec.messages import Location
 from pianobot.spec.parameters import (
     ENVELOPE_PARAMETERS,
     PARAMETERS,
+    REQUIRED_PARAMETERS,
     Limits,
     format_value,
 )
 from pianobot.spec.rig import RigSpec
 from pianobot.spec.sweep import GridSweep, Linspace, Range, clean_value
 
-REQUIRED = ("down_velocity_mps", "depth_m")
+REQUIRED = REQUIRED_PARAMETERS
+# Parameter → the parameters that take its value when not set (down velocity → up velocity).
+_FOLLOWERS: dict[str, tuple[str, ...]] = {
+    name: tuple(q.name for q in PARAMETERS.values() if q.follows == name) for name in PARAMETERS
+}
 
 
 @dataclass(frozen=True)
@@ -39,12 +44,14 @@ def spec_problems(spec: ExperimentSpec, rig: RigSpec, rig_label: str = "the rig 
     envelope = rig.envelope_for(spec.finger, rig_label)
     for name, path, value in _written_values(spec):
         problem = _value_problem(spec, envelope, name, value, path)
-        if problem is None and name == "down_velocity_mps" and not _given(spec, "up_velocity_mps"):
-            # Without an up velocity the arm also moves up at this speed.
-            problem = _value_problem(spec, envelope, "up_velocity_mps", value, path)
-            if problem is not None:
-                problem = Problem(path, problem.message + " (it is also the up velocity, "
-                                  "since up_velocity_mps is not set)")
+        for follower in _FOLLOWERS.get(name, ()):
+            if problem is None and not _given(spec, follower):
+                # Without an up velocity the arm also moves up at this speed.
+                problem = _value_problem(spec, envelope, follower, value, path)
+                if problem is not None:
+                    problem = Problem(path, problem.message + f" (it is also the "
+                                      f"{PARAMETERS[follower].label.removeprefix('arm ')}, "
+                                      f"since {follower} is not set)")
         if problem is not None:
             problems.append(problem)
     for name in ENVELOPE_PARAMETERS:

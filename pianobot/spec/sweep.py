@@ -24,23 +24,16 @@ from pydantic import (
     model_validator,
 )
 
-from pianobot.spec.parameters import PARAMETER_NAMES, PARAMETERS, Parameter
+from pianobot.spec.parameters import PARAMETER_NAMES, PARAMETERS, Parameter, defaults_text
 
 # Numbers in trial values are cleaned to this many decimals: linspace and YAML give
 # 0.045000000000000005 where the experimenter meant 0.045.
 VALUE_DECIMALS = 12
 
-ParameterName = Literal[
-    "note",
-    "vacuum_kpa",
-    "down_velocity_mps",
-    "up_velocity_mps",
-    "acceleration_mps2",
-    "depth_m",
-    "distance_m",
-    "hold_s",
-    "finger_angle_deg",
-]
+if TYPE_CHECKING:
+    ParameterName = str
+else:  # the names of the parameter table, as a Literal pydantic checks and shows in the schema
+    ParameterName = Literal[PARAMETER_NAMES]
 Order = Literal["as-listed", "shuffled", "blocked-shuffle"]
 
 
@@ -210,8 +203,7 @@ class SweepBase(StrictModel):
 
     fixed: FixedParams = Field(
         default_factory=FixedParams,
-        description="Parameters held constant. Unset ones take their defaults: distance 0.05 m, "
-        "hold 0 s, acceleration 0.5 m/s², vacuum 0 kPa, angle 0 deg, up velocity = down velocity.",
+        description=f"Parameters held constant. Unset ones take their defaults: {defaults_text()}.",
     )
     repeats: int = Field(1, ge=1, le=1000, description="How many times each point is pressed.")
     order: Order = Field(

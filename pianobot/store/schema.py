@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pyarrow as pa
 
-from pianobot.spec.parameters import PARAMETER_NAMES
+from pianobot.spec.parameters import PARAMETER_NAMES, PARAMETERS
 
 if TYPE_CHECKING:  # pandas takes a third of a second to import: only where frames are made
     import pandas as pd
@@ -38,15 +38,7 @@ TRIALS_SCHEMA = pa.schema(
         ("index", pa.int64()),
         ("attempt", pa.int64()),
         ("status", pa.string()),
-        ("note", pa.int64()),
-        ("vacuum_kpa", pa.float64()),
-        ("down_velocity_mps", pa.float64()),
-        ("up_velocity_mps", pa.float64()),
-        ("acceleration_mps2", pa.float64()),
-        ("depth_m", pa.float64()),
-        ("distance_m", pa.float64()),
-        ("hold_s", pa.float64()),
-        ("finger_angle_deg", pa.float64()),
+        *((p.name, pa.int64() if p.integer else pa.float64()) for p in PARAMETERS.values()),
         ("t_start_s", pa.float64()),
         ("on_velocity", pa.float64()),
         ("off_velocity", pa.float64()),

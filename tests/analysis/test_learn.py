@@ -9,11 +9,11 @@ import pandas as pd
 import pytest
 from _synthetic_runs import sounded_trials
 
-from pianobot.analysis.learn.predictors import StrokePredictor, load_predictor
+from pianobot.analysis.learn.files import load_predictor, save_predictor
+from pianobot.analysis.learn.predictors import LoudnessCurve, StrokePredictor, speed_grid
 from pianobot.analysis.learn.training import (
     LearnedPredictor,
     cross_validate,
-    save_predictor,
     training_set,
 )
 from pianobot.errors import InputError
@@ -38,13 +38,15 @@ def test_inverse_round_trips_within_one_midi_unit(kind: str, tmp_path: Path) -> 
     model = LearnedPredictor(kind).fit(training_set(sounded_trials(2)))
     assert isinstance(model, StrokePredictor)
     fixed = {"vacuum_kpa": -40.0, "acceleration_mps2": 0.5, "depth_m": 0.03, "distance_m": 0.05}
-    lo, hi = model.velocity_range(max_down_velocity_mps=0.08, **fixed)
+    trained = model.ranges_["down_velocity_mps"]
+    curve = LoudnessCurve.tabulate(model, speed_grid(trained[0], min(trained[1], 0.08)), **fixed)
+    lo, hi = curve.velocity_range
     targets = np.linspace(lo + 0.5, hi - 0.5, 9)
-    speeds = model.inverse(targets, **fixed)
+    speeds = curve.inverse(targets, strict=True)
     assert np.isfinite(speeds).all()
     back = model.predict(pd.DataFrame({"down_velocity_mps": speeds, **fixed}))["on_velocity"]
     assert np.max(np.abs(back.to_numpy() - targets)) <= 1.0
-    assert np.isnan(model.inverse([200.0], **fixed)).all()
+    assert np.isnan(curve.inverse([200.0], strict=True)).all()
     path = save_predictor(model, tmp_path / "p.json")
     loaded = load_predictor(path)
     again = loaded.predict(pd.DataFrame({"down_velocity_mps": speeds, **fixed}))["on_velocity"]
@@ -84,8 +86,10 @@ def test_fit_on_study_soft_finger_logs(zhang2022: Path, data_dir: Path) -> None:
     assert rows.loc["gp", "silent_accuracy"] > 0.95
     model = load_predictor(saved["gp"])
     fixed = {"vacuum_kpa": -60.0, "acceleration_mps2": 0.5, "depth_m": 0.03, "distance_m": 0.05}
-    lo, hi = model.velocity_range(max_down_velocity_mps=0.08, **fixed)
+    trained = model.ranges_["down_velocity_mps"]  # a LearnedPredictor
+    curve = LoudnessCurve.tabulate(model, speed_grid(trained[0], min(trained[1], 0.08)), **fixed)
+    lo, hi = curve.velocity_range
     targets = np.linspace(lo + 0.5, hi - 0.5, 8)
-    speeds = model.inverse(targets, **fixed)
+    speeds = curve.inverse(targets, strict=True)
     back = model.predict(pd.DataFrame({"down_velocity_mps": speeds, **fixed}))["on_velocity"].to_numpy()
     assert np.nanmax(np.abs(back - targets)) <= 1.0

@@ -16,7 +16,7 @@ from pianobot.physics.msd import MSDParams
 from pianobot.reports import figures
 from pianobot.reports.run_report import build_run_report
 from pianobot.reports.run_tables import coverage_table
-from pianobot.reports.stage_residuals import stage_residuals
+from pianobot.reports.stage_residuals import stage_edges, stage_residuals
 from pianobot.reports.style import quantity, unlabelled_axes
 from pianobot.run import run_sweep
 
@@ -200,3 +200,18 @@ def test_every_figure_of_a_built_report_is_labelled(tmp_path: Path, monkeypatch:
     assert len(seen) >= 6
     assert [(caption, unlabelled_axes(fig)) for caption, fig in seen
             if unlabelled_axes(fig)] == []
+
+
+def test_stage_edges_take_traces_as_relative_to_rest_even_when_their_first_frames_dropped() -> None:
+    # A sweep's traces start at motion start: with the first 0.1 s dropped, the first sample seen
+    # is mid-approach, and a rest level taken from it would move every boundary late.
+    t = np.arange(0.0, 2.0, 1 / 120)
+    x0 = 0.03 * np.clip(np.minimum(t, 3.0 - t), 0, 1.0)  # 30 mm/s down, hold, up
+    x2 = np.clip(x0 - 0.01, 0, 0.01)  # the finger starts 10 mm above the key
+    x0[:12] = x2[:12] = np.nan
+    edges = stage_edges(t, x0, x0, x2, 0.01)
+    contact_s, key_move_s = 0.01 / 0.03, (0.01 + 2e-4) / 0.03
+    assert edges[0] < 1 / 120  # motion starts where the trace does, not 0.1 s later
+    assert edges[1] == pytest.approx(contact_s, abs=1 / 120)
+    assert edges[2] == pytest.approx(key_move_s, abs=1 / 120)
+    assert edges[1] < edges[2]  # the finger touches the key before the key moves

@@ -250,7 +250,7 @@ def _mutate_json(value: Any, data: st.DataObject, depth: int = 0) -> Any:
 def test_model_and_predictor_files_load_or_refuse_in_one_line(
     data: st.DataObject, tmp_path_factory: pytest.TempPathFactory,
 ) -> None:
-    from pianobot.analysis.learn.predictors import load_predictor
+    from pianobot.analysis.learn.files import load_predictor
     from pianobot.physics.model import KeystrokeModel, read_model_file, save_model
 
     folder = tmp_path_factory.mktemp("model")
@@ -279,7 +279,7 @@ def test_model_and_predictor_files_load_or_refuse_in_one_line(
 def test_a_learned_predictor_sidecar_loads_or_refuses_in_one_line(
     sidecar: dict[str, Any], tmp_path_factory: pytest.TempPathFactory,
 ) -> None:
-    from pianobot.analysis.learn.predictors import load_predictor
+    from pianobot.analysis.learn.files import load_predictor
 
     path = tmp_path_factory.mktemp("predictor") / "predictor.json"
     path.write_text(json.dumps(sidecar, allow_nan=True))

@@ -18,7 +18,6 @@ are simulated in blocks of similar length.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -27,7 +26,7 @@ import numpy.typing as npt
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
 from pianobot.analysis.greybox.prediction import Prediction, fastest_rate_per_s
 from pianobot.physics.model import KeystrokeModel
-from pianobot.physics.piano import PianoParams
+from pianobot.physics.piano import PianoParams, on_velocity_from_speed
 from pianobot.physics.simulate import simulate_presses
 from pianobot.physics.trajectory import Press, press_timing
 
@@ -85,13 +84,9 @@ def midi_outcomes(x2_m: FloatArray, valid: npt.NDArray[np.bool_], piano: PianoPa
     t_on = _cross_s(x, k_lo, piano.lower_sensor_m, dt_s)
     gap = piano.lower_sensor_m - piano.upper_sensor_m
     speed = gap / np.maximum(t_on - t_up, 1e-6)
-    u = speed / piano.full_scale_speed_mps
-    g = u**piano.curve_exponent
-    if piano.curve_saturation > 0.0:
-        g = np.tanh(piano.curve_saturation * g) / math.tanh(piano.curve_saturation)
     # Not clipped to the MIDI range: a fit needs the slope everywhere (measured velocities are
     # 1–127 anyway, and a model beyond them is simply that far off).
-    velocity = 127.0 * g
+    velocity = on_velocity_from_speed(speed, piano, rounded=False, clipped=False)
     after = np.arange(x.shape[1])[None, :] > k_lo[:, None]
     k_off, released = _first(after & valid & (x2_m <= piano.release_m))
     rows = np.arange(x.shape[0])

@@ -119,6 +119,7 @@ def find_stages(
     x1_m: npt.ArrayLike | None = None,
     distance_m: float | None = None,
     key_threshold_m: float = KEY_MOTION_THRESHOLD_M,
+    relative_to_rest: bool = False,
 ) -> Stages:
     """Find the five stages of one keystroke.
 
@@ -129,19 +130,24 @@ def find_stages(
         x1_m: fingertip displacement, if known; with `distance_m` gives the contact instant.
         distance_m: initial fingertip–key gap; None or 0 means the finger starts on the key.
         key_threshold_m: key travel that counts as "moving" (above the measurement noise).
+        relative_to_rest: the traces are already relative to rest (0 = at rest), so no rest level
+            is estimated from them (`rest_level` would take a trace that starts at motion start
+            from its first finite sample).
     """
     t = np.asarray(t_s, dtype=np.float64)
     x2 = fill_gaps(t, np.asarray(x2_m, dtype=np.float64))
     nan = float("nan")
     if t.size < 3 or not np.isfinite(x2).any():
         return Stages(nan, nan, nan, nan, nan, nan)
-    x2 = x2 - rest_level(t, x2)
+    if not relative_to_rest:
+        x2 = x2 - rest_level(t, x2)
 
     t_motion = float(t[0])
     if x0_m is not None:
         x0 = fill_gaps(t, np.asarray(x0_m, dtype=np.float64))
         if np.isfinite(x0).any():
-            x0 = x0 - rest_level(t, x0)
+            if not relative_to_rest:
+                x0 = x0 - rest_level(t, x0)
             travel = float(np.nanmax(x0))
             # 2 % of the stroke (at least the key threshold) separates motion from noise.
             level = max(key_threshold_m, 0.02 * travel)
@@ -159,7 +165,7 @@ def find_stages(
     if x1_m is not None and distance_m is not None and distance_m > 0:
         x1 = fill_gaps(t, np.asarray(x1_m, dtype=np.float64))
         if np.isfinite(x1).any():
-            gap_closed = (x1 - rest_level(t, x1)) - x2
+            gap_closed = (x1 if relative_to_rest else x1 - rest_level(t, x1)) - x2
             t_found = first_crossing_s(t, gap_closed, distance_m - key_threshold_m)
             if np.isfinite(t_found) and t_found <= t_key_move:
                 t_contact = t_found

@@ -8,9 +8,10 @@ from pathlib import Path
 
 import pandas as pd
 
+from pianobot.analysis.learn.files import load_predictor, save_predictor
 from pianobot.analysis.learn.models import MODEL_KINDS
-from pianobot.analysis.learn.predictors import PhysicsPredictor, load_predictor
-from pianobot.analysis.learn.training import cross_validate_models, save_predictor, training_set
+from pianobot.analysis.learn.physical import PhysicsPredictor
+from pianobot.analysis.learn.training import cross_validate_models, training_set
 from pianobot.analysis.plausibility import Finding, as_dicts, fit_findings
 from pianobot.errors import InputError
 from pianobot.progress import NO_PROGRESS, Progress

@@ -7,22 +7,17 @@ start to note-on (`t_on_s`), and the probability that a keystroke is silent. Cro
 grouped (`GroupKFold`) by setting, so the repeats of one setting never sit on both sides of a
 split — otherwise a model could score by remembering a setting's repeats.
 
-A fitted `LearnedPredictor` is a `StrokePredictor` (`pianobot.analysis.learn.predictors`): `play` loads
-it with `load_predictor`. Files: `<name>.json` (schema `pianobot.predictor/1`: kind, inputs,
-ranges, CV table, training runs, hash of the estimator file) beside `<name>.joblib`.
+A fitted `LearnedPredictor` is a `StrokePredictor` (`pianobot.analysis.learn.predictors`); it is
+saved and loaded by `learn.files` (`save_predictor`, `load_predictor`).
 """
 
 from __future__ import annotations
 
-import hashlib
-import json
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
-import joblib
 import numpy as np
 import numpy.typing as npt
 import pandas as pd
@@ -34,13 +29,10 @@ from pianobot.analysis.learn.predictors import (
     OUTPUT_COLUMNS,
     FloatArray,
     complete_inputs,
-    grid_inverse,
-    grid_velocity_range,
 )
 from pianobot.errors import InputError
 from pianobot.progress import NO_PROGRESS, Progress
 
-PREDICTOR_SCHEMA = "pianobot.predictor/1"
 REGRESSION_TARGETS = {"on_velocity": "on_velocity", "midi_hold_s": "midi_hold_s", "lead_s": "t_on_s"}
 
 
@@ -154,20 +146,6 @@ class LearnedPredictor:
             out[name] = model.predict(X) if model is not None else np.nan
         return out[list(OUTPUT_COLUMNS)]
 
-    def inverse(self, target_on_velocity: npt.ArrayLike, *, vacuum_kpa: float,
-                acceleration_mps2: float, depth_m: float, distance_m: float) -> FloatArray:
-        """Down velocity for each target on-velocity within the trained speed range (NaN outside)."""
-        lo, hi = self.ranges_["down_velocity_mps"]
-        return grid_inverse(self, target_on_velocity, lo, hi, vacuum_kpa=vacuum_kpa,
-                            acceleration_mps2=acceleration_mps2, depth_m=depth_m, distance_m=distance_m)
-
-    def velocity_range(self, *, vacuum_kpa: float, acceleration_mps2: float, depth_m: float,
-                       distance_m: float, max_down_velocity_mps: float) -> tuple[float, float]:
-        """Sounding on-velocities reachable with speeds in the trained range up to the cap."""
-        lo, hi = self.ranges_["down_velocity_mps"]
-        return grid_velocity_range(self, lo, min(hi, max_down_velocity_mps), vacuum_kpa=vacuum_kpa,
-                                   acceleration_mps2=acceleration_mps2, depth_m=depth_m, distance_m=distance_m)
-
 
 def _scores(y: FloatArray, pred: FloatArray) -> dict[str, float]:
     err = pred - y
@@ -265,50 +243,3 @@ def _latency(model: Any, frame: pd.DataFrame, repeats: int = 5) -> float:
         model.predict(one)
         times.append(time.perf_counter() - t0)
     return 1e3 * float(np.median(times))
-
-
-def save_predictor(model: LearnedPredictor, path: Path, *, cv: pd.DataFrame | None = None,
-                   runs: Sequence[str] = (), warnings: Sequence[dict[str, str]] = ()) -> Path:
-    """Write `<path>.json` (sidecar, the file to load) and `<path stem>.joblib`; returns the JSON path."""
-    path = Path(path)
-    json_path = path if path.suffix == ".json" else path.with_suffix(".json")
-    blob = json_path.with_suffix(".joblib")
-    json_path.parent.mkdir(parents=True, exist_ok=True)
-    joblib.dump(model, blob)
-    import pianobot
-
-    sidecar = {
-        "schema": PREDICTOR_SCHEMA,
-        "kind": model.kind,
-        "inputs": list(model.inputs_),
-        "ranges": {k: list(v) for k, v in model.ranges_.items()},
-        "defaults": model.defaults_,
-        "estimator_file": blob.name,
-        "estimator_sha256": hashlib.sha256(blob.read_bytes()).hexdigest(),
-        "runs": list(runs),
-        "cv": [] if cv is None else json.loads(cv.to_json(orient="records")),
-        "warnings": list(warnings),  # plausibility findings of the fit (pianobot.analysis.plausibility)
-        "pianobot_version": getattr(pianobot, "__version__", "unknown"),
-    }
-    json_path.write_text(json.dumps(sidecar, indent=2), encoding="utf-8")
-    return json_path
-
-
-def load_learned(path: Path, sidecar: dict[str, Any]) -> LearnedPredictor:
-    """Load the estimator a sidecar names, after checking its hash (a changed file is refused)."""
-    name = sidecar.get("estimator_file")
-    # A plain file name beside the sidecar: never a path elsewhere, nothing the OS chokes on.
-    if (not isinstance(name, str) or not name or len(name) > 255 or "\x00" in name
-            or Path(name).name != name or name in (".", "..")):
-        raise InputError(f"estimator_file should be a file name beside the predictor, got {str(name)[:40]!r}",
-                         str(path))
-    blob = Path(path).parent / name
-    if not blob.is_file():
-        raise InputError(f"estimator file {blob.name!r} named by the predictor is missing", str(path))
-    digest = hashlib.sha256(blob.read_bytes()).hexdigest()
-    if digest != sidecar.get("estimator_sha256"):
-        raise InputError(f"estimator file {blob.name!r} does not match its recorded sha256", str(path))
-    model = joblib.load(blob)
-    if not isinstance(model, LearnedPredictor):
-        raise InputError("the estimator file does not hold a pianobot predictor", str(blob))
-    return model

@@ -23,13 +23,13 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 import pandas as pd
 
-from pianobot.physics.trajectory import Press, press_duration_s
+from pianobot.physics.trajectory import press_duration_s
 from pianobot.physics.world import World
+from pianobot.plan.trial import press_from
+from pianobot.spec.parameters import PARAMETERS, PRESS_PARAMETERS, missing_value
 
 #: Pause between one stroke's end and the next stroke's start (the sideways move), seconds.
 MOVE_S = 0.3
-PRESS_FIELDS: tuple[str, ...] = ("distance_m", "depth_m", "down_velocity_mps", "up_velocity_mps",
-                                 "acceleration_mps2", "hold_s")
 
 
 def random_sequences(n_sequences: int, length: int, *, notes: Sequence[int],
@@ -47,8 +47,8 @@ def random_sequences(n_sequences: int, length: int, *, notes: Sequence[int],
     for name, (lo, hi) in ranges.items():
         if not hi >= lo:
             raise ValueError(f"range of {name} is empty: [{lo}, {hi}]")
-    missing = [f for f in (*PRESS_FIELDS, "vacuum_kpa") if f not in ranges and f not in fixed
-               and f != "up_velocity_mps"]
+    missing = [f for f in (*PRESS_PARAMETERS, "vacuum_kpa") if f not in ranges and f not in fixed
+               and PARAMETERS[f].follows is None]
     if missing:
         raise ValueError(f"parameters neither drawn nor fixed: {', '.join(missing)}")
     rng = np.random.default_rng(seed)
@@ -62,8 +62,9 @@ def random_sequences(n_sequences: int, length: int, *, notes: Sequence[int],
         frame[name] = rng.uniform(lo, hi, n)
     for name, value in fixed.items():
         frame[name] = float(value)
-    if "up_velocity_mps" not in frame:
-        frame["up_velocity_mps"] = frame["down_velocity_mps"]
+    for name in PRESS_PARAMETERS:  # the up velocity follows the down velocity (the parameter table)
+        if name not in frame:
+            frame[name] = missing_value(name, {c: frame[c] for c in frame.columns})
     frame["index"] = np.arange(n)
     return frame
 
@@ -71,7 +72,7 @@ def random_sequences(n_sequences: int, length: int, *, notes: Sequence[int],
 def play_on_world(world: World, plan: pd.DataFrame, *, stiffness_per_sequence: bool = False,
                   run_id: str = "sim-sequences") -> pd.DataFrame:
     """Play `plan` (from `random_sequences`) on `world`; the trials table of what was heard."""
-    presses = [Press(*(float(row[f]) for f in PRESS_FIELDS)) for _, row in plan.iterrows()]
+    presses = [press_from(row) for row in plan[list(PRESS_PARAMETERS)].to_dict("records")]
     vacuum = plan["vacuum_kpa"].to_numpy(float)
     blocks: list[str | None] = ([f"sequence-{int(s)}" for s in plan["sequence_id"]] if stiffness_per_sequence
                                 else [None] * len(plan))

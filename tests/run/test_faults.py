@@ -12,7 +12,7 @@ from cli_runner import invoke_cli as cli
 from pianobot.spec import load_rig
 from pianobot.store import load_run
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 QUICKSTART = REPO / "experiments" / "quickstart.yaml"
 FAULTY = REPO / "experiments" / "rigs" / "sim-faulty.yaml"
 

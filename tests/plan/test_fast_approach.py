@@ -21,7 +21,7 @@ from pianobot.run import run_sweep
 from pianobot.spec import ExperimentSpec, RigSpec
 from pianobot.store import load_run
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 GRID = REPO / "experiments" / "soft_finger_grid.yaml"
 SWEEP: dict[str, Any] = {
     "mode": "grid",

@@ -22,7 +22,7 @@ from pianobot.rig import Rig
 from pianobot.run import BlockEnded, RunStarted, TrialDone, run_sweep
 from pianobot.store import load_run
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 FAULTY_RIG = """\
 kind: sim
 seed: 5

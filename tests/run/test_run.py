@@ -1,7 +1,7 @@
 """The runner on the sim rig: records, tables, journal, retries, stops, interrupts, resume.
 
 A small stand-in World keeps these tests fast and independent of the physics; the crash test
-(tests/test_crash_resume.py) runs the real world through the command line.
+(tests/run/test_crash_resume.py) runs the real world through the command line.
 """
 
 from __future__ import annotations

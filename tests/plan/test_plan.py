@@ -29,7 +29,7 @@ from pianobot.plan import (
 )
 from pianobot.spec import ExperimentSpec, RigSpec, load_rig_for, load_spec
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 EXAMPLES = sorted((REPO / "experiments").glob("*.yaml"))
 
 

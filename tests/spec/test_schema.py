@@ -12,7 +12,7 @@ import pytest
 
 from pianobot.spec.schema import SCHEMA_FILES, schema_texts, write_schemas
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 EXPERIMENTS = REPO / "experiments"
 
 

@@ -25,7 +25,7 @@ from pianobot.spec import (
     write_rig_calibration,
 )
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 EXPERIMENTS = REPO / "experiments"
 
 GOOD = """\
