@@ -1,6 +1,6 @@
 """Sweep benchmark: simulated sweeps against the physics they run, side by side in one run.
 
-    python benchmarks/bench_sweep.py            # grid, 10,000 random, Dask 2 vs 1, lab time
+    python benchmarks/bench_sweep.py            # grid, 10,000 random, lab time
     python benchmarks/bench_sweep.py --large    # also 100,000 random trials and 1,000,000 for RSS
     python benchmarks/bench_sweep.py --quick    # small sizes, to check the script itself
     python benchmarks/bench_sweep.py --only random --random-trials 1000 --baseline main
@@ -13,16 +13,21 @@ Every sweep stores every stream (MIDI, arm, mocap and the simulated truth). Figu
    presses (the batch integrator alone, sorted into batches of similar length: what the physics
    needs) and (b) the one-keystroke-at-a-time path the sweep used before (on 405 of the trials).
 2. `random`: a random sweep (10,000 trials; 100,000 with --large) of short strokes from 10 mm
-   above the key, the same comparison with the raw simulator, and RSS sampled along the run.
+   above the key, the same comparison with the raw simulator, RSS sampled along the run, and
+   the CPU per trial of each phase (physics, keystrokes, parts, compaction).
 3. `rss_1m` (--large): 1,000,000 trials, RSS every 100,000 trials (bounded: no per-trial
    state grows). The world samples its truth at 200 Hz and the arm at 125 Hz there, to keep the
    run's data near 10 GB on disk.
-4. `dask`: the grid's first 675 trials on a local Dask cluster of 2 worker processes against 1
-   worker (in this process), wall time and speed-up, the data checked identical.
-5. `lab_time`: the study grid's planned lab time as specified, with `approach: fast`, and by
-   the study's own script (0.5 s sleep before and after each press plus the two moveLs).
+4. `lab_time`: the study grid's planned lab time as specified, with `approach: fast`, and by
+   the study's own script (0.5 s sleep before and after each press plus the two moveLs); where
+   the fast plan's press time goes; what a settle worked out from the finger's own mode would
+   save, checked in the simulated world.
 
-Times are wall-clock and CPU (this process only; `dask` counts the workers' CPU as well). The
+`--baseline REF` runs grid and random also with the pianobot of git revision REF (baseline,
+this, baseline; the better baseline kept) and reports the speed-up over it. Dask (2 processes
+against 1): benchmarks/bench_dask.py.
+
+Times are wall-clock and CPU (this process only). The
 machine may be shared: ratios are measured in the same run, and `load_average` says how busy
 it was. Each scenario runs in a fresh interpreter so its peak RSS is its own. JSON goes to
 stdout and to benchmarks/results/sweep.json (and sweep_large.json with --large).
@@ -256,7 +261,7 @@ def scenario_random(samples: int, lean: bool = False, breakdown: bool = True) ->
         (folder / "rig.yaml").write_text(LEAN_RIG if lean else RANDOM_RIG)
         spec = folder / "random.yaml"
         spec.write_text(RANDOM_SPEC.format(samples=samples, distance=0.0 if lean else 0.01))
-        prepared = prepare_sweep(spec)
+        prepared = prepare_sweep(spec, max_trials=samples)
         probe = prepared.trials[: min(len(prepared.trials), 5000)]
         raw = raw_simulator(probe, prepared.rig, prepared.seed)
         del prepared, probe
@@ -266,34 +271,38 @@ def scenario_random(samples: int, lean: bool = False, breakdown: bool = True) ->
         def sample(record: Any) -> None:
             if isinstance(record, TrialDone) and int(record.data.row["index"]) % step == 0:
                 rss.append((int(record.data.row["index"]), round(_rss_mb(), 1)))
+                # Also as it goes (stderr), so a run stopped early still shows its memory.
+                print(f"trial {rss[-1][0]}: RSS {rss[-1][1]} MB, {time.process_time():.0f} s CPU",
+                      file=sys.stderr, flush=True)
 
         spent, restore = phase_timer() if breakdown else ({}, lambda: None)
         try:
             outcome, wall, cpu = _timed(lambda: run_sweep(
                 spec, data_dir=folder / "data", progress=False, subscribers=[sample],
-                executor=ExecutorSettings(workers=1)))
+                executor=ExecutorSettings(workers=1), max_trials=samples))
         finally:
             restore()
         peak_rss_mb = _peak_rss_mb()
+        done = max(outcome.trials, 1)  # rates over the trials run (a stopped run ran fewer)
         floor = storage_floor(outcome.path, outcome.trials) if samples <= 20_000 else None
         rows = floor["rows"] if floor is not None else None
         return {
             "trials": samples, "status": outcome.status, "completed": outcome.trials,
             "world": "default, truth at 200 Hz, arm at 125 Hz" if lean else "default",
             "wall_s": round(wall, 2), "cpu_s": round(cpu, 2),
-            "trials_per_s_wall": round(samples / wall, 1), "trials_per_s_cpu": round(samples / cpu, 1),
+            "trials_per_s_wall": round(done / wall, 1), "trials_per_s_cpu": round(done / cpu, 1),
             "raw_simulator_trials_per_s_wall": round(raw["trials_per_s_wall"], 1),
             "raw_simulator_trials_per_s_cpu": round(raw["trials_per_s_cpu"], 1),
-            "ratio_to_raw_simulator_wall": round(samples / wall / raw["trials_per_s_wall"], 3),
-            "ratio_to_raw_simulator_cpu": round(samples / cpu / raw["trials_per_s_cpu"], 3),
+            "ratio_to_raw_simulator_wall": round(done / wall / raw["trials_per_s_wall"], 3),
+            "ratio_to_raw_simulator_cpu": round(done / cpu / raw["trials_per_s_cpu"], 3),
             "storing_samples_only_trials_per_s_cpu": (
                 None if floor is None else round(floor["trials_per_s_cpu"], 1)),
             "storing_samples_only_vs_raw_simulator_cpu": (
                 None if floor is None else round(floor["trials_per_s_cpu"] / raw["trials_per_s_cpu"], 3)),
-            "sample_rows_per_trial": None if rows is None else round(rows / samples),
-            "cpu_us_per_trial": round(cpu / samples * 1e6),
+            "sample_rows_per_trial": None if rows is None else round(rows / done),
+            "cpu_us_per_trial": round(cpu / done * 1e6),
             "raw_simulator_cpu_us_per_trial": round(1e6 / raw["trials_per_s_cpu"]),
-            "breakdown_cpu_us_per_trial": {k: round(v / samples * 1e6) for k, v in spent.items()},
+            "breakdown_cpu_us_per_trial": {k: round(v / done * 1e6) for k, v in spent.items()},
             "peak_rss_mb": round(peak_rss_mb, 1),
             "rss_mb_by_trial": rss,
             "rss_growth_mb_after_first_tenth": round(rss[-1][1] - rss[1][1], 1) if len(rss) > 2 else None,
@@ -301,32 +310,6 @@ def scenario_random(samples: int, lean: bool = False, breakdown: bool = True) ->
         }
     finally:
         shutil.rmtree(folder, ignore_errors=True)
-
-
-def scenario_dask(quick: bool) -> dict[str, Any]:
-    """The same sweep on 1 worker (this process) and on a local cluster of 2 processes."""
-    from pianobot.executor import ExecutorSettings, open_executor
-    from pianobot.store import load_run
-
-    with tempfile.TemporaryDirectory() as tmp:
-        spec = _grid_spec(Path(tmp), 1 if quick else 5)
-        _, start_s, _ = _timed(lambda: open_executor(ExecutorSettings(workers=2)))
-        _sweep(spec, Path(tmp) / "warm", executor=ExecutorSettings(workers=2), batch_trials=64)
-        one, one_wall, _ = _sweep(spec, Path(tmp) / "one", executor=ExecutorSettings(workers=1),
-                                  batch_trials=64)
-        two, two_wall, _ = _sweep(spec, Path(tmp) / "two", executor=ExecutorSettings(workers=2),
-                                  batch_trials=64)
-        a = load_run(one.run_id, Path(tmp) / "one").trials.sort_values("trial_id").reset_index(drop=True)
-        b = load_run(two.run_id, Path(tmp) / "two").trials.sort_values("trial_id").reset_index(drop=True)
-        cols = [c for c in a.columns if c != "run_id"]
-        return {
-            "trials": one.trials, "cluster_start_s": round(start_s, 2),
-            "one_worker_wall_s": round(one_wall, 2), "two_processes_wall_s": round(two_wall, 2),
-            "speedup": round(one_wall / two_wall, 2),
-            "identical_trials": bool(a[cols].equals(b[cols])),
-            "identify_bootstrap": "not wired yet: waits for issue 10's analysis reorganisation",
-            "discovery_candidates": "not wired yet: waits for issue 10's analysis reorganisation",
-        }
 
 
 def scenario_lab_time() -> dict[str, Any]:
@@ -484,7 +467,7 @@ def _child(name: str, *flags: str, code: Path | None = None) -> dict[str, Any]:
     return result
 
 
-SCENARIOS = ("grid", "random", "random_large", "rss_1m", "dask", "lab_time")
+SCENARIOS = ("grid", "random", "random_large", "rss_1m", "lab_time")
 
 
 def _export(ref: str, into: Path) -> Path:
@@ -514,7 +497,7 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="small sizes, to check the script")
     parser.add_argument("--large", action="store_true", help="also 100,000 and 1,000,000 trials")
     parser.add_argument("--scenario", choices=SCENARIOS, help=argparse.SUPPRESS)
-    parser.add_argument("--only", help="comma-separated scenarios (grid, random, dask, lab_time)")
+    parser.add_argument("--only", help="comma-separated scenarios (grid, random, lab_time)")
     parser.add_argument("--baseline", metavar="REF",
                         help="also run grid and random with the pianobot of git revision REF "
                              "(e.g. main), interleaved, and report the speed-up over it")
@@ -529,7 +512,6 @@ def main() -> None:
             "random": lambda: scenario_random(random_trials),
             "random_large": lambda: scenario_random(100_000),
             "rss_1m": lambda: scenario_random(1_000_000, lean=True),
-            "dask": lambda: scenario_dask(args.quick),
             "lab_time": scenario_lab_time,
         }
         print(json.dumps(runners[args.scenario]()))
@@ -544,7 +526,7 @@ def main() -> None:
         results["rss_1m"] = _child("rss_1m")
     else:
         flags = (*quick, "--random-trials", str(random_trials))
-        names = args.only.split(",") if args.only else ["grid", "random", "dask", "lab_time"]
+        names = args.only.split(",") if args.only else ["grid", "random", "lab_time"]
         with tempfile.TemporaryDirectory(prefix="pianobot-baseline-") as tmp:
             code = _export(args.baseline, Path(tmp)) if args.baseline else None
             for name in names:

@@ -201,7 +201,9 @@ def _local_client(workers: int) -> Any:
         return _LOCAL[workers]
     distributed: Any = importlib.import_module("distributed")
     cluster = distributed.LocalCluster(
-        n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+        # ":0": any free port. None still tries 8787 and warns on stderr when another cluster
+        # (another user's, another command's) holds it.
+        n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0",
         worker_dashboard_address=None, silence_logs=50,
         # Each task is one block of numba-compiled work: keep BLAS/numba from oversubscribing.
         env={"OMP_NUM_THREADS": "1", "NUMBA_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"},

@@ -17,8 +17,6 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from test_batched_sweep import OUTCOME, _spec
-from test_crash_resume import SWEEP_ONLY, _journal_lines, _run_folder
 
 from pianobot.errors import InputError
 from pianobot.executor import (
@@ -30,6 +28,8 @@ from pianobot.executor import (
 )
 from pianobot.run import run_sweep
 from pianobot.store import Run, check_run, load_run, read_journal
+from tests.run.test_batched_sweep import OUTCOME, _spec
+from tests.run.test_crash_resume import SWEEP_ONLY, _journal_lines, _run_folder
 
 TWO = ExecutorSettings(workers=2)
 

@@ -121,10 +121,14 @@ def scan_journal(path: Path) -> tuple[list[dict[str, Any]], list[int]]:
 
 
 def _nan_to_none(value: Any) -> Any:
-    if isinstance(value, float) and value != value:
-        return None
+    if isinstance(value, float):
+        return None if value != value else value
     if isinstance(value, dict):
-        return {k: _nan_to_none(v) for k, v in value.items()}
+        # Most fields are plain values: recurse only into containers (a line per keystroke).
+        return {k: (v if v.__class__ in _PLAIN else _nan_to_none(v)) for k, v in value.items()}
     if isinstance(value, list | tuple):
         return [_nan_to_none(v) for v in value]
     return value
+
+
+_PLAIN = frozenset({str, int, bool, type(None)})

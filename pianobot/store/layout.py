@@ -216,7 +216,8 @@ def parquet_options(schema: pa.Schema, *, part: bool = False) -> dict[str, Any]:
     return {
         "compression": "lz4" if part else "zstd",
         "use_dictionary": text,
-        "write_statistics": [f.name for f in schema if f.name not in text] or False,
+        # Parts are read whole: statistics only in the files a run keeps.
+        "write_statistics": False if part else [f.name for f in schema if f.name not in text] or False,
         "use_byte_stream_split": floats or False,
     }
 

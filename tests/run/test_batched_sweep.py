@@ -16,11 +16,11 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
-from test_crash_resume import SWEEP_ONLY, _journal_lines, _run_folder
 
 from pianobot.rig import Rig
 from pianobot.run import BlockEnded, RunStarted, TrialDone, run_sweep
 from pianobot.store import load_run
+from tests.run.test_crash_resume import SWEEP_ONLY, _journal_lines, _run_folder
 
 REPO = Path(__file__).resolve().parents[2]
 FAULTY_RIG = """\
