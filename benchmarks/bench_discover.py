@@ -14,6 +14,7 @@ Time is process CPU time of one discovery (one core), not wall time: the benchma
 shared.
 
     .venv/bin/python benchmarks/bench_discover.py [--suite own truth real] [--only NAME ...] [--out FILE]
+    .venv/bin/python benchmarks/bench_discover.py --reference OTHER_CHECKOUT --out FILE   (speed ratio)
 """
 
 from __future__ import annotations
@@ -222,6 +223,65 @@ def real_suite(log: Callable[[str], None]) -> list[dict[str, Any]]:
     return rows
 
 
+#: A few independent scenarios of each kind for the speed comparison (`--reference`): a hard
+#: key stop (the slowest fits: a stiff, heavily damped base model), friction, a let-off, a
+#: clean take and a 135-keystroke MIDI log.
+SPEED_SCENARIOS = ("mocap-keybed-hunt_crossley-strong", "mocap-key_friction-stribeck-strong",
+                   "mocap-letoff-gaussian-strong", "mocap-clean-light-finger-deep-1", "midi-velocity_curve-tanh-strong")
+
+_CHILD = """
+import json, sys, time
+from pathlib import Path
+sys.path.insert(0, sys.argv[1])
+from pianobot.analysis.discover.loop import discover
+from pianobot.analysis.greybox.load import load_keystrokes, read_schedule
+from pianobot.io.importers import import_keystroke_log, import_mocap
+files, truth, data = json.loads(sys.argv[2]), json.loads(sys.argv[3]), Path(sys.argv[4])
+if "take" in files:
+    run = import_mocap(Path(files["take"]), data, vacuum_kpa=float(truth["vacuum_kpa"])).run_id
+    schedule = read_schedule(Path(files["presses"])) if "presses" in files else None
+    batch = load_keystrokes([run], data, schedule=schedule).batch
+else:
+    batch = load_keystrokes([import_keystroke_log(Path(files["log"]), data).run_id], data).batch
+discover(batch.subset(list(range(min(batch.n, 6)))))  # compile and warm up outside the timing
+start = time.process_time()
+result = discover(batch)
+print(json.dumps({"cpu_s": time.process_time() - start, "found": [v.label for v in result.accepted],
+                  "code": str(Path(sys.modules["pianobot"].__file__).parent.parent)}))
+"""
+
+
+def speed_suite(reference: Path, only: list[str] | None, log: Callable[[str], None]) -> list[dict[str, Any]]:
+    """Process CPU of one discovery with this tree's code and with `reference` (a checkout of
+    another commit, e.g. the last release) on the same files, alternating, in the same run."""
+    import subprocess
+
+    from tests.truth import full_suite, materialise
+
+    names = [n for n in SPEED_SCENARIOS if not only or any(o in n for o in only)]
+    scenarios = [sc for sc in full_suite() if sc.name in names]
+    rows = []
+    with tempfile.TemporaryDirectory() as scratch:
+        for scenario in scenarios:
+            made = materialise(scenario, Path(scratch) / "files")
+            row: dict[str, Any] = {"scenario": scenario.name}
+            for label, tree in (("reference", reference), ("this", ROOT)):
+                data = Path(scratch) / f"data-{label}-{scenario.name}"
+                out = subprocess.run(
+                    [sys.executable, "-c", _CHILD, str(tree), json.dumps({k: str(v) for k, v in made.files.items()}),
+                     json.dumps(made.truth, default=str), str(data)],
+                    capture_output=True, text=True, check=True, cwd=tree)
+                got = json.loads(out.stdout.strip().splitlines()[-1])
+                row[f"{label}_cpu_s"], row[f"{label}_found"] = got["cpu_s"], got["found"]
+                if Path(got["code"]).resolve() != tree.resolve():
+                    raise RuntimeError(f"the {label} run imported pianobot from {got['code']}, not {tree}")
+            row["speed_up"] = row["reference_cpu_s"] / max(row["this_cpu_s"], 1e-9)
+            rows.append(row)
+            log(f"speed {scenario.name:42s} reference {row['reference_cpu_s']:6.1f}s  this {row['this_cpu_s']:6.1f}s  "
+                f"x{row['speed_up']:.2f}  found {row['reference_found']} -> {row['this_found']}")
+    return rows
+
+
 def _rate(rows: list[dict[str, Any]], pick: Callable[[dict[str, Any]], bool]) -> str:
     chosen = [r for r in rows if pick(r)]
     return f"{sum(bool(r['hit']) for r in chosen)}/{len(chosen)}"
@@ -310,7 +370,18 @@ def main() -> None:
     parser.add_argument("--collect", nargs="*", type=Path, default=None,
                         help="assemble finished runs instead of running: truth rows (*.rows.jsonl of runs split "
                              "with --only) and earlier JSON outputs (their own-world and real sections)")
+    parser.add_argument("--reference", type=Path, default=None,
+                        help="a checkout of another commit: compare the CPU per discovery of its code with this "
+                             "tree's on the same scenarios (SPEED_SCENARIOS, or --only), alternating in one run")
     args = parser.parse_args()
+    if args.reference is not None:
+        rows = speed_suite(args.reference, args.only, lambda line: print(line, flush=True))
+        ratios = sorted(r["speed_up"] for r in rows)
+        payload = {"benchmark": "discover-speed", "reference": args.reference.name, "rows": rows,
+                   "median_speed_up": ratios[len(ratios) // 2] if ratios else None}
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(json.dumps(_finite(payload), indent=2, default=str) + "\n", encoding="utf-8")
+        return
     if args.collect is not None:
         collect(args.collect, args.out)
         return

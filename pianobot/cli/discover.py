@@ -45,6 +45,10 @@ def _print(result: DiscoveryResult, report: Path | None, model_out: Path | None)
     for note in result.notes:
         console.print(f"[dim]Data: {note}[/dim]")
     for it in result.iterations:
+        if not it.verdicts:
+            say(f"Iteration {it.index + 1}: held-out gap of the current model {it.gap_before.text()}: at the noise "
+                "level, no candidate fitted")
+            continue
         rows = []
         for v in it.verdicts[:12]:
             ratio = "∞" if not math.isfinite(v.ratio) else f"{v.ratio:.2g}×"

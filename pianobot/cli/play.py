@@ -118,7 +118,7 @@ def play(
     data: DataDir = DEFAULT_DATA,
     json_out: JsonFlag = False,
     no_progress: NoProgressFlag = False,
-    model: Annotated[Path | None, typer.Option("--model", help="Model or predictor file to start from (default: the published physics model).")] = None,
+    model: Annotated[Path | None, typer.Option("--model", help="Model or predictor file to start from (default: the published physics model), or a sequence model (fit --model sequence) to plan each note with the notes before it.")] = None,
     planner: Annotated[str, typer.Option("--planner", help="model | naive (the study's demo logic).")] = "model",
     adapt: Annotated[bool, typer.Option("--adapt", help="Keep correcting the model from the piano's MIDI during the song.")] = False,
     dry_run: Annotated[bool, typer.Option("--dry-run", help="Print the plan, the fastest feasible tempo and the notes that limit it; move nothing.")] = False,

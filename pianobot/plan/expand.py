@@ -12,6 +12,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+from dataclasses import fields
 from typing import Any
 
 import numpy as np
@@ -20,7 +21,7 @@ import numpy.typing as npt
 from pianobot.errors import InputError
 from pianobot.plan.envelope import check_envelope, raise_for_errors
 from pianobot.plan.size import DEFAULT_MAX_TRIALS, check_size
-from pianobot.plan.trial import FloatArray, Trial
+from pianobot.plan.trial import FloatArray, SequenceTrial, Trial
 from pianobot.spec import (
     PARAMETER_NAMES,
     PARAMETERS,
@@ -35,7 +36,7 @@ from pianobot.spec import (
     resolved_spec_dict,
 )
 from pianobot.spec.parameters import missing_value
-from pianobot.spec.sweep import VALUE_DECIMALS
+from pianobot.spec.sweep import VALUE_DECIMALS, SequenceSweep
 
 TRIAL_ID_HEX = 16
 _HASH_DECIMALS = 9  # parameters are hashed at 1e-9 resolution: YAML repr noise is far below it
@@ -78,9 +79,18 @@ def expand(
                 [trial_ids[k] for k in positions.tolist()],
                 range(start, start + len(positions)), repeat, rows, strict=True)
         ]
+    if isinstance(spec.sweep, SequenceSweep):
+        trials = _in_sequences(trials, spec.sweep.length)
     if rig is not None:
         raise_for_errors(check_envelope(trials, spec.finger, rig, rig_label=spec.rig), label)
     return trials
+
+
+def _in_sequences(trials: list[Trial], length: int) -> list[Trial]:
+    """A sequence sweep's trials (drawn and played in order): consecutive runs of `length`."""
+    names = [f.name for f in fields(Trial)]
+    return [SequenceTrial(**{name: getattr(t, name) for name in names}, sequence_id=t.index // length,
+                          sequence_order=t.index % length) for t in trials]
 
 
 class _PointSource:

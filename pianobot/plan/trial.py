@@ -70,11 +70,22 @@ class Trial:
         return row
 
 
+@dataclass(frozen=True, slots=True)
+class SequenceTrial(Trial):
+    """A keystroke of a sequence sweep: a `Trial` that also knows its sequence and its place
+    in it (plan and trials columns `SEQUENCE_COLUMNS`; other sweeps' plans do not have them)."""
+
+    sequence_id: int = 0
+    sequence_order: int = 0
+
+
 # The commanded fast moves of a two-segment press: plan.parquet columns after the parameters,
 # present only in the plan of a sweep with `approach: fast`.
 MOTION_COLUMNS: tuple[str, ...] = (
     "approach_m", "retract_m", "travel_velocity_mps", "travel_acceleration_mps2",
 )
+# A sequence sweep's trials: which sequence, and the place in it (from 0).
+SEQUENCE_COLUMNS: tuple[str, ...] = ("sequence_id", "sequence_order")
 PLAN_COLUMNS: tuple[str, ...] = tuple(f.name for f in fields(Trial) if f.name not in MOTION_COLUMNS)
 FAST_PLAN_COLUMNS: tuple[str, ...] = PLAN_COLUMNS + MOTION_COLUMNS
 # Everything `press_from` reads: the motion parameters, then the commanded fast moves.
@@ -162,15 +173,19 @@ def trial_columns(
 def plan_frame(trials: Sequence[Trial]) -> pd.DataFrame:
     """The plan as a table: one row per trial, columns as in `Trial` (plan.parquet).
 
-    The motion columns (`MOTION_COLUMNS`) are there only when some trial has a fast move, so
-    the plan of an as-specified sweep reads as it always did.
+    The motion columns (`MOTION_COLUMNS`) are there only when some trial has a fast move, and
+    the sequence columns (`SEQUENCE_COLUMNS`) only in a sequence sweep's plan, so the plan of
+    any other sweep reads as it always did.
     """
     import pandas as pd
 
     fast = any(t.approach_m > 0.0 or t.retract_m > 0.0 for t in trials)
     columns = FAST_PLAN_COLUMNS if fast else PLAN_COLUMNS
+    if trials and all(isinstance(t, SequenceTrial) for t in trials):
+        columns = columns + SEQUENCE_COLUMNS
     frame = pd.DataFrame(
         {name: list(map(attrgetter(name), trials)) for name in columns}, columns=columns
     )
-    dtypes = {"trial_id": "string", "index": "int64", "repeat": "int64", "note": "int64"}
+    dtypes = {"trial_id": "string", "index": "int64", "repeat": "int64", "note": "int64",
+              **{name: "int64" for name in SEQUENCE_COLUMNS if name in columns}}
     return frame.astype({**{n: "float64" for n in columns}, **dtypes})

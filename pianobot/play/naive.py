@@ -68,5 +68,6 @@ def plan_naive(notes: Sequence[Note], settings: PlaySettings, rig: RigSpec, *,
         "predicted_release_s": nan, "move_s": move, "vacuum_change_s": 0.0, "start_s": start,
         "busy_s": busy, "late_s": start - onset, "tempo_limit_bpm": nan, "status": "play",
         "reason": ["" if late <= 0 else f"late by {late * 1e3:.0f} ms" for late in start - onset],
+        "context_velocity": 0.0, "context_lead_s": 0.0,
     }, columns=list(SONG_PLAN_COLUMNS))
     return SongPlan("naive", frame, settings, None, {}, (), geometry, choice)

@@ -26,6 +26,7 @@ from pianobot.errors import InputError
 from pianobot.io.midifile import Melody, Note, Song, melody, read_song, write_performance
 from pianobot.physics.model import KeystrokeModel
 from pianobot.play.adapt import OnlineAdapter
+from pianobot.play.context import SongContext, is_sequence_file
 from pianobot.play.dynamics import DYNAMICS_MODES, DynamicsMode
 from pianobot.play.figure import piano_roll, warmup_figure
 from pianobot.play.naive import plan_naive
@@ -159,7 +160,7 @@ def play_song(
     song_path: Path,
     *,
     data_dir: Path,
-    model: Path | StrokePredictor | None = None,
+    model: Path | StrokePredictor | SongContext | None = None,
     planner: str = "model",
     adapt: bool = False,
     dry_run: bool = False,
@@ -181,7 +182,9 @@ def play_song(
     """Plan (and unless `dry_run`, warm up, play and score) a song; see `pianobot play --help`.
 
     `model` is a model/predictor file, a StrokePredictor, or None for the published physics
-    model (the warm-up's starting point). `tempo`: None (auto unless `tempo_scale` is given),
+    model (the warm-up's starting point); or a sequence model (file of `fit --model sequence`,
+    told by its schema, or a `SongContext`): then the per-note maps start from the published
+    model as usual and each note is planned with its context (`pianobot.play.context`). `tempo`: None (auto unless `tempo_scale` is given),
     "auto", "written" or bpm. `warmup`: keystrokes per vacuum level (None: the settings', 0: none).
     `world` replaces the sim rig's physics World (tests). `on_warning` hears each warning when it is
     known, before the motion it concerns: the song's (chords reduced to a melody) once it is read,
@@ -213,13 +216,20 @@ def play_song(
     for text in (*song.warnings, *line.warnings):
         tell(text)
     mode: DynamicsMode = "absolute" if dynamics == "absolute" else "mapped"
+    context = _sequence_context(model, planner, adapt)
+    if context is not None:
+        model = None
+        if not context.used:
+            tell(context.describe())
     if planner == "naive":
         plan = plan_naive(line.notes, settings, rig_spec, tempo=request, written_bpm=song.tempo_bpm)
         label, strokes = "none (naive: 0.001·v m/s)", 0
     else:
-        predictor, label = starting_model(model, settings.finger)
+        predictor, label = starting_model(model, settings.finger)  # type: ignore[arg-type]
+        if context is not None:
+            label = f"sequence model {context.source} over the {label}"
         plan = plan_model(line.notes, predictor, settings, rig_spec, dynamics=mode, tempo=request,
-                          written_bpm=song.tempo_bpm)
+                          written_bpm=song.tempo_bpm, context=context)
     prior = plan
     if dry_run:
         notes = list(plan.warnings)
@@ -262,7 +272,7 @@ def play_song(
             tables = stroke_tables(warm.predictor, settings, rig_spec, warm.geometry, levels=warm.levels_kpa,
                                    speed_ranges=warm.speed_ranges_mps)
             plan = plan_model(line.notes, warm.predictor, settings, rig_spec, dynamics=mode, tables=tables,
-                              tempo=request, written_bpm=song.tempo_bpm)
+                              tempo=request, written_bpm=song.tempo_bpm, context=context)
         song_plan = plan.notes.assign(trial_id=[trial_id_for(song_key, int(i)) for i in plan.notes["note_index"]])
         _write_parquet(song_plan, performer.run_path / "song_plan.parquet")
         if warm is not None:
@@ -279,6 +289,23 @@ def play_song(
     files = _write_outputs(performance, target, score, plan, plot, label, warm)
     warnings = (*song.warnings, *line.warnings, *plan.warnings)
     return PlayResult(song, line, plan, performance, score, warnings, files, label, warm, prior)
+
+
+def _sequence_context(model: Path | StrokePredictor | SongContext | None, planner: str,
+                      adapt: bool) -> SongContext | None:
+    """The sequence model `--model` names, if it names one (by the file's schema)."""
+    if isinstance(model, SongContext):
+        context = model
+    elif isinstance(model, str | Path) and is_sequence_file(Path(model)):
+        context = SongContext.load(Path(model))
+    else:
+        return None
+    if planner == "naive":
+        raise InputError("the naive planner uses no model; a sequence model needs --planner model", "--model")
+    if adapt:
+        raise InputError("--adapt corrects each note from what it hears, a sequence model from the notes before it: "
+                         "give one of them", "--adapt")
+    return context
 
 
 def starting_model(model: Path | StrokePredictor | None, finger: Finger) -> tuple[StrokePredictor, str]:

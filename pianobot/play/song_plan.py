@@ -23,6 +23,7 @@ then the widest loudness range, then the shortest hover.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -34,6 +35,7 @@ from pianobot.analysis.learn.predictors import StrokePredictor
 from pianobot.errors import InputError
 from pianobot.io.midifile import Note
 from pianobot.plan import key_change_s
+from pianobot.play.context import SongContext
 from pianobot.play.dynamics import DynamicsMap, DynamicsMode
 from pianobot.play.geometry import StrokeGeometry, geometries
 from pianobot.play.schedule import (
@@ -55,6 +57,8 @@ from pianobot.spec import RigSpec
 # the regulator's real settling varies with the size of the step.
 VACUUM_BUDGET_FACTOR = 1.25
 LOUDER_TEXT = "louder than asked to keep time"
+# Planning passes with a sequence model: a changed stroke changes the next note's context.
+CONTEXT_PASSES = 2
 # A target this close to a level's reachable range is not worth a warning (half a MIDI step).
 CLIP_TOLERANCE = 0.5
 
@@ -63,7 +67,7 @@ SONG_PLAN_COLUMNS: tuple[str, ...] = (
     "vacuum_kpa", "down_velocity_mps", "up_velocity_mps", "acceleration_mps2", "depth_m",
     "distance_m", "approach_m", "hold_s", "predicted_velocity", "predicted_lead_s", "predicted_midi_hold_s",
     "predicted_release_s", "move_s", "vacuum_change_s", "start_s", "busy_s", "late_s",
-    "tempo_limit_bpm", "status", "reason",
+    "tempo_limit_bpm", "status", "reason", "context_velocity", "context_lead_s",
 )
 
 
@@ -86,6 +90,7 @@ class SongPlan:
     warnings: tuple[str, ...] = ()
     geometry: StrokeGeometry | None = None
     tempo: TempoChoice | None = None
+    context: str | None = None  # what a sequence model changed (None: planned per note)
 
     @property
     def played(self) -> pd.DataFrame:
@@ -108,6 +113,7 @@ class SongPlan:
                 f"{k:g}": list(t.velocity_range) for k, t in sorted(self.tables.items())
             },
             "vacuum_levels_used_kpa": sorted({float(v) for v in self.played["vacuum_kpa"]}),
+            "context": self.context,
         }
 
 
@@ -213,11 +219,13 @@ def plan_model(
     tables: dict[float, StrokeTable] | None = None,
     tempo: TempoRequest | None = None,
     written_bpm: float = 120.0,
+    context: SongContext | None = None,
 ) -> SongPlan:
     """Plan a melody (on its written time axis at `written_bpm`) with the model's inverse.
 
     `tables` fixes the stroke configuration (one geometry, its vacuum levels); otherwise every
     candidate geometry of the settings is tabulated and the best kept (see the module doc).
+    `context`: a sequence model that corrects each note for the notes before it (`context`).
     """
     if not notes:
         raise InputError("the song has no playable notes", "SONG")
@@ -242,8 +250,55 @@ def plan_model(
     choice = choose_tempo(request, best.feasibility)
     scheduled = _scheduled(notes, best, choice, settings, rig, moves)
     frame = _frame(notes, best, choice, scheduled)
+    if context is not None and context.used:
+        frame = _in_context(notes, best, choice, settings, rig, moves, frame, context)
     return SongPlan("model", frame, settings, best.dynamics, dict(best.tables), _warnings(frame, choice),
-                best.geometry, choice)
+                    best.geometry, choice, None if context is None else context.describe())
+
+
+def _in_context(notes: Sequence[Note], prepared: _Prepared, choice: TempoChoice, settings: PlaySettings,
+                rig: RigSpec, moves: _Moves, frame: pd.DataFrame, context: SongContext) -> pd.DataFrame:
+    """Re-aim every note at its target minus the context's loudness effect, re-schedule, then
+    move each motion start by the context's lead effect as far as the arm's free time allows."""
+    for _ in range(CONTEXT_PASSES):
+        dv, _ = context.effects(frame)
+        aimed = _aimed(prepared, prepared.targets - dv, settings)
+        frame = _frame(notes, aimed, choice, _scheduled(notes, aimed, choice, settings, rig, moves))
+    dv, dlead = context.effects(frame)
+    return _shifted(frame, dv, dlead)
+
+
+def _aimed(prepared: _Prepared, aim_targets: np.ndarray, settings: PlaySettings) -> _Prepared:
+    """The same notes and targets, each stroke aimed at `aim_targets` instead."""
+    times = prepared.times
+    aim, fast = times.aim_mps.copy(), times.fast_mps.copy()
+    for key, table in prepared.tables.items():
+        rows = times.level == key
+        if rows.any():
+            aim[rows] = table.inverse(aim_targets[rows])
+            fast[rows] = np.maximum(table.fastest_within(aim_targets[rows], settings.loudness_tolerance), aim[rows])
+    return dataclasses.replace(prepared, times=dataclasses.replace(times, aim_mps=aim, fast_mps=fast))
+
+
+def _shifted(frame: pd.DataFrame, dv: np.ndarray, dlead: np.ndarray) -> pd.DataFrame:
+    """Context effects into the plan: predicted loudness, and the lead's change bounded so each
+    motion starts after the previous note frees the arm and frees it in time for the next."""
+    out = frame.copy()
+    start, busy = out["start_s"].to_numpy(float).copy(), out["busy_s"].to_numpy(float)
+    gap = (out["move_s"] + out["vacuum_change_s"]).to_numpy(float)
+    played = np.flatnonzero((out["status"] == "play").to_numpy())
+    applied = np.zeros(len(out))
+    for j, i in enumerate(played):
+        lo = start[played[j - 1]] + busy[played[j - 1]] + gap[i] if j else -np.inf
+        hi = start[played[j + 1]] - busy[i] - gap[played[j + 1]] if j + 1 < len(played) else np.inf
+        new = float(np.clip(start[i] - dlead[i], lo, max(lo, hi)))
+        applied[i], start[i] = start[i] - new, new
+    out["start_s"] = start
+    out["predicted_lead_s"] = out["predicted_lead_s"] + applied
+    out["predicted_release_s"] = out["predicted_release_s"] + applied
+    out["predicted_velocity"] = np.clip(out["predicted_velocity"] + dv, 1.0, 127.0)
+    out["context_velocity"], out["context_lead_s"] = dv, applied
+    return out
 
 
 def _scheduled(notes: Sequence[Note], prepared: _Prepared, choice: TempoChoice, settings: PlaySettings,
@@ -290,6 +345,7 @@ def _frame(notes: Sequence[Note], prepared: _Prepared, choice: TempoChoice, s: S
         "start_s": np.where(skipped, onset - lead, s.start_s), "busy_s": busy0 + s.hold_s,
         "late_s": s.late_s, "tempo_limit_bpm": prepared.feasibility.tempo_limit_bpm,
         "status": np.where(skipped, "skip", "play"), "reason": _reasons(prepared, s, velocity),
+        "context_velocity": 0.0, "context_lead_s": 0.0,
     }, columns=list(SONG_PLAN_COLUMNS))
     return frame
 

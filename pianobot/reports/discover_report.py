@@ -160,7 +160,11 @@ def build_discover_report(result: DiscoveryResult, path: Path, *, model_path: Pa
         title = it.accepted.label if it.accepted else "nothing accepted"
         sec = Section(f"Iteration {it.index + 1}: {title}")
         sec.add(paragraph(f"Held-out gap of the current model: {it.gap_before.text()}."))
-        sec.add(table_html(candidate_frame(result, it.index), caption="Candidates (best ΔIC first)"))
+        if it.verdicts:
+            sec.add(table_html(candidate_frame(result, it.index), caption="Candidates (best ΔIC first)"))
+        else:
+            sec.add(paragraph("The held-out error is at the noise level: no effect can be judged, so no candidate "
+                              "was fitted.", note=True))
         if it.proposals:
             props = pd.DataFrame([{"term": p.term, "family": p.family or "", "share": round(p.share, 3)}
                                   for p in it.proposals])

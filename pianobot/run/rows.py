@@ -18,7 +18,7 @@ import numpy as np
 import numpy.typing as npt
 import pyarrow as pa
 
-from pianobot.plan.trial import MOTION_COLUMNS
+from pianobot.plan.trial import MOTION_COLUMNS, SEQUENCE_COLUMNS
 from pianobot.rig import TrialLike
 from pianobot.rig.protocols import FloatArray, KeystrokeResult, MidiEvent, Trace
 from pianobot.store.schema import PARAMETER_COLUMNS
@@ -58,10 +58,14 @@ class TrialData:
 def parameters_of(trial: TrialLike, *, motion: bool = False) -> dict[str, Any]:
     """The parameter columns of a trial, by attribute (NaN where a trial type lacks one).
 
-    `motion` adds the commanded fast moves (`MOTION_COLUMNS`).
+    `motion` adds the commanded fast moves (`MOTION_COLUMNS`); a sequence sweep's trial adds
+    `SEQUENCE_COLUMNS`.
     """
     names = PARAMETER_COLUMNS + MOTION_COLUMNS if motion else PARAMETER_COLUMNS
-    return {name: getattr(trial, name, math.nan) for name in names}
+    out = {name: getattr(trial, name, math.nan) for name in names}
+    # A sequence sweep's trial says which sequence it is in, and where (`fit --model sequence`).
+    out.update({name: int(getattr(trial, name)) for name in SEQUENCE_COLUMNS if hasattr(trial, name)})
+    return out
 
 
 def read_keystroke(

@@ -13,6 +13,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
+from pianobot.plan.trial import SEQUENCE_COLUMNS
 from pianobot.rig import Rig, TrialLike
 from pianobot.rig.errors import ConnectionLost, DeviceUnavailable, SafetyStop, SafetyViolation
 from pianobot.run.records import (
@@ -214,4 +215,4 @@ class Runner:
 
 def read_parameters(trial: TrialLike) -> dict[str, float]:
     """The parameters shown while a trial runs (progress bar, journal)."""
-    return {k: v for k, v in parameters_of(trial).items() if isinstance(v, int | float)}
+    return {k: v for k, v in parameters_of(trial).items() if isinstance(v, int | float) and k not in SEQUENCE_COLUMNS}

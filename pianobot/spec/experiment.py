@@ -16,7 +16,7 @@ SLUG_PATTERN = r"^[a-z0-9][a-z0-9_-]*$"
 SIM_RIG = "sim"
 
 # Keys of a resolved sweep, in reading order (pydantic would list the shared base fields first).
-_SWEEP_KEY_ORDER = ("mode", "samples", "seed", "params", "fixed", "repeats", "order", "block_by")
+_SWEEP_KEY_ORDER = ("mode", "samples", "sequences", "length", "seed", "params", "fixed", "repeats", "order", "block_by")
 
 
 class ExperimentSpec(StrictModel):

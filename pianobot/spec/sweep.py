@@ -1,4 +1,4 @@
-"""The `sweep:` section of an experiment spec: grid, random and Latin-hypercube sweeps.
+"""The `sweep:` section of an experiment spec: grid, random, Latin-hypercube and sequence sweeps.
 
 A sweep names the parameters it varies (`params`), those it holds (`fixed`), how often each
 point is repeated and in which order the trials run. Parameter names are the trials table's
@@ -252,5 +252,36 @@ class LhsSweep(SampledSweep):
     mode: Literal["lhs"] = Field(description="Latin-hypercube samples (scipy.stats.qmc).")
 
 
-Sweep = Annotated[GridSweep | RandomSweep | LhsSweep, Field(discriminator="mode")]
-SWEEP_MODES: tuple[str, ...] = ("grid", "random", "lhs")
+class SequenceSweep(SweepBase):
+    """Random note sequences, as the study collected its sequence data: `sequences` runs of
+    `length` strokes played back to back, every parameter of `params` (the note too) drawn
+    uniformly per stroke. Each trial carries its `sequence_id` and `sequence_order`, which is
+    what `pianobot fit --model sequence` learns the context from."""
+
+    mode: Literal["sequence"] = Field(description="Random sequences of strokes, parameters drawn per stroke.")
+    sequences: int = Field(ge=1, le=100_000, description="Number of sequences.")
+    length: int = Field(ge=1, le=1000, description="Strokes per sequence (the study's: 12).")
+    params: SampledParams = Field(
+        default_factory=SampledParams,
+        description="Per parameter a {low, high} range (uniform) or a list of choices, drawn per stroke.",
+    )
+
+    @model_validator(mode="after")
+    def _played_in_order(self) -> SequenceSweep:
+        # A sequence is the strokes in the order drawn: shuffling or repeating would break it.
+        if self.order != "as-listed":
+            raise ValueError(f"a sequence sweep plays its strokes in order: order must be as-listed, got {self.order!r}")
+        if self.repeats != 1:
+            raise ValueError(f"a sequence sweep draws every stroke anew: repeats must be 1, got {self.repeats}")
+        if self.sequences * self.length > 1_000_000:
+            raise ValueError(f"{self.sequences} sequences of {self.length} strokes exceed 1,000,000 strokes")
+        return self
+
+    @property
+    def samples(self) -> int:
+        """Strokes in all (each one a sampled point)."""
+        return self.sequences * self.length
+
+
+Sweep = Annotated[GridSweep | RandomSweep | LhsSweep | SequenceSweep, Field(discriminator="mode")]
+SWEEP_MODES: tuple[str, ...] = ("grid", "random", "lhs", "sequence")

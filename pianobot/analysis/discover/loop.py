@@ -26,6 +26,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from pianobot.analysis.discover import search
 from pianobot.analysis.discover.candidates import CandidateSpec, candidates, size_params
@@ -99,6 +100,10 @@ def _iterate(setting: Setting, current: GreyBoxFit, start: KeystrokeModel, setti
     held_fit = GreyBoxFit(setting.held_drive, current.layout, channels=current.channels,
                           sigma=current.sigma).evaluate(current.theta_)
     before = localise(held_fit, sigma_m)
+    if not explainable:
+        # No candidate can pass (condition 2 of the rule fails for all alike): fitting them
+        # would cost most of a clean take's discovery and decide nothing.
+        return Iteration(index, reference.gap, before, (), None, None, explainable), None
     specs = candidates(current.model_, setting.train)
     total = len(specs) + min(settings.joint_refits, len(specs))
     with progress.task(f"discover, iteration {index + 1}: candidate fits", total=total) as task:
@@ -162,7 +167,13 @@ def _with_findings(model: KeystrokeModel, findings: Sequence[Finding]) -> Keystr
 def discover(batch: KeystrokeBatch, start: KeystrokeModel | None = None, settings: Settings | None = None, *,
              notes: Sequence[str] = (), progress: Progress = NO_PROGRESS, mapper: Mapper | None = None) -> DiscoveryResult:
     """Run discovery on a batch (trajectories or MIDI only) from `start` (default: the study's
-    linear model)."""
+    linear model). Linear algebra runs on one BLAS thread (see `greybox.fitter`)."""
+    with threadpool_limits(1, user_api="blas"):
+        return _discover(batch, start, settings, notes, progress, mapper)
+
+
+def _discover(batch: KeystrokeBatch, start: KeystrokeModel | None, settings: Settings | None, notes: Sequence[str],
+              progress: Progress, mapper: Mapper | None) -> DiscoveryResult:
     t0 = time.perf_counter()
     settings = settings or Settings()
     start = start or KeystrokeModel.study()
@@ -194,7 +205,7 @@ def discover(batch: KeystrokeBatch, start: KeystrokeModel | None = None, setting
         iterations.append(iteration)
         if chosen is None:
             break
-        current = chosen
+        current = search.converged(setting, chosen)
     timings["candidates_s"] = time.perf_counter() - t0 - timings["base_fit_s"]
     held_final = GreyBoxFit(setting.held_drive, current.layout, channels=current.channels,
                             sigma=current.sigma).evaluate(current.theta_)

@@ -38,6 +38,10 @@ Mode = Literal["trajectories", "midi"]
 #: Iteration limits of the screening and joint fits (function evaluations).
 SCREEN_NFEV = 40
 JOINT_NFEV = 80
+#: The second start of a joint fit is first fitted this far (see `joint`).
+JOINT_PROBE_NFEV = 15
+#: An accepted model is carried on to its optimum with this budget (see `converged`).
+CONVERGE_NFEV = 200
 
 
 @dataclass(frozen=True)
@@ -166,20 +170,44 @@ def joint(setting: Setting, current: GreyBoxFit, spec: CandidateSpec, screened: 
     """The candidate refitted with every parameter of the current model, from the screened fit
     and, when given, also from `start_model`'s base values with the screened effect: a base fit
     that bent its parameters to imitate the missing effect (friction read as key damping) is a
-    basin the joint fit may not leave from its own values. The better fit is kept."""
+    basin the joint fit may not leave from its own values. The better fit is kept.
+
+    The second start is a probe: it is fitted for `JOINT_PROBE_NFEV` evaluations and carried on
+    only if by then it is better than the first start's optimum (usually both starts reach the
+    same optimum, and a second full fit would double the cost for nothing)."""
     layout = _candidate_layout(current, spec, setting.train)
-    starts = [layout.internal({**current.params_, **screened.params_})]
-    if start_model is not None:
-        # The start model's base values, with the effect's best starting point for them.
-        prior = model_values(start_model, layout.levels_kpa)
-        fresh = {**current.params_, **{k: v for k, v in prior.items() if k in current.params_ and "." not in k}}
-        probe = GreyBoxFit(setting.train_drive, layout, channels=current.channels, sigma=current.sigma)
-        options = [layout.internal({**fresh, **screened.params_})]
-        options += [layout.internal({**fresh, **point}) for point in start_points(layout, spec, setting.train)]
-        starts.append(min(options, key=lambda th: _cost(probe, th)))
-    fits = [GreyBoxFit(setting.train_drive, layout, channels=current.channels, sigma=current.sigma,
-                       max_nfev=JOINT_NFEV, tol=1e-5).fit(start) for start in starts]
-    return min(fits, key=lambda f: _cost(f, f.theta_))
+
+    def fit(start: np.ndarray, nfev: int) -> GreyBoxFit:
+        return GreyBoxFit(setting.train_drive, layout, channels=current.channels, sigma=current.sigma,
+                          max_nfev=nfev, tol=1e-5).fit(start)
+
+    best = fit(layout.internal({**current.params_, **screened.params_}), JOINT_NFEV)
+    if start_model is None:
+        return best
+    # The start model's base values, with the effect's best starting point for them.
+    prior = model_values(start_model, layout.levels_kpa)
+    fresh = {**current.params_, **{k: v for k, v in prior.items() if k in current.params_ and "." not in k}}
+    probe = GreyBoxFit(setting.train_drive, layout, channels=current.channels, sigma=current.sigma)
+    options = [layout.internal({**fresh, **screened.params_})]
+    options += [layout.internal({**fresh, **point}) for point in start_points(layout, spec, setting.train)]
+    other = fit(min(options, key=lambda th: _cost(probe, th)), JOINT_PROBE_NFEV)
+    best_cost = _cost(best, best.theta_)
+    if not _cost(other, other.theta_) < best_cost - 1e-3 * abs(best_cost):
+        return best  # no better than the first start (mostly: on its way to the same optimum)
+    if not other.converged_:
+        other = fit(other.theta_, JOINT_NFEV - JOINT_PROBE_NFEV)
+    return min((best, other), key=lambda f: _cost(f, f.theta_))
+
+
+def converged(setting: Setting, fit: GreyBoxFit) -> GreyBoxFit:
+    """An accepted candidate carried on to its optimum when its joint fit ran out of budget.
+
+    The next iteration judges every candidate against this model: a joint refit that merely
+    finished what this fit left undone would gain ΔIC without any new effect."""
+    if fit.converged_:
+        return fit
+    return GreyBoxFit(setting.train_drive, fit.layout, channels=fit.channels, sigma=fit.sigma,
+                      max_nfev=CONVERGE_NFEV, tol=1e-5).fit(fit.theta_)
 
 
 def as_full(setting: Setting, current: GreyBoxFit, spec: CandidateSpec, screened: GreyBoxFit) -> GreyBoxFit:

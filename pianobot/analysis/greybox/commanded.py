@@ -24,7 +24,7 @@ import numpy as np
 import numpy.typing as npt
 
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
-from pianobot.analysis.greybox.prediction import Prediction, fastest_rate_per_s
+from pianobot.analysis.greybox.prediction import Prediction, integration_step_s
 from pianobot.physics.model import KeystrokeModel
 from pianobot.physics.piano import PianoParams, on_velocity_from_speed
 from pianobot.physics.simulate import simulate_presses
@@ -33,8 +33,7 @@ from pianobot.physics.trajectory import Press, press_timing
 FloatArray = npt.NDArray[np.float64]
 
 OUT_DT_S = 1e-3
-SIM_STEP_S = 2e-4
-STEP_PER_TIME_SCALE = 0.2
+SIM_STEP_S = 2e-4  # or less: `prediction.integration_step_s`
 #: Keystrokes per simulated block (the simulator's SIMD block).
 GROUP = 16
 #: Simulated past the arm's rise through the pressed depth: the key settles above release.
@@ -124,7 +123,7 @@ class Commanded:
         presses = _presses(batch, accel)
         lag = model.effects.value("arm_lag", "arm_lag_s", 0.0)
         cuts = np.array([_cut_s(p, model.arm_profile, lag) for p in presses])
-        step_s = min(SIM_STEP_S, STEP_PER_TIME_SCALE / fastest_rate_per_s(model, batch.vacuum_kpa))
+        step_s = integration_step_s(model, batch.vacuum_kpa, SIM_STEP_S)
         piano = model.readout_params()
         n = batch.n
         out = [np.full(n, np.nan) for _ in range(4)]

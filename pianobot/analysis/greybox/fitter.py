@@ -3,7 +3,8 @@
 `GreyBoxFit(drive, layout).fit()` adjusts the layout's free parameters so that the drive's
 predictions match the batch, and returns itself with the learned attributes (scikit-learn
 style): `theta_`, `params_`, `model_`, `drive_`, `channels_` (raw residuals per channel),
-`sigma_`, `rms_m_`, `on_bounds_`; `covariance()` sets `cov_`.
+`sigma_`, `rms_m_`, `on_bounds_`, `converged_` (False: stopped by `max_nfev`); `covariance()`
+sets `cov_`.
 
 Residual channels (model minus measurement):
 
@@ -25,6 +26,11 @@ and central ones for the covariance, with a step of 1 % in internal units: the s
 switches the coupling on at the first integration step after touch, so trajectories move in
 tiny steps as the touch instant crosses a step boundary; a 1 % change moves the touch by many
 steps, which averages those out, while the curvature error of a central difference stays ~1e-4.
+
+Linear algebra runs on one BLAS thread: the Jacobians are tall and thin (tens of thousands of
+frames × about ten parameters), where threads gain nothing, and on a shared machine (or in an
+executor's worker, one per core) OpenBLAS's spinning threads cost up to 20× the CPU of one
+thread for the trust-region solver's SVD (measured in benchmarks/bench_discover.py's runs).
 """
 
 from __future__ import annotations
@@ -36,6 +42,7 @@ from typing import Protocol
 import numpy as np
 import numpy.typing as npt
 from scipy.optimize import least_squares
+from threadpoolctl import threadpool_limits
 
 from pianobot.analysis.greybox.covariance import hac_covariance, larger_variances, noise_covariance
 from pianobot.analysis.greybox.forward import MeasuredArm
@@ -111,6 +118,7 @@ class GreyBoxFit:
         use = np.array([c in channels for c in TRAJECTORY_CHANNELS])
         self.mask = np.isfinite(y) & inside[:, None, :] & use[None, :, None]
         self._last: tuple[FloatArray, FloatArray] | None = None
+        self.converged_ = False  # set by `fit` (an `evaluate`d model was not fitted)
 
     # ---- residuals --------------------------------------------------------------------------
 
@@ -218,9 +226,14 @@ class GreyBoxFit:
 
     def fit(self, theta0: FloatArray | None = None) -> GreyBoxFit:
         """Robust least squares from theta0 (default: the layout's start) within the bounds."""
+        with threadpool_limits(1, user_api="blas"):
+            return self._fit(theta0)
+
+    def _fit(self, theta0: FloatArray | None) -> GreyBoxFit:
         lo, hi = self.layout.bounds()
         theta = np.clip(self.layout.start() if theta0 is None else np.asarray(theta0, float), lo + 1e-9, hi - 1e-9)
         fixed_sigma = bool(self.sigma)
+        self.converged_ = True
         passes = 1 if fixed_sigma else 2
         for _ in range(passes):
             if not fixed_sigma:
@@ -230,6 +243,7 @@ class GreyBoxFit:
                                        loss="soft_l1", f_scale=LOSS_SCALE_SIGMAS, x_scale=1.0, method="trf",
                                        max_nfev=self.max_nfev, bounds=(lo, hi), ftol=self.tol, xtol=self.tol)
                 theta = np.asarray(result.x, dtype=np.float64)
+                self.converged_ = bool(result.status > 0)  # 0: the evaluation budget ran out
         self._finish(theta)
         return self
 
@@ -260,6 +274,10 @@ class GreyBoxFit:
         """Covariance of theta: per parameter the larger of the HAC sandwich (honest under model
         error) and the noise propagation (honest when the model is right, and the only one that
         sees input noise the fit absorbs); sets `cov_`."""
+        with threadpool_limits(1, user_api="blas"):
+            return self._covariance(seed)
+
+    def _covariance(self, seed: int) -> FloatArray:
         theta = self.theta_
         r = self.residuals(theta)
         J = self.jacobian(theta)

@@ -34,7 +34,7 @@ import numpy as np
 import numpy.typing as npt
 
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
-from pianobot.analysis.greybox.prediction import Prediction, fastest_rate_per_s
+from pianobot.analysis.greybox.prediction import Prediction, integration_step_s
 from pianobot.analysis.greybox.stages import KEY_MOTION_THRESHOLD_M, fill_gaps
 from pianobot.physics.effects import Effects
 from pianobot.physics.model import KeystrokeModel
@@ -44,12 +44,9 @@ from pianobot.physics.simulate import simulate_arm
 FloatArray = npt.NDArray[np.float64]
 
 #: Largest internal integration step. The fastest mode of the published model is near 20 Hz;
-#: at 0.2 ms the semi-implicit scheme's phase error over a keystroke stays far below mocap noise.
+#: at 0.2 ms the semi-implicit scheme's phase error over a keystroke stays far below mocap noise
+#: (a stiffer or more heavily damped model takes a smaller one: `prediction.integration_step_s`).
 SIM_STEP_S = 2e-4
-#: The step is also kept below this fraction of the model's fastest time scale (1/ω of its
-#: stiffest mode, m/c of its heaviest damping): the explicit scheme is stable and accurate only
-#: well inside h·ω < 2 and h·c/m < 1, and a fit may try stiff or heavily damped parameters.
-STEP_PER_TIME_SCALE = 0.2
 #: Largest spacing of the resampled input.
 INPUT_STEP_S = 5e-4
 #: The fingertip has left the key once the fingertip-key gap has reopened by this much (well
@@ -133,7 +130,7 @@ class MeasuredArm:
         if isinstance(model, MSDParams):
             model = KeystrokeModel(msd=model, effects=Effects.none())
         batch = self.batch
-        step_s = min(SIM_STEP_S, STEP_PER_TIME_SCALE / fastest_rate_per_s(model, batch.vacuum_kpa))
+        step_s = integration_step_s(model, batch.vacuum_kpa, SIM_STEP_S)
         arm = self.arm_m(input_x0_m)
         dt = batch.dt_s
         outs = [np.full(batch.x1_m.shape, np.nan) for _ in range(4 if states else 2)]

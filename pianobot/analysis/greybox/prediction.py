@@ -54,12 +54,33 @@ class Prediction:
         return np.asarray(np.isfinite(self.on_velocity), dtype=bool)
 
 
-def fastest_rate_per_s(model: KeystrokeModel, vacuum_kpa: FloatArray) -> float:
-    """The fastest rate (1/s) of the model at these vacuum levels: each mass's natural frequency
-    on all its springs (the stiffest effect included) and each mass's damping over its mass.
+#: The step is kept below these fractions of the model's fastest time scales. Oscillation
+#: (h·ω, ω the largest natural frequency): accuracy of the phase over a keystroke, 0.2 is ~30
+#: steps per period. Damping (h·λ, λ the largest eigenvalue of M⁻¹C): the scheme's damping force
+#: is explicit, stable below h·λ ≈ 1 (measured); an overdamped fast mode only has to relax
+#: stably, its transient lasting 1/λ, so half the limit is accurate to far below mocap noise.
+STEP_PER_PERIOD = 0.2
+STEP_PER_DAMPING_TIME = 0.5
 
-    The explicit integrator is stable and accurate only well inside h·ω < 2 and h·c/m < 1, and a
-    fit may try stiff, heavily damped or strongly stiffening parameters.
+
+def _largest_eigenvalue(a11: float, a12: float, a21: float, a22: float) -> float:
+    """Largest real part of the eigenvalues of [[a11, a12], [a21, a22]] (a similar-to-symmetric
+    M⁻¹K or M⁻¹C: the eigenvalues are real)."""
+    half = 0.5 * (a11 + a22)
+    disc = half * half - (a11 * a22 - a12 * a21)
+    return half + math.sqrt(max(disc, 0.0))
+
+
+def integration_step_s(model: KeystrokeModel, vacuum_kpa: FloatArray, largest_s: float) -> float:
+    """The integration step for the model at these vacuum levels: `largest_s` or less, so that
+    the explicit scheme stays stable and accurate (`STEP_PER_PERIOD`, `STEP_PER_DAMPING_TIME`).
+
+    The time scales are those of the 2-DoF system with every spring and damper it may engage at
+    once (the arm coupling k0, c0 on the fingertip, the finger k1, c1 between fingertip and key,
+    the key's k2, c2 and the stiffest effect: an end stop, a let-off bump's slope, a stiffening
+    finger at a typical compression), from the exact eigenvalues of M⁻¹K and M⁻¹C. A fit may try
+    stiff, heavily damped or strongly stiffening parameters; a bound on the diagonal alone would
+    either miss the coupled mode or (as before) take a step several times smaller than needed.
     """
     fx = model.effects
     k_bed = fx.value("keybed", "bed_stiffness_npm", 0.0)
@@ -71,10 +92,13 @@ def fastest_rate_per_s(model: KeystrokeModel, vacuum_kpa: FloatArray) -> float:
     if beta > 0:
         bd = beta * _TYPICAL_COMPRESSION_M
         grow = math.exp(min(bd, 30.0)) if fx.form("finger_stiffening") == "exponential" else 1.0 + 3.0 * bd * bd
-    rate = 1.0
+    step = largest_s
     for p in np.unique(vacuum_kpa):
         lp = model.msd.at(float(p))
-        k1 = lp.k1_npm * grow
-        rate = max(rate, math.sqrt((lp.k0_npm + k1) / lp.m1_kg), math.sqrt((k1 + lp.k2_npm + k_bed + k_let) / lp.m2_kg),
-                   (lp.c0_nspm + lp.c1_nspm) / lp.m1_kg, (lp.c1_nspm + lp.c2_nspm + c_bed) / lp.m2_kg)
-    return rate
+        k1, c1 = lp.k1_npm * grow, lp.c1_nspm
+        m1, m2 = lp.m1_kg, lp.m2_kg
+        omega = math.sqrt(max(_largest_eigenvalue((lp.k0_npm + k1) / m1, -k1 / m1, -k1 / m2,
+                                                  (k1 + lp.k2_npm + k_bed + k_let) / m2), 0.0))
+        damping = _largest_eigenvalue((lp.c0_nspm + c1) / m1, -c1 / m1, -c1 / m2, (c1 + lp.c2_nspm + c_bed) / m2)
+        step = min(step, STEP_PER_PERIOD / max(omega, 1e-300), STEP_PER_DAMPING_TIME / max(damping, 1e-300))
+    return step

@@ -66,6 +66,10 @@ class _Stage:
         self.classifier: Any = None
 
     def fit(self, X: FloatArray, frame: pd.DataFrame, targets: tuple[str, ...] = TARGETS) -> _Stage:
+        # A feature with no value at all (a context nobody had in a small training set) breaks
+        # the trees' binning; held at 0 it is never split on.
+        self.dead = np.isnan(X).all(axis=0) if len(X) else np.zeros(X.shape[1], bool)
+        X = self._usable(X)
         for name in targets:
             y = frame[name].to_numpy(float)
             rows = np.isfinite(y)
@@ -82,7 +86,16 @@ class _Stage:
             self.classifier = _Constant(float(silent.mean()))
         return self
 
+    def _usable(self, X: FloatArray) -> FloatArray:
+        dead = getattr(self, "dead", None)
+        if dead is None or not dead.any():
+            return X
+        X = X.copy()
+        X[:, dead] = 0.0
+        return X
+
     def predict(self, X: FloatArray) -> pd.DataFrame:
+        X = self._usable(X)
         out = pd.DataFrame({name: (self.regressors[name].predict(X) if name in self.regressors
                                    else np.full(len(X), np.nan)) for name in TARGETS})
         out["on_velocity"] = np.clip(out["on_velocity"], 1.0, 127.0)
@@ -139,6 +152,10 @@ class SequenceModel:
         for train, test in GroupKFold(n_splits=folds).split(own, groups=groups):
             stage = _Stage(self.seed).fit(own[train], table.frame.iloc[train], ("on_velocity",))
             out[test] = stage.predict(own[test])["on_velocity"]
+        # A fold too small to learn from: the model of every stroke stands in.
+        missing = ~np.isfinite(out)
+        if missing.any():
+            out[missing] = np.asarray(self.base_.predict(own[missing])["on_velocity"], float)
         return out
 
     def _check(self) -> None:
@@ -194,6 +211,31 @@ class SequenceModel:
         prev_note = float(past["note"].iloc[-1]) if len(past) else np.nan
         X[:, n_own + 1] = cand["note"].to_numpy(float) - prev_note
         return self.stage_.predict(X)
+
+    def planned_effect(self, strokes: pd.DataFrame) -> pd.DataFrame:
+        """What the context changes in each stroke of a plan: with context minus without.
+
+        `strokes`: the strokes of one sequence in play order, controls only (a plan). A plan
+        has no outcomes yet, so each predecessor's outcome is the context-free prediction and
+        its residual zero (its expected value: a finger state the plan cannot know). Columns
+        `TARGETS` (NaN where a target was not learned), one row per stroke; all zero for k = 0.
+        """
+        self._check()
+        rows = self._controls_of(strokes.reset_index(drop=True))
+        own = rows[list(self.controls_)].to_numpy(float)
+        base = self.base_.predict(own)
+        if self.k == 0 or rows.empty:
+            return pd.DataFrame(0.0, index=range(len(rows)), columns=list(TARGETS))
+        silent = base["p_silent"].to_numpy(float) >= 0.5
+        base_on = base["on_velocity"].to_numpy(float)
+        rows["sequence"] = 0
+        rows["silent"] = silent.astype(float)
+        rows["on_velocity"] = np.where(silent, np.nan, base_on)
+        rows["midi_hold_s"] = np.where(silent, np.nan, base["midi_hold_s"].to_numpy(float))
+        residual = np.where(silent, np.nan, 0.0)
+        with threadpool_limits(1):
+            context = self.stage_.predict(features(rows, self.controls_, self.k, base_on, residual))
+        return pd.DataFrame({name: context[name].to_numpy(float) - base[name].to_numpy(float) for name in TARGETS})
 
     def _controls_of(self, frame: pd.DataFrame) -> pd.DataFrame:
         out = pd.DataFrame(index=range(len(frame)))

@@ -8,7 +8,7 @@ the order they were played, grouped into sequences:
   sweeps) form one sequence per (run, sequence id);
 - trials without them (a play run, a sweep) were still played one after another: each run is
   cut into consecutive stretches of `STRETCH_STROKES` strokes, in `index` order, so that
-  cross-validation can hold whole stretches out.
+  cross-validation can hold whole stretches out (a play run's warm-up and song apart).
 
 Failed trials are dropped before ordering: the previous stroke is the previous one that ran.
 """
@@ -115,13 +115,19 @@ def _ordered(frame: pd.DataFrame) -> pd.DataFrame:
     frame = frame.copy()
     run = frame["run_id"].astype(str) if "run_id" in frame else pd.Series("", index=frame.index)
     index = frame["index"].to_numpy(np.int64) if "index" in frame else np.arange(len(frame))
-    if "sequence_id" in frame and "sequence_order" in frame and frame["sequence_id"].notna().all():
-        seq = frame["sequence_id"].astype(int).to_numpy()
-        order = frame["sequence_order"].astype(int).to_numpy()
-    else:
-        # A run without sequence ids: consecutive stretches in run order.
-        rank = pd.Series(index, index=frame.index).groupby(run).rank(method="first").to_numpy(int) - 1
-        seq, order = rank // STRETCH_STROKES, rank % STRETCH_STROKES
+    # Runs without sequence ids (a play run, a sweep; or mixed with runs that have them):
+    # consecutive stretches in run order, a play run's warm-up and song cut apart (no stretch
+    # spans the pause between them).
+    phase = frame["phase"].astype(str) if "phase" in frame else pd.Series("", index=frame.index)
+    rank = pd.Series(index, index=frame.index).groupby([run, phase]).rank(method="first").to_numpy(int) - 1
+    seq = np.array([f"{p}:{r // STRETCH_STROKES:09d}" for p, r in zip(phase, rank, strict=True)], dtype=object)
+    order = rank % STRETCH_STROKES
+    if "sequence_id" in frame and "sequence_order" in frame:
+        has = (frame["sequence_id"].notna() & frame["sequence_order"].notna()).to_numpy()
+        ids = pd.to_numeric(frame["sequence_id"], errors="coerce").to_numpy(float)
+        seq[has] = [f"id:{int(v):09d}" for v in ids[has]]
+        order = np.where(has, pd.to_numeric(frame["sequence_order"], errors="coerce").fillna(0).to_numpy(float),
+                         order).astype(np.int64)
     frame["_run"], frame["_seq"], frame["_order"], frame["_index"] = run.to_numpy(), seq, order, index
     frame = frame.sort_values(["_run", "_seq", "_order", "_index"], kind="stable")
     keys = list(zip(frame["_run"], frame["_seq"], strict=True))
