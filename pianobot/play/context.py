@@ -41,6 +41,7 @@ MIN_GAIN = 0.02
 #: The plan's columns under the names the sequence model's controls carry (the plan calls the
 #: note its pitch).
 CONTROLS = {name: "pitch" if name == "note" else name for name in PARAMETER_NAMES}
+NAMES = {"on_velocity": "loudness", "lead_s": "lead"}
 #: Targets the planner corrects, with the cross-validation column that decides.
 USED: dict[str, str] = {"on_velocity": "on_velocity_rmse", "lead_s": "lead_rmse_s"}
 
@@ -121,7 +122,7 @@ class SongContext:
                 f"against no context ({measured or 'not measured'})"
                 + (f" or stayed above the per-note model's ({', '.join(worse)})" if worse else ""))
             return f"sequence model {self.source}: {why}; every note is planned alone"
-        return (f"sequence model {self.source}: each note's {' and '.join(u.replace('_s', '') for u in self.used)} "
+        return (f"sequence model {self.source}: each note's {' and '.join(NAMES[u] for u in self.used)} "
                 f"planned with the last {k} note(s) as context (cross-validated error against no context: {measured})")
 
     def effects(self, plan: pd.DataFrame) -> tuple[FloatArray, FloatArray]:
