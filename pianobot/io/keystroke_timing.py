@@ -27,6 +27,7 @@ import numpy as np
 import numpy.typing as npt
 
 from pianobot.physics.keyboard import HIGHEST_NOTE, LOWEST_NOTE, key_center_m
+from pianobot.spec.parameters import recorded_or_followed
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -113,8 +114,9 @@ def line_timing(
     distance = np.nan_to_num(column("distance_m"), nan=0.0)
     depth = np.nan_to_num(column("depth_m"), nan=0.0)  # unknown: the session constant absorbs it
     hold = np.nan_to_num(column("hold_s"), nan=0.0)
-    v_down, v_up = column("down_velocity_mps"), column("up_velocity_mps")
-    v_up = np.where(np.isfinite(v_up), v_up, v_down)
+    v_down = column("down_velocity_mps")
+    v_up = recorded_or_followed("up_velocity_mps", {"up_velocity_mps": column("up_velocity_mps"),
+                                                    "down_velocity_mps": v_down})
     a_down = _acceleration(column("acceleration_mps2"))
     a_up = _acceleration(
         np.where(

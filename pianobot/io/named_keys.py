@@ -42,12 +42,12 @@ from pianobot.io.keystroke_layouts import (
     RIGID_STIFFNESS_CODE,
     round_grid_array,
 )
+from pianobot.plan.trial import SEQUENCE_COLUMNS
 from pianobot.spec.parameters import PARAMETERS, missing_value
 
 DEFAULT_NOTE_OCTAVE = 4  # scientific pitch notation: middle C = C4 = MIDI 60
 KEY_COLUMNS = COLUMN_ALIASES
 NUMERIC_COLUMNS = PARAMETER_SLOTS
-SEQUENCE_COLUMNS = ("sequence_id", "sequence_order")
 _OWN = {*NUMERIC_COLUMNS, *SEQUENCE_COLUMNS, "note", "velocity_mps"}
 _PITCH = {"C": 0, "D": 2, "E": 4, "F": 5, "G": 7, "A": 9, "B": 11}
 _NOTE_NAME = re.compile(r"^\s*([A-Ga-g])\s*([#♯b♭]*)\s*(-?\d+)?\s*$")

@@ -116,8 +116,9 @@ def completed(values: Mapping[Any, Any], names: Sequence[str]) -> dict[str, Any]
         if name not in PARAMETERS:
             continue
         followed = PARAMETERS[name].follows
-        known = out if followed is None or followed in out or not given(values, followed) else {
-            followed: values[followed]}
+        known = dict(out)
+        if followed is not None and followed not in known and given(values, followed):
+            known[followed] = values[followed]  # (a followed value outside `names`)
         value = missing_value(name, known)
         if value is None:
             raise ValueError(f"{name} is not given and has no default")
@@ -134,8 +135,14 @@ def press_from(values: Mapping[Any, Any]) -> Press:
     Raises:
         ValueError: the down velocity or the depth is not given.
     """
-    present = completed(values, PRESS_FIELDS)
-    return Press(**{name: float(v) for name, v in present.items()})
+    motion: dict[str, float] = {}
+    for name in PRESS_FIELDS:  # every field given (a trial, a table row): no defaults to look up
+        value = values.get(name)
+        if value is None or value != value:
+            motion = {name: float(v) for name, v in completed(values, PRESS_FIELDS).items()}
+            break
+        motion[name] = float(value)
+    return Press(**motion)
 
 
 def trial_from(trial_id: str, index: int, repeat: int, values: Mapping[Any, Any]) -> Trial:

@@ -9,7 +9,7 @@ the arm executes (a two-segment press where that reaches the key sooner).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 import numpy as np
 import numpy.typing as npt
@@ -17,6 +17,7 @@ import numpy.typing as npt
 from pianobot.errors import InputError
 from pianobot.physics.trajectory import Press
 from pianobot.plan import Trial, move_durations_s
+from pianobot.plan.trial import press_from, trial_from
 from pianobot.play.settings import PlaySettings
 from pianobot.spec import RigSpec
 
@@ -78,10 +79,9 @@ class StrokeGeometry:
     def press(self, down_velocity_mps: float, hold_s: float) -> Press:
         """The press of one note with this geometry (two-segment where that is faster)."""
         approach = float(self.approach_m(float(down_velocity_mps)))
-        return Press(self.distance_m, self.depth_m, float(down_velocity_mps), self.up_velocity_mps,
-                     self.acceleration_mps2, float(hold_s), approach_m=approach,
-                     travel_velocity_mps=self.approach_velocity_mps if approach > 0 else 0.25,
-                     travel_acceleration_mps2=self.approach_acceleration_mps2 if approach > 0 else 1.0)
+        fast = {"approach_m": approach, "travel_velocity_mps": self.approach_velocity_mps,
+                "travel_acceleration_mps2": self.approach_acceleration_mps2} if approach > 0 else {}
+        return press_from({**self.to_dict(), "down_velocity_mps": down_velocity_mps, "hold_s": hold_s, **fast})
 
     def durations_s(self, down_velocity_mps: npt.ArrayLike, hold_s: npt.ArrayLike = 0.0) -> FloatArray:
         """Motion start → arm back up, for many down velocities and holds (exact moveL timing)."""
@@ -121,10 +121,7 @@ def _time_to(s_m: npt.ArrayLike, travel_m: npt.ArrayLike, v_mps: FloatArray, a_m
 
 def stroke_trial(trial_id: str, index: int, pitch: int, vacuum_kpa: float, press: Press) -> Trial:
     """A planned keystroke (repeat 0) for the rig and the store, carrying the press's fast moves."""
-    return Trial(trial_id, index, 0, int(pitch), float(vacuum_kpa), press.down_velocity_mps, press.up_velocity_mps,
-                 press.acceleration_mps2, press.depth_m, press.distance_m, press.hold_s, 0.0,
-                 approach_m=press.approach_m, retract_m=press.retract_m,
-                 travel_velocity_mps=press.travel_velocity_mps, travel_acceleration_mps2=press.travel_acceleration_mps2)
+    return trial_from(trial_id, index, 0, {"note": pitch, "vacuum_kpa": vacuum_kpa, **asdict(press)})
 
 
 def geometries(settings: PlaySettings, rig: RigSpec) -> list[StrokeGeometry]:

@@ -31,8 +31,9 @@ import numpy as np
 import pandas as pd
 
 from pianobot.io.midifile import Note
-from pianobot.physics.trajectory import Press, press_duration_s
+from pianobot.physics.trajectory import press_duration_s
 from pianobot.plan import Trial
+from pianobot.plan.trial import press_from
 from pianobot.play.adapt import OnlineAdapter, adapted_stroke
 from pianobot.play.geometry import stroke_trial
 from pianobot.play.song_plan import SongPlan
@@ -284,9 +285,8 @@ class _SongLoop:
         gap = p._collect_gap()
         # A played note is a planned trial like any other (repeat 0), so the rig and store read it.
         geometry = self.plan.geometry
-        press = geometry.press(speed, hold) if geometry is not None else Press(
-            float(row.distance_m), float(row.depth_m), speed, float(row.up_velocity_mps),
-            float(row.acceleration_mps2), hold)
+        press = geometry.press(speed, hold) if geometry is not None else press_from(
+            {**row._asdict(), "down_velocity_mps": speed, "hold_s": hold, "approach_m": 0.0})
         stroke = stroke_trial(str(row.trial_id), int(row.note_index), int(row.pitch), float(row.vacuum_kpa), press)
         data = p._keystroke(stroke, start)
         data = dataclasses.replace(data, midi=tuple(gap) + data.midi)

@@ -236,6 +236,20 @@ def defaults_text() -> str:
     return ", ".join(parts)
 
 
+def recorded_or_followed(name: str, columns: Mapping[str, FloatArray]) -> FloatArray:
+    """`columns[name]` where it holds a value, else the column it follows (up velocity → down
+    velocity): a log's unrecorded (NaN) or impossible (at or below an exclusive minimum, a
+    moveL at 0 m/s) entries.
+    """
+    own = np.asarray(columns[name], dtype=np.float64)
+    p = PARAMETERS[name]
+    if p.follows is None or p.follows not in columns:
+        return own
+    with np.errstate(invalid="ignore"):
+        valid = np.isfinite(own) & ((own > p.minimum) if p.exclusive_minimum else True)
+    return np.where(valid, own, np.asarray(columns[p.follows], dtype=np.float64))
+
+
 def input_default(name: str) -> float | None:
     """What a model assumes for an input a caller leaves out: the default, else the model's
     stand-in (a depth inside the soft finger's envelope); None for the down velocity."""

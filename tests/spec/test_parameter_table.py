@@ -40,8 +40,6 @@ ALLOWED: dict[tuple[str, str], str] = {
     ("io/keystroke_layouts.py", "_RANGES"): "plausible values of old scripts' logs, which tell their layouts apart",
     ("reports/figures.py", "silent_fraction"): "a figure's three grouping columns, a choice",
     # Not yet derived (owned by other issues this session; see the issue-18 report):
-    ("analysis/greybox/keystrokes.py", "COMMAND_FIELDS"): "issue 10's keystroke container",
-    ("analysis/greybox/load.py", "SCHEDULE_COLUMNS"): "issue 10's loader",
     ("play/song_plan.py", "SONG_PLAN_COLUMNS"): "the song plan's column order (issue 16 owns play/)",
     ("cli/play.py", "SONG_PLAN_TABLE"): "headings of the song plan's columns (issue 16 owns play)",
     ("play/report.py", "_warmup"): "the warm-up table's columns, a choice (issue 16 owns play/)",
@@ -213,3 +211,13 @@ def test_old_specs_plan_as_before(name: str) -> None:
     csv = plan_frame(trials).to_csv(index=False).encode()
     assert [t.trial_id for t in trials[:3]] == first_ids
     assert hashlib.sha256(csv).hexdigest()[:16] == digest
+
+
+def test_a_log_without_an_up_velocity_moves_up_at_the_down_velocity() -> None:
+    import numpy as np
+
+    from pianobot.spec.parameters import recorded_or_followed
+
+    columns = {"up_velocity_mps": np.array([0.2, np.nan, 0.0]), "down_velocity_mps": np.array([0.1, 0.03, 0.04])}
+    np.testing.assert_array_equal(recorded_or_followed("up_velocity_mps", columns), [0.2, 0.03, 0.04])
+    np.testing.assert_array_equal(recorded_or_followed("depth_m", {"depth_m": np.array([np.nan])}), [np.nan])

@@ -25,11 +25,13 @@ import numpy.typing as npt
 
 from pianobot.analysis.greybox.noise import noise_sigma_m
 from pianobot.physics.trajectory import Press
+from pianobot.spec.parameters import PRESS_PARAMETERS
 
 FloatArray = npt.NDArray[np.float64]
 
-#: Columns of the commanded press, in `Press` order (NaN where not recorded).
-COMMAND_FIELDS: tuple[str, ...] = ("down_velocity_mps", "up_velocity_mps", "acceleration_mps2", "depth_m", "hold_s")
+#: Columns of the commanded press (the parameter table's press parameters but the distance, a
+#: row field of its own; NaN where not recorded).
+COMMAND_FIELDS: tuple[str, ...] = tuple(n for n in PRESS_PARAMETERS if n != "distance_m")
 #: Per-keystroke arrays (n,) of a batch; `subset` indexes these and the (n, ...) trajectories.
 _ROW_FIELDS = ("vacuum_kpa", "x0_m", "x1_m", "x2_m", "distance_m", "t_offset_s", "input_x0_m",
                *COMMAND_FIELDS, "command_start_s", "on_velocity", "t_on_s", "hold_midi_s", "sounded")

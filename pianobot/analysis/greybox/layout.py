@@ -260,7 +260,13 @@ def readout_params(prior: KeystrokeModel, max_travel_m: float = 0.012) -> list[P
     ]
 
 
-def drive_params(start_mps2: float = 1.0) -> list[Param]:
+# Where the fit of an unrecorded acceleration starts. Not a default (the parameter table's 0.5
+# m/s² is what a spec's trial gets when unset): a starting guess between the study's levels
+# (0.1-1 m/s²) and a UR moveL's own default (1.2 m/s²), which the fit moves within 0.02-10 m/s².
+UNRECORDED_ACCELERATION_START_MPS2 = 1.0
+
+
+def drive_params(start_mps2: float = UNRECORDED_ACCELERATION_START_MPS2) -> list[Param]:
     """The commanded drive's acceleration, when the data do not record it."""
     return [Param("drive.acceleration_mps2", start_mps2, 0.02, 10.0, True, "m/s^2")]
 

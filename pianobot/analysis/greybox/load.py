@@ -26,6 +26,7 @@ import pandas as pd
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
 from pianobot.analysis.greybox.trajectories import OUTPUT_SOURCES, keystroke_batch
 from pianobot.errors import InputError
+from pianobot.spec.parameters import PRESS_PARAMETERS, recorded_or_followed
 from pianobot.store import load_run
 
 
@@ -76,8 +77,8 @@ def _commands(rows: pd.DataFrame, notes: set[str]) -> dict[str, np.ndarray]:
     if use.any():
         depth = np.where(use, travel, depth)
         notes.add("depth taken from the measured arm travel")
-    up = _column(rows, "up_velocity_mps")
-    up = np.where(up > 0, up, down)
+    up = recorded_or_followed("up_velocity_mps", {"up_velocity_mps": _column(rows, "up_velocity_mps"),
+                                                  "down_velocity_mps": down})
     accel = _column(rows, "acceleration_mps2")
     accel = np.where(accel > 0, accel, np.nan)
     if np.isnan(accel).any():
@@ -175,8 +176,7 @@ def load_keystrokes(run_ids: Sequence[str], data_dir: Path, *, x0_source: str = 
 
 
 #: Columns of a commanded schedule (a lab script's log of what it told the arm).
-SCHEDULE_COLUMNS = ("t_start_s", "down_velocity_mps", "up_velocity_mps", "acceleration_mps2", "depth_m",
-                    "distance_m", "hold_s")
+SCHEDULE_COLUMNS: tuple[str, ...] = ("t_start_s", *PRESS_PARAMETERS)
 
 
 def read_schedule(path: Path) -> pd.DataFrame:

@@ -29,6 +29,7 @@ from threadpoolctl import threadpool_limits
 from pianobot.analysis.sequence.context import OUTCOMES, feature_names, features
 from pianobot.analysis.sequence.strokes import TARGETS, StrokeTable
 from pianobot.errors import InputError
+from pianobot.spec.parameters import PARAMETERS
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -262,8 +263,8 @@ class SequenceModel:
         for name in self.controls_:
             if name in frame:
                 out[name] = frame[name].to_numpy(float)
-            elif name == "up_velocity_mps" and "down_velocity_mps" in frame:
-                out[name] = frame["down_velocity_mps"].to_numpy(float)
+            elif name in PARAMETERS and (followed := PARAMETERS[name].follows) is not None and followed in frame:
+                out[name] = frame[followed].to_numpy(float)  # the up velocity follows the down velocity
             else:
                 lo, hi = self.ranges_[name]
                 out[name] = 0.5 * (lo + hi)
