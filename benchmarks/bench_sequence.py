@@ -5,7 +5,8 @@
    keystroke-log`: cross-validation grouped by sequence (5 folds), the per-note models (GP)
    and the sequence model with k = 0, 1, 2, 3 previous strokes, on the same folds. Errors:
    on-velocity RMSE/MAE (MIDI), inter-onset interval RMSE (previous note-on → this note-on, s),
-   MIDI hold RMSE (s). `chosen_k` is what `fit` saves (`choose_k`); `context_gain_vs_k0` is its relative
+   MIDI hold RMSE (s); with PyTorch installed (extra `[rnn]`) also the recurrent model (row
+   `rnn gru`) on the same folds. `chosen_k` is what `fit` saves (`choose_k`); `context_gain_vs_k0` is its relative
    change against k = 0, per error.
 2. The simulated world where context matters (own-world suite, reported apart): sequence-mode
    strokes on a `World` whose finger stiffness drifts by up to 30 % between sequences and stays
@@ -37,6 +38,14 @@ def _records(cv: Any) -> list[dict[str, Any]]:
             for row in cv.to_dict(orient="records")]
 
 
+def _has_torch() -> bool:
+    try:
+        import torch  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
 def study_log(ks: tuple[int, ...]) -> dict[str, Any]:
     from pianobot.analysis.learn.run import load_trials
     from pianobot.analysis.sequence.evaluate import _per_note, cross_validate_sequence
@@ -49,7 +58,7 @@ def study_log(ks: tuple[int, ...]) -> dict[str, Any]:
                               "--data", tmp, "--json"], check=True, capture_output=True, text=True).stdout
         run_id = json.loads(out)["run_id"]
         table = stroke_table(load_trials([run_id], Path(tmp)))
-    cv = cross_validate_sequence(table, ks=ks, per_note=("gp",), folds=5, workers=2)
+    cv = cross_validate_sequence(table, ks=ks, per_note=("gp",), folds=5, workers=2, rnn=_has_torch())
     rows = cv.set_index("model")
     chosen = choose_k(cv)
     best = rows.loc[f"sequence k={chosen}"]

@@ -151,7 +151,7 @@ def register(app: typer.Typer) -> None:
         runs: RunIds,
         data: DataDir = DEFAULT_DATA,
         json_out: JsonFlag = False,
-        model: Annotated[list[str] | None, typer.Option("--model", help="gp | poly | spline | mlp | physics | sequence (repeatable; with sequence, the others are its per-note baselines).")] = None,
+        model: Annotated[list[str] | None, typer.Option("--model", help="gp | poly | spline | mlp | physics | sequence | rnn (repeatable; with sequence, the others are its per-note baselines; rnn adds the recurrent model, extra [rnn]).")] = None,
         out_dir: Annotated[Path, typer.Option("--out-dir", help="Folder for the saved predictors.")] = Path("models"),
         folds: Annotated[int, typer.Option(min=2, help="Grouped CV folds.")] = 5,
         physics_model: Annotated[Path | None, typer.Option(help="Model file for --model physics.")] = None,
@@ -161,7 +161,7 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Cross-validate learned maps to on-velocity, hold and silence; save each as a predictor."""
         kinds = model or ["gp"]
-        if "sequence" in kinds:
+        if "sequence" in kinds or "rnn" in kinds:
             from pianobot.cli.sequence_fit import fit_sequence_command
 
             if plot is not None:

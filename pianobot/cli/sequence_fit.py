@@ -34,9 +34,13 @@ def parse_context(text: str) -> list[int]:
 def fit_sequence_command(runs: Sequence[str], data: Path, kinds: Sequence[str], out_dir: Path, folds: int,
                          context: str, json_out: bool, no_progress: bool) -> None:
     """Run the sequence fit and print (or emit) its table."""
-    per_note = [k for k in kinds if k not in ("sequence", "physics")] or ["gp"]
+    if "rnn" in kinds:
+        from pianobot.analysis.sequence.rnn import require_torch
+
+        require_torch()  # before any data is read: one line on how to install the extra
+    per_note = [k for k in kinds if k not in ("sequence", "physics", "rnn")] or ["gp"]
     result = fit_sequence_runs(runs, data, out_dir=out_dir, ks=parse_context(context), per_note=per_note,
-                               folds=folds, progress=command_progress(json_out, no_progress))
+                               folds=folds, progress=command_progress(json_out, no_progress), rnn="rnn" in kinds)
     if json_out:
         emit_json(result.to_dict())
         return

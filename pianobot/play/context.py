@@ -10,16 +10,18 @@ by the context's lead effect (never before the arm is free); two passes, since a
 changes the context of the next.
 
 A sequence model is used for a target only where its own grouped cross-validation (which travels
-with the file) showed that context cuts the error against the same model without context by at
-least `MIN_GAIN`: a context that did not predict better on held-out sequences would only add the
-trees' noise to a plan. A model whose context helps nowhere plans exactly as the per-note planner,
-and `play` says so.
+with the file) showed both that context cuts the error against the same model without context by
+at least `MIN_GAIN`, and that with context it predicts held-out sequences better than the per-note
+model did on the same folds: a context that did not predict better would only add the model's
+noise to a plan (on the simulated rig, trees predict the lead to ~40 ms where the per-note GP
+does to ~4 ms, whatever the context adds). A model whose context helps nowhere plans exactly as
+the per-note planner, and `play` says so.
 """
 
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -39,6 +41,7 @@ MIN_GAIN = 0.02
 #: The plan's columns under the names the sequence model's controls carry (the plan calls the
 #: note its pitch).
 CONTROLS = {name: "pitch" if name == "note" else name for name in PARAMETER_NAMES}
+NAMES = {"on_velocity": "loudness", "lead_s": "lead"}
 #: Targets the planner corrects, with the cross-validation column that decides.
 USED: dict[str, str] = {"on_velocity": "on_velocity_rmse", "lead_s": "lead_rmse_s"}
 
@@ -52,6 +55,10 @@ def is_sequence_file(path: Path) -> bool:
     return isinstance(payload, dict) and payload.get("schema") == SEQUENCE_SCHEMA
 
 
+def _finite(value: Any) -> bool:
+    return isinstance(value, int | float) and bool(np.isfinite(value))
+
+
 def context_gains(cv: list[dict[str, Any]], k: int) -> dict[str, float]:
     """Relative change of each used target's CV error, k against k = 0 (negative: context helps)."""
     rows = {r.get("model"): r for r in cv}
@@ -61,8 +68,21 @@ def context_gains(cv: list[dict[str, Any]], k: int) -> dict[str, float]:
         return out
     for target, column in USED.items():
         b, v = base.get(column), best.get(column)
-        if isinstance(b, int | float) and isinstance(v, int | float) and np.isfinite(b) and b > 0 and np.isfinite(v):
+        if isinstance(b, int | float) and isinstance(v, int | float) and _finite(b) and _finite(v) and b > 0:
             out[target] = float(v) / float(b) - 1.0
+    return out
+
+
+def beats_per_note(cv: list[dict[str, Any]], k: int) -> dict[str, bool]:
+    """Per used target: whether the sequence model with k predicted held-out sequences better
+    than every per-note model in the same CV (True when there was none to compare with)."""
+    best = next((r for r in cv if r.get("model") == f"sequence k={k}"), None)
+    per_note = [r for r in cv if str(r.get("model", "")).startswith("per-note")]
+    out: dict[str, bool] = {}
+    for target, column in USED.items():
+        v = None if best is None else best.get(column)
+        rivals = [float(r[column]) for r in per_note if _finite(r.get(column))]
+        out[target] = isinstance(v, int | float) and bool(np.isfinite(v)) and all(v < rival for rival in rivals)
     return out
 
 
@@ -73,31 +93,36 @@ class SongContext:
     model: SequenceModel
     source: str
     gains: dict[str, float]  # CV error change per target, chosen k against k = 0
+    better: dict[str, bool] = field(default_factory=dict)  # beats the per-note model (CV), per target
 
     @classmethod
     def load(cls, path: Path) -> SongContext:
         """Open a sequence model file (InputError when missing, changed or of another schema)."""
         payload = json.loads(Path(path).read_text(encoding="utf-8"))
         model = load_sequence_model(Path(path), payload)
-        return cls(model, str(path), context_gains(list(payload.get("cv") or []), model.k))
+        cv = list(payload.get("cv") or [])
+        return cls(model, str(path), context_gains(cv, model.k), beats_per_note(cv, model.k))
 
     @property
     def used(self) -> tuple[str, ...]:
-        """Targets corrected: context cut their held-out error by at least `MIN_GAIN`."""
+        """Targets corrected: context cut their held-out error by at least `MIN_GAIN`, and the
+        model with context beat the per-note model on them."""
         if self.model.k == 0:
             return ()
-        return tuple(t for t in USED if self.gains.get(t, 0.0) <= -MIN_GAIN)
+        return tuple(t for t in USED if self.gains.get(t, 0.0) <= -MIN_GAIN and self.better.get(t, True))
 
     def describe(self) -> str:
         """One line for the user: what the context corrects and why (or why nothing)."""
         k = self.model.k
         measured = ", ".join(f"{t.replace('_s', '').replace('_', '-')} {100 * g:+.1f} %" for t, g in self.gains.items())
+        worse = [t.replace("_s", "").replace("_", "-") for t, ok in self.better.items() if not ok]
         if not self.used:
             why = "the model uses no context (k=0)" if k == 0 else (
                 f"with the last {k} stroke(s) its cross-validated error did not fall by {100 * MIN_GAIN:.0f} % "
-                f"({measured or 'not measured'})")
+                f"against no context ({measured or 'not measured'})"
+                + (f" or stayed above the per-note model's ({', '.join(worse)})" if worse else ""))
             return f"sequence model {self.source}: {why}; every note is planned alone"
-        return (f"sequence model {self.source}: each note's {' and '.join(u.replace('_s', '') for u in self.used)} "
+        return (f"sequence model {self.source}: each note's {' and '.join(NAMES[u] for u in self.used)} "
                 f"planned with the last {k} note(s) as context (cross-validated error against no context: {measured})")
 
     def effects(self, plan: pd.DataFrame) -> tuple[FloatArray, FloatArray]:

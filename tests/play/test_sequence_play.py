@@ -85,10 +85,14 @@ def test_repeated_notes_are_aimed_louder_where_the_context_takes_loudness_away(
     assert "on-velocity" in (played.plan.context or "") and "sequence model" in played.model
 
 
+@pytest.mark.parametrize("gains, better", [
+    ({"on_velocity": 0.01}, {}),  # context did not cut the error against no context
+    ({"on_velocity": -0.3}, {"on_velocity": False}),  # it did, but stayed above the per-note model's
+])
 def test_a_context_that_did_not_help_on_held_out_sequences_leaves_the_plan_as_it_was(
-    sequence_file: Path, repeats_song: Path, tmp_path: Path,
+    sequence_file: Path, repeats_song: Path, tmp_path: Path, gains: dict[str, float], better: dict[str, bool],
 ) -> None:
-    useless = SongContext(SongContext.load(sequence_file).model, "useless", {"on_velocity": 0.01})
+    useless = SongContext(SongContext.load(sequence_file).model, "useless", gains, better)
     said: list[str] = []
     alone = play_song(repeats_song, data_dir=tmp_path, dry_run=True, tempo="written").plan.notes
     plan = play_song(repeats_song, data_dir=tmp_path, model=useless, dry_run=True, tempo="written",

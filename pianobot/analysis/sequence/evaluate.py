@@ -7,7 +7,8 @@ stroke's neighbours. On the same folds:
   the per-note inputs (`pianobot.analysis.learn.predictors.INPUT_COLUMNS`) that vary;
 - `sequence k=0`: the sequence model's own learner without context (the stroke's own
   controls, including a log's sideways move): the difference to k ≥ 1 is the value of context;
-- `sequence k=1…`: with the last k strokes.
+- `sequence k=1…`: with the last k strokes;
+- `rnn gru` (optional, PyTorch): the recurrent model (`rnn`), everything before in its state.
 
 Scores: on-velocity RMSE/MAE of sounded strokes; RMSE of the inter-onset interval (previous
 note-on → this note-on; the timing a sequence log records), of the lead (motion start →
@@ -60,6 +61,10 @@ def _run(task: _Task) -> tuple[npt.NDArray[np.intp], pd.DataFrame]:
     train, test = _subset(task.table, task.train), _subset(task.table, task.test)
     if task.model == "sequence":
         return task.test, SequenceModel(task.k, task.seed).fit(train).predict(test)
+    if task.model == "rnn":
+        from pianobot.analysis.sequence.rnn import RnnSequenceModel  # torch: an optional extra
+
+        return task.test, RnnSequenceModel(task.seed).fit(train).predict(test)
     return task.test, _per_note(task.model, train, test, task.seed)
 
 
@@ -85,8 +90,10 @@ def _per_note(kind: str, train: StrokeTable, test: StrokeTable, seed: int) -> pd
 def cross_validate_sequence(
     table: StrokeTable, *, ks: Sequence[int] = DEFAULT_KS, per_note: Sequence[str] = ("gp",),
     folds: int = 5, seed: int = 0, workers: int | None = None, progress: Progress = NO_PROGRESS,
+    rnn: bool = False,
 ) -> pd.DataFrame:
-    """Grouped-CV table: one row per model (per-note kinds, then the sequence model per k).
+    """Grouped-CV table: one row per model (per-note kinds, then the sequence model per k, then
+    with `rnn` the recurrent model, row "rnn gru").
 
     Columns: model, k, on_velocity_rmse, on_velocity_mae, ioi_rmse_s, lead_rmse_s,
     hold_rmse_s, silent_accuracy, n_strokes, n_sequences, folds.
@@ -101,7 +108,11 @@ def cross_validate_sequence(
                          "fit --model sequence")
     k_folds = max(2, min(folds, n_groups))
     splits = list(GroupKFold(n_splits=k_folds).split(np.zeros(table.n), groups=groups))
-    models = [(kind, 0) for kind in per_note] + [("sequence", int(k)) for k in ks]
+    models = [(kind, 0) for kind in per_note] + [("sequence", int(k)) for k in ks] + ([("rnn", 0)] if rnn else [])
+    if rnn:
+        from pianobot.analysis.sequence.rnn import require_torch
+
+        require_torch()  # before any fold runs: one line on how to install it
     tasks = [_Task(m, k, table, tr, te, seed) for m, k in models for tr, te in splits]
     settings = ExecutorSettings.resolve(workers=workers, scheduler=None)
     with open_executor(settings, work_s=TASK_COST_S * len(tasks)) as ex:
@@ -111,7 +122,7 @@ def cross_validate_sequence(
         pred = pd.DataFrame(np.nan, index=range(table.n), columns=[*TARGETS, "p_silent"])
         for test, out in results[i * k_folds : (i + 1) * k_folds]:
             pred.iloc[test] = out[list(pred.columns)].to_numpy(float)
-        name = f"sequence k={k}" if model == "sequence" else f"per-note {model}"
+        name = f"sequence k={k}" if model == "sequence" else "rnn gru" if model == "rnn" else f"per-note {model}"
         rows.append({"model": name, "k": k if model == "sequence" else None,
                      **_scores(table.frame, pred), "n_strokes": table.n,
                      "n_sequences": table.n_sequences, "folds": k_folds})

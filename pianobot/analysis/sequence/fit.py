@@ -72,14 +72,14 @@ def choose_k(cv: pd.DataFrame) -> int:
 def fit_sequence_runs(
     run_ids: Sequence[str], data_dir: Path, *, out_dir: Path | None, ks: Sequence[int] = DEFAULT_KS,
     per_note: Sequence[str] = ("gp",), folds: int = 5, seed: int = 0, workers: int | None = None,
-    progress: Progress = NO_PROGRESS,
+    progress: Progress = NO_PROGRESS, rnn: bool = False,
 ) -> SequenceFit:
     """Cross-validate, choose k, fit on every stroke and save `sequence.json` under `out_dir`."""
     if not ks or min(ks) < 0:
         raise InputError(f"context lengths must be >= 0, got {list(ks)}", "--context")
     table = stroke_table(load_trials(run_ids, data_dir))
     cv = cross_validate_sequence(table, ks=ks, per_note=per_note, folds=folds, seed=seed,
-                                 workers=workers, progress=progress)
+                                 workers=workers, progress=progress, rnn=rnn)
     k = choose_k(cv)
     saved = None
     if out_dir is not None:

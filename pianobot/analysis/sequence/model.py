@@ -37,6 +37,9 @@ FloatArray = npt.NDArray[np.float64]
 MIN_TARGET_ROWS = 20
 #: Folds of the cross-fitting that gives training strokes out-of-sequence residuals.
 RESIDUAL_FOLDS = 3
+#: Training contexts kept with a fitted model: what "a typical context" is when a plan asks
+#: what its own context changes (`planned_effect`).
+REFERENCE_CONTEXTS = 48
 
 
 def _regressor(seed: int) -> HistGradientBoostingRegressor:
@@ -140,6 +143,11 @@ class SequenceModel:
         base_on = self._cross_fitted_base(own, table)
         X = features(frame, self.controls_, self.k, base_on, frame["on_velocity"].to_numpy(float) - base_on)
         self.stage_ = _Stage(self.seed).fit(X, frame)
+        followers = np.flatnonzero(frame["order"].to_numpy() > 0)
+        if followers.size:
+            rng = np.random.default_rng(self.seed)
+            pick = rng.choice(followers, size=min(REFERENCE_CONTEXTS, followers.size), replace=False)
+            self.contexts_ = X[np.sort(pick), len(self.controls_) + 1:]
         return self
 
     def _cross_fitted_base(self, own: FloatArray, table: StrokeTable) -> FloatArray:
@@ -217,8 +225,12 @@ class SequenceModel:
 
         `strokes`: the strokes of one sequence in play order, controls only (a plan). A plan
         has no outcomes yet, so each predecessor's outcome is the context-free prediction and
-        its residual zero (its expected value: a finger state the plan cannot know). Columns
-        `TARGETS` (NaN where a target was not learned), one row per stroke; all zero for k = 0.
+        its residual zero (its expected value: a finger state the plan cannot know). The effect
+        is the context model's prediction with this stroke's context minus its mean over the
+        training contexts (`REFERENCE_CONTEXTS`), the stroke's own controls held: the same
+        model on both sides, so what the context model learned better from the stroke itself
+        is not taken for context. Columns `TARGETS` (NaN where a target was not learned), one
+        row per stroke; all zero for k = 0.
         """
         self._check()
         rows = self._controls_of(strokes.reset_index(drop=True))
@@ -233,9 +245,18 @@ class SequenceModel:
         rows["on_velocity"] = np.where(silent, np.nan, base_on)
         rows["midi_hold_s"] = np.where(silent, np.nan, base["midi_hold_s"].to_numpy(float))
         residual = np.where(silent, np.nan, 0.0)
+        X = features(rows, self.controls_, self.k, base_on, residual)
+        reference = getattr(self, "contexts_", None)
         with threadpool_limits(1):
-            context = self.stage_.predict(features(rows, self.controls_, self.k, base_on, residual))
-        return pd.DataFrame({name: context[name].to_numpy(float) - base[name].to_numpy(float) for name in TARGETS})
+            context = self.stage_.predict(X)
+            if reference is None:  # a model saved before the reference contexts: against k = 0
+                typical = base
+            else:
+                n_own = len(self.controls_) + 1
+                m = len(reference)
+                grid = np.column_stack([np.repeat(X[:, :n_own], m, axis=0), np.tile(reference, (len(X), 1))])
+                typical = self.stage_.predict(grid)[list(TARGETS)].groupby(np.repeat(np.arange(len(X)), m)).mean()
+        return pd.DataFrame({name: context[name].to_numpy(float) - typical[name].to_numpy(float) for name in TARGETS})
 
     def _controls_of(self, frame: pd.DataFrame) -> pd.DataFrame:
         out = pd.DataFrame(index=range(len(frame)))

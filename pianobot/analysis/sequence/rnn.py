@@ -1,0 +1,134 @@
+"""The recurrent sequence model (optional extra `[rnn]`: PyTorch, CPU): a GRU over each sequence.
+
+The study trained recurrent networks on its sequence data; this is the forward form of one, so
+that it is scored exactly as the windowed model is (`evaluate`, same grouped folds): per stroke
+the input is its own controls, the pitch step from the previous stroke and the previous
+stroke's outcomes (on-velocity, silent, MIDI hold — observed, as `SequenceModel.predict`
+sees them; zeros and a start flag at a sequence's start); the GRU's state carries everything
+before. Outputs: on-velocity, MIDI hold, lead and inter-onset interval, each standardised, with
+a squared error over the known values only. P(silent) is the training frequency (silent strokes
+are too rare in the lab's data to learn).
+
+Without PyTorch every other command works; `fit --model sequence --model rnn` says in one line
+how to install it (`require_torch`).
+"""
+
+from __future__ import annotations
+
+import warnings
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import pandas as pd
+
+from pianobot.analysis.sequence.strokes import TARGETS, StrokeTable
+from pianobot.errors import InputError
+
+FloatArray = npt.NDArray[np.float64]
+
+INSTALL_HINT = ("the recurrent sequence model needs PyTorch, an optional extra: "
+                "pip install 'pianobot[rnn]' (CPU build: pip install torch==2.13.0)")
+HIDDEN = 32
+EPOCHS = 300
+LEARNING_RATE = 0.01
+
+
+def require_torch() -> Any:
+    """The torch module, or InputError naming the one-line install (exit 2 from the CLI)."""
+    try:
+        import torch
+    except ImportError:
+        raise InputError(INSTALL_HINT, "--model rnn") from None
+    return torch
+
+
+def _inputs(frame: pd.DataFrame, controls: tuple[str, ...]) -> FloatArray:
+    """Per stroke: own controls, pitch step, previous outcomes and a sequence-start flag."""
+    seq = frame["sequence"].to_numpy()
+    start = np.r_[True, seq[1:] != seq[:-1]]
+
+    def previous(values: FloatArray) -> FloatArray:
+        out = np.asarray(np.r_[np.nan, values[:-1]], dtype=np.float64)
+        out[start] = np.nan
+        return out
+
+    note = frame["note"].to_numpy(float)
+    on = frame["on_velocity"].to_numpy(float)
+    hold = frame["midi_hold_s"].to_numpy(float)
+    silent = frame["silent"].to_numpy(float)
+    columns = [frame[list(controls)].to_numpy(float), (note - previous(note))[:, None],
+               previous(on)[:, None], previous(silent)[:, None], previous(hold)[:, None], start[:, None].astype(float)]
+    return np.asarray(np.column_stack(columns), dtype=np.float64)
+
+
+class RnnSequenceModel:
+    """A GRU forward model of each stroke given the strokes before it in its sequence."""
+
+    def __init__(self, seed: int = 0, hidden: int = HIDDEN, epochs: int = EPOCHS) -> None:
+        self.seed, self.hidden, self.epochs = seed, hidden, epochs
+
+    def _tensor(self, table: StrokeTable, values: FloatArray) -> tuple[Any, FloatArray]:
+        """Pad per sequence: (n_sequences, longest, features) and each stroke's (sequence, step)."""
+        torch = require_torch()
+        seq = table.frame["sequence"].to_numpy()
+        codes, position = np.unique(seq, return_inverse=True)
+        step = table.frame.groupby(seq).cumcount().to_numpy()
+        out = np.zeros((len(codes), int(step.max()) + 1, values.shape[1]), dtype=np.float32)
+        out[position, step] = values
+        return torch.from_numpy(out), np.column_stack([position, step])
+
+    def fit(self, table: StrokeTable) -> RnnSequenceModel:
+        torch = require_torch()
+        torch.manual_seed(self.seed)
+        torch.set_num_threads(1)  # a shared machine; a few thousand strokes gain nothing from more
+        self.controls_ = table.controls
+        X = _inputs(table.frame, self.controls_)
+        self.x_mean_, self.x_std_ = np.nanmean(X, axis=0), np.nanstd(X, axis=0) + 1e-9
+        Y = table.frame[list(TARGETS)].to_numpy(float)
+        with warnings.catch_warnings():  # a target never measured (the lead of an old log): all NaN
+            warnings.simplefilter("ignore", RuntimeWarning)
+            self.y_mean_, self.y_std_ = np.nanmean(Y, axis=0), np.nanstd(Y, axis=0) + 1e-9
+        self.p_silent_ = float(table.frame["silent"].mean())
+        xs, where = self._tensor(table, np.nan_to_num((X - self.x_mean_) / self.x_std_))
+        y = (Y - self.y_mean_) / self.y_std_
+        ys, _ = self._tensor(table, np.nan_to_num(y))
+        known, _ = self._tensor(table, np.isfinite(y).astype(float))
+        self.net_ = _Net(torch, xs.shape[-1], self.hidden, len(TARGETS))
+        optimiser = torch.optim.Adam(self.net_.parameters(), lr=LEARNING_RATE, weight_decay=1e-4)
+        for _ in range(self.epochs):
+            optimiser.zero_grad()
+            loss = (((self.net_(xs) - ys) ** 2) * known).sum() / known.sum().clamp(min=1.0)
+            loss.backward()
+            optimiser.step()
+        return self
+
+    def predict(self, table: StrokeTable) -> pd.DataFrame:
+        """Each stroke's predicted outcome given its observed predecessors (`TARGETS`, p_silent)."""
+        torch = require_torch()
+        if not hasattr(self, "net_"):
+            raise RuntimeError("RnnSequenceModel is not fitted; call fit first")
+        X = _inputs(table.frame, self.controls_)
+        xs, where = self._tensor(table, np.nan_to_num((X - self.x_mean_) / self.x_std_))
+        with torch.no_grad():
+            out = self.net_(xs).numpy().astype(float)[where[:, 0], where[:, 1]]
+        pred = pd.DataFrame(out * self.y_std_ + self.y_mean_, columns=list(TARGETS))
+        pred["on_velocity"] = np.clip(pred["on_velocity"], 1.0, 127.0)
+        pred["p_silent"] = self.p_silent_
+        return pred
+
+
+def _Net(torch: Any, n_in: int, hidden: int, n_out: int) -> Any:
+    """GRU → linear head, built here so that torch is imported only when the model is used."""
+
+    class Net(torch.nn.Module):  # type: ignore[misc]
+        def __init__(self) -> None:
+            super().__init__()
+            self.gru = torch.nn.GRU(n_in, hidden, batch_first=True)
+            self.head = torch.nn.Linear(hidden, n_out)
+
+        def forward(self, x: Any) -> Any:
+            states, _ = self.gru(x)
+            return self.head(states)
+
+    return Net()
