@@ -130,8 +130,17 @@ def _iterate(setting: Setting, current: GreyBoxFit, start: KeystrokeModel, setti
             task.advance(note=f"{e.label} (joint)")
     final = [refitted.get(e.label, e) for e in evaluated]
     verdicts = [_verdict(e, reference, rule, False) for e in final]
-    # Intervals (a central Jacobian and noise draws each) only where the rest of the rule holds.
-    verdicts = [_verdict(e, reference, rule, True) if _promising(v, rule) else v for e, v in zip(final, verdicts, strict=True)]
+    # Intervals (a central Jacobian and noise draws each) only where the rest of the rule holds,
+    # and only at an optimum: away from it the residuals still hold the misfit the fit was about
+    # to remove, and the sandwich covariance reads it as uncertainty of the effect's size.
+    for i, (e, v) in enumerate(zip(final, verdicts, strict=True)):
+        if not _promising(v, rule):
+            continue
+        if not e.fit.converged_:
+            assert e.spec is not None
+            e = search.evaluate(setting, search.converged(setting, e.fit), criterion, sigma_m, e.label, e.spec, e.joint)
+            final[i] = e
+        verdicts[i] = _verdict(e, reference, rule, True)
     accepted, judged = choose(verdicts, rule, explainable)
     chosen = next((e.fit for e in final if accepted is not None and e.label == accepted.label), None)
     after = None
