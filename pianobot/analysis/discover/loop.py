@@ -138,7 +138,9 @@ def _iterate(setting: Setting, current: GreyBoxFit, start: KeystrokeModel, setti
             continue
         if not e.fit.converged_:
             assert e.spec is not None
-            e = search.evaluate(setting, search.converged(setting, e.fit), criterion, sigma_m, e.label, e.spec, e.joint)
+            with progress.task(f"discover, iteration {index + 1}: {e.label} fitted to its optimum", total=None):
+                done = search.converged(setting, e.fit)
+            e = search.evaluate(setting, done, criterion, sigma_m, e.label, e.spec, e.joint)
             final[i] = e
         verdicts[i] = _verdict(e, reference, rule, True)
     accepted, judged = choose(verdicts, rule, explainable)
@@ -214,7 +216,9 @@ def _discover(batch: KeystrokeBatch, start: KeystrokeModel | None, settings: Set
         iterations.append(iteration)
         if chosen is None:
             break
-        current = search.converged(setting, chosen)
+        label = iteration.accepted.label if iteration.accepted else "the accepted model"
+        with progress.task(f"discover, iteration {index + 1}: {label} fitted to its optimum", total=None):
+            current = search.converged(setting, chosen)
     timings["candidates_s"] = time.perf_counter() - t0 - timings["base_fit_s"]
     held_final = GreyBoxFit(setting.held_drive, current.layout, channels=current.channels,
                             sigma=current.sigma).evaluate(current.theta_)
