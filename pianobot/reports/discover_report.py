@@ -15,7 +15,7 @@ import numpy as np
 import pandas as pd
 
 from pianobot.analysis.discover.gap import Gap
-from pianobot.analysis.discover.result import DiscoveryResult
+from pianobot.analysis.discover.result import DiscoveryResult, params_text
 from pianobot.reports.html import Section, figure_html, paragraph, table_html, write_page
 
 
@@ -28,12 +28,8 @@ def candidate_frame(result: DiscoveryResult, index: int) -> pd.DataFrame:
     """One iteration's candidate table."""
     rows = []
     for v in result.iterations[index].verdicts:
-        params = "; ".join(
-            f"{name.split('.', 1)[1]}={value:.4g}"
-            + (f" [{v.intervals[name][0]:.3g}, {v.intervals[name][1]:.3g}]" if name in v.intervals else "")
-            + (" (on bound)" if name in v.on_bounds else "")
-            for name, value in v.params.items())
-        rows.append({"candidate": v.label, "family": v.family, "parameters (SI, 95 % CI)": params or "(switch)",
+        params = params_text(v)
+        rows.append({"candidate": v.label, "family": v.family, "parameters (95 % CI)": params or "(switch)",
                      "ΔIC": round(v.delta_ic, 1), "held-out gap before": gap_cell(v.gap_before),
                      "after": gap_cell(v.gap_after), "shrink %": round(100 * v.shrink),
                      "consistent %": round(100 * v.consistency), "joint fit": "yes" if v.joint else "screened",

@@ -10,6 +10,7 @@ import pytest
 from pianobot.analysis.discover.candidates import candidates, family_of
 from pianobot.analysis.discover.decide import Rule, choose, something_to_explain, verdict
 from pianobot.analysis.discover.gap import Gap, consistency, score
+from pianobot.analysis.discover.result import params_text
 from pianobot.analysis.discover.sparse import (
     KeyState,
     outcome_proposals,
@@ -75,6 +76,18 @@ def test_rule_needs_every_condition_and_prefers_the_simpler() -> None:
     no_size = verdict("keybed/linear", "keybed", "linear", {"x": 1.0}, {}, (), 200.0, before, _gap(1e-5, [1e-5] * 6),
                       False, True)
     assert choose([no_size], rule, True)[0] is None
+
+
+def test_candidate_parameters_read_in_display_units_with_bounds_flagged() -> None:
+    before = _gap(1e-4, [1e-4] * 6)
+    v = verdict("keybed/linear", "keybed", "linear",
+                {"keybed.bed_depth_m": 0.0105, "finger_stiffening.stiffening_per_m": 80.0, "key_friction.friction_n": 0.5},
+                {"keybed.bed_depth_m": (0.010, 0.011)}, ("key_friction.friction_n",), 200.0, before,
+                _gap(1e-5, [1e-5] * 6), True, True)
+    text = params_text(v)
+    assert "bed_depth = 10.5 mm [10, 11]" in text  # lengths in mm, as every gap is
+    assert "stiffening = 0.08 1/mm" in text  # a rate per metre is not a length
+    assert "friction = 0.5 N (on bound)" in text
 
 
 def test_one_keystroke_cannot_carry_a_discovery() -> None:

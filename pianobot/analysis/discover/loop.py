@@ -130,8 +130,19 @@ def _iterate(setting: Setting, current: GreyBoxFit, start: KeystrokeModel, setti
             task.advance(note=f"{e.label} (joint)")
     final = [refitted.get(e.label, e) for e in evaluated]
     verdicts = [_verdict(e, reference, rule, False) for e in final]
-    # Intervals (a central Jacobian and noise draws each) only where the rest of the rule holds.
-    verdicts = [_verdict(e, reference, rule, True) if _promising(v, rule) else v for e, v in zip(final, verdicts, strict=True)]
+    # Intervals (a central Jacobian and noise draws each) only where the rest of the rule holds,
+    # and only at an optimum: away from it the residuals still hold the misfit the fit was about
+    # to remove, and the sandwich covariance reads it as uncertainty of the effect's size.
+    for i, (e, v) in enumerate(zip(final, verdicts, strict=True)):
+        if not _promising(v, rule):
+            continue
+        if not e.fit.converged_:
+            assert e.spec is not None
+            with progress.task(f"discover, iteration {index + 1}: {e.label} fitted to its optimum", total=None):
+                done = search.converged(setting, e.fit)
+            e = search.evaluate(setting, done, criterion, sigma_m, e.label, e.spec, e.joint)
+            final[i] = e
+        verdicts[i] = _verdict(e, reference, rule, True)
     accepted, judged = choose(verdicts, rule, explainable)
     chosen = next((e.fit for e in final if accepted is not None and e.label == accepted.label), None)
     after = None
@@ -205,7 +216,9 @@ def _discover(batch: KeystrokeBatch, start: KeystrokeModel | None, settings: Set
         iterations.append(iteration)
         if chosen is None:
             break
-        current = search.converged(setting, chosen)
+        label = iteration.accepted.label if iteration.accepted else "the accepted model"
+        with progress.task(f"discover, iteration {index + 1}: {label} fitted to its optimum", total=None):
+            current = search.converged(setting, chosen)
     timings["candidates_s"] = time.perf_counter() - t0 - timings["base_fit_s"]
     held_final = GreyBoxFit(setting.held_drive, current.layout, channels=current.channels,
                             sigma=current.sigma).evaluate(current.theta_)

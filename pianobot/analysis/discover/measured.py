@@ -175,9 +175,15 @@ def arm_checks(batch: KeystrokeBatch) -> list[Finding]:
         z = lag / se if se > 0 else math.inf
         lagging = lag > _MIN_DELAY_S and z > 3.0
         out.append(Finding("arm_lag", lag, (lag - 1.96 * se, lag + 1.96 * se), z * z, lagging,
-                           f"the measured arm starts {1e3 * lag:.1f} ± {1.96e3 * se:.1f} ms after the commanded start"
+                           f"the measured arm starts {_ms(lag)} ± {_ms(1.96 * se)} ms after the commanded start"
                            + ("" if lagging else " (no lag worth modelling)"), {"arm_lag_s": lag}))
     return out
+
+
+def _ms(seconds: float) -> str:
+    """A delay in ms to two significant decimals, never "-0.0" (a lag of -0.00002 s is none)."""
+    value = round(1e3 * seconds, 2)
+    return f"{value + 0.0:.2f}"
 
 
 def clock_check(batch: KeystrokeBatch) -> Finding | None:

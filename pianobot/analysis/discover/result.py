@@ -132,26 +132,26 @@ class DiscoveryResult:
         }
 
 
-def _params_text(v: Verdict) -> str:
+#: Display units of parameter-name suffixes (name suffix -> scale, unit); the first match wins.
+_DISPLAY_UNITS: tuple[tuple[str, float, str], ...] = (
+    ("_per_m", 1e-3, "1/mm"), ("_nspm", 1.0, "N·s/m"), ("_npm", 1.0, "N/m"), ("_mps", 1e3, "mm/s"),
+    ("_m", 1e3, "mm"), ("_s", 1e3, "ms"), ("_n", 1.0, "N"),
+)
+
+
+def params_text(v: Verdict) -> str:
+    """A candidate's parameters with 95 % intervals in display units (lengths in mm, times in ms,
+    speeds in mm/s, forces in N), the unit suffix dropped from the name, those that ended on a
+    bound flagged: one text for the decision line and the report's tables."""
     parts = []
     for name, value in v.params.items():
         lo, hi = v.intervals.get(name, (math.nan, math.nan))
         short = name.split(".", 1)[1]
         scale, unit = 1.0, ""
-        if short.endswith("_m"):
-            scale, unit = 1e3, " mm"
-        elif short.endswith("_s"):
-            scale, unit = 1e3, " ms"
-        elif short.endswith("_n"):
-            unit = " N"
-        elif short.endswith("_per_m"):
-            unit = " 1/m"
-        elif short.endswith("_npm"):
-            unit = " N/m"
-        elif short.endswith("_nspm"):
-            unit = " N·s/m"
-        elif short.endswith("_mps"):
-            scale, unit = 1e3, " mm/s"
+        for suffix, factor, label in _DISPLAY_UNITS:
+            if short.endswith(suffix):
+                short, scale, unit = short[: -len(suffix)], factor, " " + label
+                break
         ci = f" [{scale * lo:.3g}, {scale * hi:.3g}]" if math.isfinite(lo) and math.isfinite(hi) else ""
         flag = " (on bound)" if name in v.on_bounds else ""
         parts.append(f"{short} = {scale * value:.3g}{unit}{ci}{flag}")
@@ -162,7 +162,7 @@ def decision_line(result: DiscoveryResult) -> str:
     """One line per accepted effect: parameters with 95 % intervals, held-out gap before → after."""
     lines = []
     for v in result.accepted:
-        params = _params_text(v)
+        params = params_text(v)
         ratio = "to the noise floor" if not math.isfinite(v.ratio) else f"{v.ratio:.1f}×"
         lines.append(f"Missing effect: {v.label}" + (f" ({params})" if params else "")
                      + f"; held-out {v.gap_before.text()} → {v.gap_after.text()} ({ratio}); ΔIC {v.delta_ic:.0f}")
