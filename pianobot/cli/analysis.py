@@ -19,6 +19,7 @@ from pianobot.cli.common import (
     DataDir,
     JsonFlag,
     NoProgressFlag,
+    RunIds,
     command_progress,
     emit_json,
     output_console,
@@ -37,7 +38,6 @@ from pianobot.store import load_run
 # busy machine): each command imports only what it uses, after its progress line is up.
 
 PlotOption = Annotated[Path | None, typer.Option("--plot", help="Also write a figure here (PNG).")]
-RunIds = Annotated[list[str], typer.Argument(help="Run ids (or unique prefixes).")]
 
 
 def keystrokes_per_level(runs: list[str], data: Path, vacuum_kpa: float | None, fitted: int) -> dict[float, int]:

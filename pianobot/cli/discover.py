@@ -28,7 +28,8 @@ from pianobot.cli.common import (
 from pianobot.executor import ExecutorSettings
 from pianobot.reports.discover_report import build_discover_report, gap_cell
 
-RunIds = Annotated[
+#: discover needs what the runs measured: mocap trajectories, MIDI outcomes, or both.
+RecordedRunIds = Annotated[
     list[str], typer.Argument(help="Run ids (or unique prefixes) with mocap and/or MIDI.")
 ]
 
@@ -75,7 +76,7 @@ def register(app: typer.Typer) -> None:
 
     @app.command()
     def discover(
-        runs: RunIds,
+        runs: RecordedRunIds,
         data: DataDir = DEFAULT_DATA,
         json_out: JsonFlag = False,
         model: Annotated[

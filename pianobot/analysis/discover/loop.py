@@ -32,10 +32,16 @@ from pianobot.analysis.discover import search
 from pianobot.analysis.discover.candidates import CandidateSpec, candidates, size_params
 from pianobot.analysis.discover.decide import Rule, Verdict, choose, something_to_explain, verdict
 from pianobot.analysis.discover.localise import localise
-from pianobot.analysis.discover.measured import Finding, arm_checks, clock_check, readout_check
+from pianobot.analysis.discover.measured import (
+    MeasuredCheck,
+    arm_checks,
+    clock_check,
+    readout_check,
+)
 from pianobot.analysis.discover.result import DiscoveryResult, Iteration, verdict_text
 from pianobot.analysis.discover.search import Evaluated, Setting
 from pianobot.analysis.discover.sparse import Proposal, outcome_proposals, trajectory_proposals
+from pianobot.analysis.greybox.covariance import Z95
 from pianobot.analysis.greybox.fitter import GreyBoxFit
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
 from pianobot.analysis.greybox.pieces import Mapper, serial_map
@@ -43,8 +49,6 @@ from pianobot.analysis.greybox.split import holdout_indices
 from pianobot.analysis.identify.fit import rms_x2_m
 from pianobot.physics.model import KeystrokeModel
 from pianobot.progress import NO_PROGRESS, Progress
-
-Z95 = 1.959963984540054
 
 
 @dataclass(frozen=True)
@@ -166,7 +170,7 @@ def _residual_search(setting: Setting, fit: GreyBoxFit) -> tuple[Proposal, ...]:
     return outcome_proposals(batch.down_velocity_mps, batch.acceleration_mps2, batch.depth_m, batch.vacuum_kpa, residual)
 
 
-def _with_findings(model: KeystrokeModel, findings: Sequence[Finding]) -> KeystrokeModel:
+def _with_findings(model: KeystrokeModel, findings: Sequence[MeasuredCheck]) -> KeystrokeModel:
     """The model with the effects measured on the set-up switched on (they do not change what the
     measured-arm drive predicts, but a commanded press, as `play` sends, needs them)."""
     for f in findings:
@@ -193,7 +197,7 @@ def _discover(batch: KeystrokeBatch, start: KeystrokeModel | None, settings: Set
     if held_idx.size == 0:
         raise ValueError(f"cannot split {batch.n} keystrokes into training and held-out ones")
     setting = Setting.of(batch.subset(train_idx), batch.subset(held_idx))
-    findings: list[Finding] = []
+    findings: list[MeasuredCheck] = []
     if setting.mode == "trajectories":
         findings += arm_checks(batch)
         findings += [f for f in (clock_check(batch), readout_check(batch)) if f is not None]

@@ -24,7 +24,7 @@ import numpy as np
 import numpy.typing as npt
 
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
-from pianobot.analysis.greybox.prediction import Prediction, integration_step_s
+from pianobot.analysis.greybox.prediction import GROUP, SIM_STEP_S, Prediction, integration_step_s
 from pianobot.physics.model import KeystrokeModel
 from pianobot.physics.piano import PianoParams, on_velocity_from_speed
 from pianobot.physics.simulate import simulate_presses
@@ -33,12 +33,10 @@ from pianobot.physics.trajectory import Press, press_timing
 FloatArray = npt.NDArray[np.float64]
 
 OUT_DT_S = 1e-3
-SIM_STEP_S = 2e-4  # or less: `prediction.integration_step_s`
-#: Keystrokes per simulated block (the simulator's SIMD block).
-GROUP = 16
 #: Simulated past the arm's rise through the pressed depth: the key settles above release.
 RISE_MARGIN_M = 5e-3
-TAIL_S = 0.15
+#: Simulated past that, so the key rises through its release depth and the note-off registers.
+RELEASE_TAIL_S = 0.15
 
 
 def _presses(batch: KeystrokeBatch, acceleration_mps2: float | None) -> list[Press]:
@@ -49,7 +47,7 @@ def _cut_s(press: Press, profile: str, lag_s: float) -> float:
     """How long keystroke `press` must be simulated for its MIDI outcome."""
     tm = press_timing(press, "trapezoid" if profile == "trapezoid" else "ramp")
     rise = min(press.depth_m + RISE_MARGIN_M, tm.up.distance_m)
-    return float(tm.t_hold_end_s + tm.up.time_at_m(rise) + TAIL_S + lag_s)
+    return float(tm.t_hold_end_s + tm.up.time_at_m(rise) + RELEASE_TAIL_S + lag_s)
 
 
 def _first(mask: npt.NDArray[np.bool_]) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.bool_]]:
