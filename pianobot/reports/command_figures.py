@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 import pandas as pd
@@ -21,8 +21,6 @@ from matplotlib.figure import Figure
 from pianobot.errors import InputError
 from pianobot.physics.linear import frequency_response
 from pianobot.physics.msd import MSDParams
-from pianobot.physics.trajectory import Press
-from pianobot.physics.world import WorldKeystroke
 from pianobot.reports.style import (
     FULL_WIDTH_IN,
     label_axes,
@@ -32,6 +30,10 @@ from pianobot.reports.style import (
     style_axes,
 )
 from pianobot.spec.parameters import PREDICTOR_INPUTS
+
+if TYPE_CHECKING:  # the simulator is not loaded for the other commands' figures
+    from pianobot.physics.trajectory import Press
+    from pianobot.physics.world import WorldKeystroke
 
 #: More vacuum levels than this are too many panels: the most populated ones are shown.
 MAX_LEVEL_PANELS = 6
