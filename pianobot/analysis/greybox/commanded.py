@@ -18,7 +18,8 @@ are simulated in blocks of similar length.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -37,10 +38,6 @@ OUT_DT_S = 1e-3
 RISE_MARGIN_M = 5e-3
 #: Simulated past that, so the key rises through its release depth and the note-off registers.
 RELEASE_TAIL_S = 0.15
-
-
-def _presses(batch: KeystrokeBatch, acceleration_mps2: float | None) -> list[Press]:
-    return [batch.press(i, acceleration_mps2) for i in range(batch.n)]
 
 
 def _cut_s(press: Press, profile: str, lag_s: float) -> float:
@@ -103,6 +100,17 @@ class Commanded:
 
     batch: KeystrokeBatch
     out_dt_s: float = OUT_DT_S
+    # The presses of the last acceleration asked for: a fit varies the model far more often
+    # than the drive's acceleration, and a Press is immutable.
+    _last: list[Any] = field(default_factory=lambda: [None, None], init=False, repr=False, compare=False)
+
+    def presses(self, acceleration_mps2: float | None) -> list[Press]:
+        """The batch's commanded presses (`acceleration_mps2` where none is recorded)."""
+        key, presses = self._last
+        if presses is None or key != acceleration_mps2:
+            presses = [self.batch.press(i, acceleration_mps2) for i in range(self.batch.n)]
+            self._last[:] = [acceleration_mps2, presses]
+        return list(presses)
 
     @property
     def observed(self) -> KeystrokeBatch:
@@ -118,7 +126,7 @@ class Commanded:
         """The model's MIDI outcome for every keystroke of the batch."""
         batch = self.batch
         accel = (drive or {}).get("acceleration_mps2")
-        presses = _presses(batch, accel)
+        presses = self.presses(accel)
         lag = model.effects.value("arm_lag", "arm_lag_s", 0.0)
         cuts = np.array([_cut_s(p, model.arm_profile, lag) for p in presses])
         step_s = integration_step_s(model, batch.vacuum_kpa, SIM_STEP_S)
