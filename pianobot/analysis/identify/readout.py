@@ -136,5 +136,6 @@ def _line_rmse(speed: FloatArray, velocity: FloatArray) -> float:
     if ok.sum() < 2:
         return math.nan
     log_full = float(np.mean(np.log(speed[ok]) - np.log(velocity[ok] / 127.0)))
-    pred = np.clip(127.0 * speed[ok] / math.exp(log_full), 1.0, 127.0)
+    line = PianoParams(full_scale_speed_mps=math.exp(log_full), curve_exponent=1.0)
+    pred = on_velocity_from_speed(speed[ok], line, rounded=False)
     return float(np.sqrt(np.mean((pred - velocity[ok]) ** 2)))
