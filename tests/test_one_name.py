@@ -8,6 +8,7 @@ cases left to their owners; a new duplicate, or a known one spreading to another
 from __future__ import annotations
 
 import ast
+import re
 from collections import defaultdict
 from pathlib import Path
 
@@ -68,3 +69,38 @@ def test_the_names_this_issue_renamed_are_each_defined_once() -> None:
     found = _public_definitions()
     for name in ("Layout", "PLAN_COLUMNS", "format_duration", "ParamSpec", "MOTION_COLUMNS"):
         assert len(found[name]) == 1, (name, found[name])
+
+
+def _calls(name_set: set[str]) -> list[tuple[str, int, str, int]]:
+    """(module path under pianobot/, line, callee, positional args) of calls to the named classes."""
+    found = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        rel = path.relative_to(PACKAGE).as_posix()
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Call):
+                func = node.func
+                callee = func.id if isinstance(func, ast.Name) else func.attr if isinstance(func, ast.Attribute) else ""
+                if callee in name_set:
+                    found.append((rel, node.lineno, callee, len(node.args)))
+    return found
+
+
+def test_presses_and_trials_are_built_in_one_place() -> None:
+    """Outside physics/ (below plan's layer), every Press comes from `plan.trial.press_from`; a
+    Trial is built only in plan/, by name (its id, index and repeat, then keywords)."""
+    presses = [(rel, line) for rel, line, _, _ in _calls({"Press"})
+               if not rel.startswith("physics/") and rel != "plan/trial.py"]
+    assert not presses, f"build these with plan.trial.press_from: {presses}"
+    trials = [(rel, line, n) for rel, line, _, n in _calls({"Trial", "SequenceTrial"})
+              if rel not in ("plan/trial.py", "plan/expand.py") or n > 3]
+    assert not trials, f"build these with plan.trial.trial_from (parameters by name): {trials}"
+
+
+def test_the_velocity_curve_is_written_once() -> None:
+    """MIDI velocity = 127·g(speed) lives in physics/piano.py (`on_velocity_from_speed`) only."""
+    curve = re.compile(r"127(\.0)?\s*\*|\*\s*127\b")
+    found = [f"{path.relative_to(PACKAGE)}:{i}" for path in sorted(PACKAGE.rglob("*.py"))
+             if path.relative_to(PACKAGE).as_posix() != "physics/piano.py"
+             for i, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1)
+             if curve.search(line.split("#", 1)[0])]
+    assert not found, f"use physics.piano.on_velocity_from_speed: {found}"
