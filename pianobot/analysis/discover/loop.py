@@ -96,7 +96,10 @@ def _promising(v: Verdict, rule: Rule) -> bool:
 
 
 def _iterate(setting: Setting, current: GreyBoxFit, start: KeystrokeModel, settings: Settings, sigma_m: float,
-             index: int, progress: Progress, mapper: Mapper) -> tuple[Iteration, GreyBoxFit | None]:
+             index: int, progress: Progress, mapper: Mapper,
+             earlier: dict[str, dict[str, float]]) -> tuple[Iteration, GreyBoxFit | None]:
+    """One round of candidates against `current`. `earlier` maps a candidate's label to the
+    values it reached in the previous round (a start for this one); it is updated in place."""
     rule = settings.rule
     criterion = search.criterion_of(current)
     reference = search.evaluate(setting, current, criterion, sigma_m, "current", None)
@@ -112,7 +115,7 @@ def _iterate(setting: Setting, current: GreyBoxFit, start: KeystrokeModel, setti
     total = len(specs) + min(settings.joint_refits, len(specs))
     with progress.task(f"discover, iteration {index + 1}: candidate fits", total=total) as task:
         def screen_one(spec: CandidateSpec) -> Evaluated:
-            screened = search.screen(setting, current, spec)
+            screened = search.screen(setting, current, spec, earlier.get(spec.label))
             full = search.as_full(setting, current, spec, screened)
             return search.evaluate(setting, full, criterion, sigma_m, spec.label, spec, joint=False)
 
@@ -133,6 +136,9 @@ def _iterate(setting: Setting, current: GreyBoxFit, start: KeystrokeModel, setti
             refitted[e.label] = e
             task.advance(note=f"{e.label} (joint)")
     final = [refitted.get(e.label, e) for e in evaluated]
+    for e in final:
+        assert e.spec is not None
+        earlier[e.label] = {k: v for k, v in e.fit.params_.items() if k.split(".", 1)[0] in (e.spec.effect, "readout")}
     verdicts = [_verdict(e, reference, rule, False) for e in final]
     # Intervals (a central Jacobian and noise draws each) only where the rest of the rule holds,
     # and only at an optimum: away from it the residuals still hold the misfit the fit was about
@@ -210,8 +216,9 @@ def _discover(batch: KeystrokeBatch, start: KeystrokeModel | None, settings: Set
     current = base
     iterations: list[Iteration] = []
     unexplained: Proposal | None = None
+    earlier: dict[str, dict[str, float]] = {}
     for index in range(settings.max_iterations):
-        iteration, chosen = _iterate(setting, current, start, settings, sigma_m, index, progress, mapper)
+        iteration, chosen = _iterate(setting, current, start, settings, sigma_m, index, progress, mapper, earlier)
         if chosen is None:
             proposals = _residual_search(setting, current) if iteration.explainable else ()
             iteration = Iteration(iteration.index, iteration.gap_before, iteration.before, iteration.verdicts,

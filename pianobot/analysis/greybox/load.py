@@ -161,7 +161,10 @@ def load_keystrokes(run_ids: Sequence[str], data_dir: Path, *, x0_source: str = 
                                np.zeros(0), np.zeros((n, 0)), np.zeros((n, 0)), np.zeros((n, 0)),
                                distance_m=np.nan_to_num(_column(all_trials, "distance_m")))
         if not midi_recorded:
-            raise InputError("the runs have neither key trajectories nor MIDI outcomes", ",".join(run_ids))
+            silent = "n_note_on" in all_trials and bool((all_trials["n_note_on"] == 0).all())
+            raise InputError(f"every one of the {n} keystrokes stayed silent and no key was tracked: no on-velocity, "
+                             "hold or trajectory to compare with the model" if silent else
+                             "the runs have neither key trajectories nor MIDI outcomes", ",".join(run_ids))
     rows = all_trials.set_index("trial_id").loc[list(batch.trial_id)]
     notes: set[str] = set()
     if "distance_m" not in rows or rows["distance_m"].isna().any():
