@@ -159,26 +159,20 @@ def phase_timer() -> tuple[dict[str, float], Any]:
 
 
 def storage_floor(run_path: Path, trials: int, block: int = 128) -> dict[str, float]:
-    """What storing the run's sample rows costs alone: encode them as parts (one per `block`
-    trials' worth of rows) and compact them into one file, as the store does, from memory."""
-    import pyarrow as pa
+    """What storing the run's sample rows costs alone: encode them as the store does, one file
+    per `block` trials' worth of rows (ids as dictionaries), from memory."""
     import pyarrow.parquet as pq
 
     from pianobot.store import encode_part
-    from pianobot.store.layout import parquet_options
 
-    table = pq.read_table(run_path / "samples.parquet")
+    text = ["run_id", "trial_id", "source"]
+    folder = run_path / "samples"  # samples.parquet: a run of an older pianobot (a baseline)
+    table = pq.read_table(folder if folder.is_dir() else run_path / "samples.parquet", read_dictionary=text)
     per_part = max(1, table.num_rows * block // max(trials, 1))
 
     def store() -> None:
-        parts = [encode_part(table.slice(i, per_part).drop_columns(["run_id"]), "samples", "bench")
-                 for i in range(0, table.num_rows, per_part)]
-        out = pa.BufferOutputStream()
-        with pq.ParquetWriter(out, table.schema, **parquet_options(table.schema)) as writer:
-            for part in parts:
-                f = pq.ParquetFile(pa.BufferReader(part), read_dictionary=["run_id", "trial_id", "source"])
-                for g in range(f.num_row_groups):
-                    writer.write_table(f.read_row_group(g).cast(table.schema))
+        for i in range(0, table.num_rows, per_part):
+            encode_part(table.slice(i, per_part).drop_columns(["run_id"]), "samples", "bench")
 
     _, wall, cpu = _timed(store)
     return {"rows": table.num_rows, "trials_per_s_wall": trials / wall, "trials_per_s_cpu": trials / cpu}

@@ -34,7 +34,6 @@ KNOWN: dict[str, set[str]] = {
     "estimated_lab_time_s": {"plan.size", "play.warmup"},
     "SETTLE_S": {"physics.simulate", "play.warmup"},
     # issue 15: one tolerance with two values
-    "SAME_VACUUM_KPA": {"plan.labtime", "rig.station"},
     # a command and the figure it draws; two typer argument types of the same shape
     "bode": {"cli.model", "reports.figures"},
     "RunIds": {"cli.analysis", "cli.discover"},

@@ -9,10 +9,12 @@ What it does, file by file (`check_run` says which are damaged):
   of it); accepted only if it has the recorded checksum, or at least the same trial ids.
 - **a trials part** — restored from its copy in the journal (the bytes that were written).
 - **a samples or midi part** — its data is gone: the whole batch (its trials part too) goes
-  to quarantine, so its trials count as not done and a resume redoes them.
+  to quarantine, so its trials count as not done and a resume redoes them. In a finished run
+  (trials merged into trials.parquet, samples parts kept as written) the batch's trials and MIDI
+  are taken out of trials.parquet and midi.parquet instead (the old files to quarantine).
 - **trials.parquet** — rebuilt as parts from the journal's copies of every batch it held.
-- **samples.parquet or midi.parquet** — gone: the compacted tables go to quarantine and the
-  trials they held are redone (their samples or MIDI cannot be had otherwise).
+- **samples.parquet (older runs) or midi.parquet** — gone: the compacted tables go to
+  quarantine and the trials they held are redone (their samples or MIDI cannot be had otherwise).
 
 Nothing is deleted: damaged files move to `quarantine/<UTC time>/` under their own names. The
 journal gets a `repaired` event and run.json a `repairs` entry; a run that lost trials is
@@ -30,12 +32,14 @@ from pathlib import Path
 from typing import Any
 
 import pyarrow as pa
+import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 from pianobot.errors import InputError
 from pianobot.store.integrity import READ_ERRORS, Damage, RunHealth, check_run
 from pianobot.store.journal import Journal
 from pianobot.store.layout import (
+    COMPACTED_TABLES,
     TABLE_NAMES,
     RunPaths,
     encode_parquet,
@@ -46,7 +50,14 @@ from pianobot.store.layout import (
     write_json_atomic,
 )
 from pianobot.store.lock import RunLock
-from pianobot.store.records import META, REPAIRED, FileRecord, JournalIndex, index_journal
+from pianobot.store.records import (
+    COMPACTED,
+    META,
+    REPAIRED,
+    FileRecord,
+    JournalIndex,
+    index_journal,
+)
 from pianobot.store.schema import batches_of, with_metadata
 
 
@@ -281,7 +292,58 @@ class _Repair:
                         self._quarantine(parts[name][batch])
             record = self.index.parts.get(batch, {}).get("trials")
             self.report.trials_lost += record.rows if record is not None else 0
+        if quarantine_parts:
+            self._drop_from_compacted(batches)
         self.report.lost_batches = sorted(set(self.report.lost_batches) | batches)
+
+    def _drop_from_compacted(self, batches: set[int]) -> None:
+        """Take the trials (and MIDI) of lost batches out of trials.parquet and midi.parquet.
+
+        A finished run's samples parts outlive their trials parts (merged into trials.parquet):
+        when such a samples part is lost, its trials must stop counting as done, or a resume
+        would never redo them. Which trials a batch held: the journal's copy of its trials part.
+        The old files go to quarantine; the new ones are journalled before they replace them.
+        """
+        trials_file = self.paths.table("trials")
+        try:
+            held = batches_of(pq.read_schema(trials_file).metadata)
+        except FileNotFoundError:
+            return
+        except (*READ_ERRORS, TypeError):
+            return  # a damaged trials.parquet is repaired on its own (`_repair_compacted`)
+        lost = batches & held
+        if not lost:
+            return
+        ids: set[str] = set()
+        for batch in sorted(lost):
+            copy = self.index.copy_of(batch)
+            if copy is None:
+                self.report.unrepairable.append(
+                    f"trials.parquet: the journal holds no copy of batch {batch}'s trials, so its "
+                    "trials cannot be marked as not done")
+                return
+            ids |= set(pq.read_table(pa.BufferReader(copy), columns=["trial_id"])
+                       .column("trial_id").to_pylist())
+        journal = Journal(self.paths.journal)
+        try:
+            for name in COMPACTED_TABLES:
+                path = self.paths.table(name)
+                if not path.is_file():
+                    continue
+                with pq.ParquetFile(path) as parquet:
+                    kept_batches = sorted(batches_of(parquet.schema_arrow.metadata) - lost)
+                    table = parquet.read()
+                keep = pc.invert(pc.is_in(table.column("trial_id"),
+                                          value_set=pa.array(sorted(ids), type=pa.string())))
+                data = encode_parquet(with_metadata(table.filter(keep), name, kept_batches))
+                rows = pq.read_metadata(pa.BufferReader(data)).num_rows
+                record = FileRecord.of_bytes(self.paths.relative(path), data, rows, tuple(kept_batches))
+                journal.write(COMPACTED, {"files": {name: record.to_dict()}})
+                self._quarantine(path)
+                write_bytes_atomic(path, data)
+                self.report.rebuilt.append(f"{name}.parquet (without batches {_listed(lost)})")
+        finally:
+            journal.close()
 
     # --- the record of it -------------------------------------------------------------------
 
@@ -324,6 +386,10 @@ class _Repair:
             journal.write(META, {"fields": fields})
         finally:
             journal.close()
+
+
+def _listed(batches: set[int]) -> str:
+    return ", ".join(str(b) for b in sorted(batches))
 
 
 def _plan_problem(meta: dict[str, Any]) -> str | None:

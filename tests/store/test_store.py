@@ -70,9 +70,13 @@ def test_round_trip_writes_layout_and_metadata(data_dir: Path) -> None:
         writer.finish("completed", lab_time_s=12.5)
         root = writer.path
     assert sorted(p.name for p in root.iterdir()) == [
-        "journal.jsonl", "midi.parquet", "parts", "plan.parquet", "run.json", "samples.parquet", "trials.parquet",
+        "journal.jsonl", "midi.parquet", "parts", "plan.parquet", "run.json", "samples", "trials.parquet",
     ]
     assert list((root / "parts").iterdir()) == []
+    # The samples are written once, one file per batch, and stay: a Parquet dataset folder.
+    assert sorted(p.name for p in (root / "samples").iterdir()) == [
+        "samples-000001.parquet", "samples-000002.parquet"]
+    assert len(pd.read_parquet(root / "samples")) == 30
     run = load_run(root.name, data_dir)
     meta = run.meta
     assert meta["status"] == "completed" and meta["kind"] == "sweep" and meta["seed"] == 7
@@ -88,7 +92,7 @@ def test_round_trip_writes_layout_and_metadata(data_dir: Path) -> None:
     assert run.samples["x2_m"].isna().all()
     assert list(run.midi["trial_id"]) == ids[:3]
     assert list(run.plan["trial_id"]) == ids
-    for name in ("trials", "samples", "midi", "plan"):
+    for name in ("trials", "samples/samples-000001", "midi", "plan"):
         metadata = pq.read_schema(root / f"{name}.parquet").metadata
         assert metadata[b"pianobot.schema_version"] == SCHEMA_VERSION.encode()
     assert [e["event"] for e in run.journal] == ["started"]
@@ -115,17 +119,18 @@ def test_uncommitted_and_temporary_parts_are_invisible(data_dir: Path) -> None:
     ids = ["a", "b"]
     writer = _create(data_dir, ids)
     writer.append(_trials(ids[:1]), _samples(ids[:1]))
-    parts = writer.path / "parts"
+    parts, samples = writer.path / "parts", writer.path / "samples"
     # A killed writer: the samples part of batch 2 landed, its trials part did not, and a
     # half-written temp file lies around.
-    shutil.copy(parts / "samples-000001.parquet", parts / "samples-000002.parquet")
+    shutil.copy(samples / "samples-000001.parquet", samples / "samples-000002.parquet")
     (parts / ".trials-000002.parquet.123.abc.tmp").write_bytes(b"PAR1 torn")
     run = load_run(writer.run_id, data_dir)
     assert len(run.samples) == 5 and list(run.trials["trial_id"]) == ["a"]
     writer.close()
     # Reopening (resume) removes the orphan and continues numbering after the committed batch.
     writer = RunWriter.reopen(data_dir, writer.run_id)
-    assert not (parts / "samples-000002.parquet").exists()
+    assert not (samples / "samples-000002.parquet").exists()
+    assert not (parts / ".trials-000002.parquet.123.abc.tmp").exists()
     assert writer.append(_trials(["b"]), _samples(["b"])) == 2
     writer.finish("completed")
     assert list(load_run(writer.run_id, data_dir).trials["trial_id"]) == ids
