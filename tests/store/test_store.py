@@ -156,6 +156,50 @@ def test_compaction_interrupted_before_parts_removed_counts_once(data_dir: Path)
     writer.close()
 
 
+def test_samples_are_written_once_and_stay_committed_after_compaction(data_dir: Path) -> None:
+    """Compaction merges trials and midi only: the samples files keep their bytes, count as
+    committed through trials.parquet, and a resumed run adds files beside them."""
+    from pianobot.store import check_run
+
+    ids = ["a", "b", "c"]
+    writer = _create(data_dir, ids)
+    writer.append(_trials(ids[:2]), _samples(ids[:2]), _midi(ids[:2]))
+    samples = writer.path / "samples" / "samples-000001.parquet"
+    written = samples.read_bytes()
+    writer.finish("stopped", reason="operator")
+    writer.close()
+    assert samples.read_bytes() == written  # not re-encoded
+    assert not list((writer.path / "parts").glob("trials-*.parquet"))
+    run = load_run(writer.run_id, data_dir)
+    assert len(run.samples) == 10 and check_run(run.paths).ok
+    # Resume: the orphan cleanup keeps the files of batches trials.parquet holds.
+    writer = RunWriter.reopen(data_dir, writer.run_id)
+    assert samples.exists()
+    writer.update_meta(status="running", reason=None)
+    writer.append(_trials(ids[2:]), _samples(ids[2:]), _midi(ids[2:]))
+    writer.finish("completed")
+    writer.close()
+    run = load_run(writer.run_id, data_dir)
+    assert sorted(set(run.samples["trial_id"])) == ids and len(run.samples) == 15
+    assert list(run.trials["trial_id"]) == ids and check_run(run.paths).ok
+
+
+def test_a_run_with_samples_parts_of_an_older_pianobot_reads_and_resumes(data_dir: Path) -> None:
+    """Samples parts in parts/ (where an older pianobot wrote them) are read and kept."""
+    writer = _create(data_dir, ["a", "b"])
+    writer.append(_trials(["a"]), _samples(["a"]))
+    writer.close()
+    old = writer.path / "parts" / "samples-000001.parquet"
+    os.replace(writer.path / "samples" / "samples-000001.parquet", old)
+    shutil.rmtree(writer.path / "samples")
+    writer = RunWriter.reopen(data_dir, writer.run_id)
+    writer.append(_trials(["b"]), _samples(["b"]))
+    writer.finish("completed")
+    writer.close()
+    run = load_run(writer.run_id, data_dir)
+    assert old.exists() and sorted(set(run.samples["trial_id"])) == ["a", "b"]
+
+
 def test_resume_after_finish_appends_and_recompacts(data_dir: Path) -> None:
     writer = _create(data_dir, ["a", "b"])
     writer.append(_trials(["a"]))
