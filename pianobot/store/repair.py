@@ -128,6 +128,7 @@ class _Repair:
     index: JournalIndex
     report: RepairReport
     folder: Path | None = None
+    dropped: set[int] = field(default_factory=set)  # lost batches whose parts were quarantined
 
     def run(self, damage: tuple[Damage, ...]) -> None:
         by_table: dict[str, list[Damage]] = {}
@@ -143,6 +144,7 @@ class _Repair:
             self._repair_batch(batch, [d for d in parts if d.batch == batch])
         if compacted:
             self._repair_compacted({d.table for d in compacted})
+        self._drop_from_compacted(self.dropped)  # once: quarantine keeps the files as they were
         self._record()
 
     # --- files -----------------------------------------------------------------------------
@@ -248,7 +250,7 @@ class _Repair:
         held = self._compacted_batches()
         if damaged == {"trials"} and held and all(self._has_copy(b) for b in held):
             # Every batch it held is in the journal: back to parts, compacted again at the end.
-            for batch in sorted(held):
+            for batch in sorted(held - self.dropped):  # a lost batch's trials stay lost
                 if not self.paths.part("trials", batch).exists():
                     copy = self.index.copy_of(batch)
                     assert copy is not None
@@ -293,55 +295,54 @@ class _Repair:
             record = self.index.parts.get(batch, {}).get("trials")
             self.report.trials_lost += record.rows if record is not None else 0
         if quarantine_parts:
-            self._drop_from_compacted(batches)
+            self.dropped |= batches
         self.report.lost_batches = sorted(set(self.report.lost_batches) | batches)
 
     def _drop_from_compacted(self, batches: set[int]) -> None:
         """Take the trials (and MIDI) of lost batches out of trials.parquet and midi.parquet.
 
-        A finished run's samples parts outlive their trials parts (merged into trials.parquet):
-        when such a samples part is lost, its trials must stop counting as done, or a resume
-        would never redo them. Which trials a batch held: the journal's copy of its trials part.
-        The old files go to quarantine; the new ones are journalled before they replace them.
+        A finished run's samples files outlive their trials parts (merged into trials.parquet):
+        when such a file is lost, its trials must stop counting as done, or a resume would never
+        redo them (nor may their MIDI stay, or a redo would double it). Which trials a batch
+        held: the journal's copy of its trials part. The old files go to quarantine; the new
+        ones are journalled before they replace them.
         """
-        trials_file = self.paths.table("trials")
-        try:
-            held = batches_of(pq.read_schema(trials_file).metadata)
-        except FileNotFoundError:
+        if not batches:
             return
-        except (*READ_ERRORS, TypeError):
-            return  # a damaged trials.parquet is repaired on its own (`_repair_compacted`)
-        lost = batches & held
-        if not lost:
-            return
+        rewrites: list[tuple[str, Path, set[int]]] = []
+        for name in COMPACTED_TABLES:
+            path = self.paths.table(name)
+            try:
+                held = batches_of(pq.read_schema(path).metadata)
+            except (*READ_ERRORS, TypeError):
+                continue  # absent, or damaged and repaired on its own (`_repair_compacted`)
+            if held & batches:
+                rewrites.append((name, path, held))
+        lost = set().union(*(held & batches for _, _, held in rewrites))
         ids: set[str] = set()
         for batch in sorted(lost):
             copy = self.index.copy_of(batch)
             if copy is None:
                 self.report.unrepairable.append(
-                    f"trials.parquet: the journal holds no copy of batch {batch}'s trials, so its "
-                    "trials cannot be marked as not done")
+                    f"trials.parquet: the journal holds no copy of batch {batch}'s trials, so they "
+                    "cannot be marked as not done")
                 return
             ids |= set(pq.read_table(pa.BufferReader(copy), columns=["trial_id"])
                        .column("trial_id").to_pylist())
         journal = Journal(self.paths.journal)
         try:
-            for name in COMPACTED_TABLES:
-                path = self.paths.table(name)
-                if not path.is_file():
-                    continue
-                with pq.ParquetFile(path) as parquet:
-                    kept_batches = sorted(batches_of(parquet.schema_arrow.metadata) - lost)
-                    table = parquet.read()
-                keep = pc.invert(pc.is_in(table.column("trial_id"),
+            for name, path, held in rewrites:
+                table = pq.read_table(path)
+                keep = pc.invert(pc.is_in(table.column("trial_id").cast(pa.string()),
                                           value_set=pa.array(sorted(ids), type=pa.string())))
+                kept_batches = sorted(held - batches)
                 data = encode_parquet(with_metadata(table.filter(keep), name, kept_batches))
                 rows = pq.read_metadata(pa.BufferReader(data)).num_rows
                 record = FileRecord.of_bytes(self.paths.relative(path), data, rows, tuple(kept_batches))
                 journal.write(COMPACTED, {"files": {name: record.to_dict()}})
                 self._quarantine(path)
                 write_bytes_atomic(path, data)
-                self.report.rebuilt.append(f"{name}.parquet (without batches {_listed(lost)})")
+                self.report.rebuilt.append(f"{name}.parquet (without batches {_listed(held & batches)})")
         finally:
             journal.close()
 

@@ -200,6 +200,43 @@ def test_a_run_with_samples_parts_of_an_older_pianobot_reads_and_resumes(data_di
     assert old.exists() and sorted(set(run.samples["trial_id"])) == ["a", "b"]
 
 
+def test_repair_of_a_finished_run_takes_out_the_trials_whose_samples_were_lost(data_dir: Path) -> None:
+    """Two damaged samples files of a compacted run: their trials and MIDI leave trials.parquet
+    and midi.parquet (the originals kept in quarantine, once), and a resume redoes them."""
+    from pianobot.store import check_run
+    from pianobot.store.repair import repair_run
+
+    ids = ["a", "b", "c", "d"]
+    writer = _create(data_dir, ids)
+    for batch in (ids[:2], ids[2:3], ids[3:]):
+        writer.append(_trials(batch), _samples(batch), _midi(batch))
+    writer.finish("completed")
+    writer.close()
+    root = writer.path
+    original = {name: (root / f"{name}.parquet").read_bytes() for name in ("trials", "midi")}
+    for batch in (1, 3):
+        part = root / "samples" / f"samples-{batch:06d}.parquet"
+        part.write_bytes(part.read_bytes()[:100])
+    report = repair_run(RunPaths(root))
+    assert report.ok and report.lost_batches == [1, 3] and report.trials_lost == 3
+    run = load_run(root.name, data_dir)
+    assert run.status == "interrupted"
+    assert list(run.trials["trial_id"]) == ["c"] and list(run.midi["trial_id"]) == ["c"]
+    assert set(run.samples["trial_id"]) == {"c"}
+    for name, data in original.items():
+        (kept,) = (root / "quarantine").rglob(f"{name}.parquet")
+        assert kept.read_bytes() == data
+    writer = RunWriter.reopen(data_dir, root.name)
+    lost = ["a", "b", "d"]
+    writer.append(_trials(lost), _samples(lost), _midi(lost))
+    writer.finish("completed")
+    writer.close()
+    run = load_run(root.name, data_dir)
+    assert sorted(run.trials["trial_id"]) == ids and sorted(run.midi["trial_id"]) == ids
+    assert run.samples.groupby("trial_id").size().to_dict() == dict.fromkeys(ids, 5)
+    assert check_run(run.paths).ok
+
+
 def test_resume_after_finish_appends_and_recompacts(data_dir: Path) -> None:
     writer = _create(data_dir, ["a", "b"])
     writer.append(_trials(["a"]))
