@@ -26,6 +26,7 @@ from pianobot.store.layout import (
     RunPaths,
     check_data_dir,
     encode_parquet,
+    fsync_dir,
     git_commit,
     new_run_id,
     parquet_options,
@@ -242,7 +243,9 @@ class RunWriter:
     def _samples_folder(self) -> None:
         """samples/ exists (a run an older pianobot started has none until it is resumed)."""
         if not self._has_samples_folder:
-            self.paths.samples.mkdir(exist_ok=True)
+            if not self.paths.samples.is_dir():
+                self.paths.samples.mkdir()
+                fsync_dir(self.paths.root)  # the folder's entry is as durable as the files in it
             self._has_samples_folder = True
 
     def replace_plan(self, plan: pd.DataFrame) -> None:
