@@ -25,8 +25,6 @@ KNOWN: dict[str, set[str]] = {
     "StrokeTable": {"analysis.sequence.strokes", "play.strokes"},
     "estimated_lab_time_s": {"plan.size", "play.warmup"},
     "SETTLE_S": {"physics.simulate", "play.warmup"},
-    # issue 15: one tolerance with two values
-    "SAME_VACUUM_KPA": {"plan.labtime", "rig.station"},
 }
 
 

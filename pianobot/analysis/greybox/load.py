@@ -42,8 +42,9 @@ class Loaded:
 
 def _file_hash(path: Path) -> str:
     digest = hashlib.sha256()
-    for name in ("trials.parquet", "samples.parquet"):
-        file = path / name
+    # A run's samples are samples/ (one file per batch; samples.parquet in older runs).
+    files = [path / "trials.parquet", path / "samples.parquet", *sorted((path / "samples").glob("*.parquet"))]
+    for file in files:
         if file.is_file():
             digest.update(file.read_bytes())
     return digest.hexdigest()
