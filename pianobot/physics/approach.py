@@ -34,7 +34,7 @@ Everything works on columns, so a plan of a million trials is planned in one pas
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import numpy.typing as npt
@@ -98,12 +98,9 @@ def fast_press(press: Press, settings: ApproachSettings) -> Press:
     """`press` as a two-segment press (its fast moves planned), or unchanged if none is exact."""
     moves = plan_fast_moves(press.distance_m, press.depth_m, press.down_velocity_mps,
                             press.up_velocity_mps, press.acceleration_mps2, settings)
-    return Press(
-        press.distance_m, press.depth_m, press.down_velocity_mps, press.up_velocity_mps,
-        press.acceleration_mps2, press.hold_s,
-        approach_m=float(moves.approach_m[0]), retract_m=float(moves.retract_m[0]),
-        travel_velocity_mps=settings.velocity_mps,
-        travel_acceleration_mps2=settings.acceleration_mps2,
+    return replace(
+        press, approach_m=float(moves.approach_m[0]), retract_m=float(moves.retract_m[0]),
+        travel_velocity_mps=settings.velocity_mps, travel_acceleration_mps2=settings.acceleration_mps2,
     )
 
 
