@@ -27,12 +27,6 @@ KNOWN: dict[str, set[str]] = {
     "Z95": {"analysis.discover.loop", "analysis.identify.fit", "analysis.identify.static_stiffness"},
     "base_fit": {"analysis.discover.search", "analysis.identify.fit"},
     "TAIL_S": {"analysis.greybox.commanded", "play.perform"},
-    # issue 16: play's finger literal, the sequence model's table of strokes, the warm-up's lab time
-    "FINGERS": {"play.session", "spec.parameters"},
-    "Finger": {"play.settings", "spec.parameters"},
-    "StrokeTable": {"analysis.sequence.strokes", "play.strokes"},
-    "estimated_lab_time_s": {"plan.size", "play.warmup"},
-    "SETTLE_S": {"physics.simulate", "play.warmup"},
     # issue 15: one tolerance with two values
     "SAME_VACUUM_KPA": {"plan.labtime", "rig.station"},
     # a command and the figure it draws; two typer argument types of the same shape

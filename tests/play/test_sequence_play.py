@@ -17,7 +17,7 @@ import pytest
 from pianobot.analysis.sequence.evaluate import cross_validate_sequence
 from pianobot.analysis.sequence.files import save_sequence_model
 from pianobot.analysis.sequence.model import SequenceModel
-from pianobot.analysis.sequence.strokes import stroke_table
+from pianobot.analysis.sequence.strokes import stroke_sequences
 from pianobot.io.midifile import Note, write_song
 from pianobot.play import play_song
 from pianobot.play.context import SongContext
@@ -46,7 +46,7 @@ def _repeat_world(n_sequences: int, length: int, seed: int = 0) -> pd.DataFrame:
 
 @pytest.fixture(scope="module")
 def sequence_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    table = stroke_table(_repeat_world(60, 10))
+    table = stroke_sequences(_repeat_world(60, 10))
     cv = cross_validate_sequence(table, ks=(0, 1), per_note=(), folds=3, workers=1)
     folder = tmp_path_factory.mktemp("sequence")
     return save_sequence_model(SequenceModel(1).fit(table), folder / "repeats.json", cv=cv, runs=["repeat-world"])

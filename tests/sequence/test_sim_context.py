@@ -8,7 +8,7 @@ import pytest
 
 from pianobot.analysis.sequence.collect import random_sequences
 from pianobot.analysis.sequence.evaluate import cross_validate_sequence
-from pianobot.analysis.sequence.strokes import stroke_table
+from pianobot.analysis.sequence.strokes import stroke_sequences
 from tests.sequence.sim_world import context_world_trials
 
 
@@ -16,7 +16,7 @@ from tests.sequence.sim_world import context_world_trials
 def test_sequence_model_beats_the_per_note_model_on_held_out_sequences() -> None:
     trials = context_world_trials(36)
     assert trials["status"].eq("ok").mean() > 0.9
-    cv = cross_validate_sequence(stroke_table(trials), ks=(2,), per_note=("gp",), folds=4, workers=1)
+    cv = cross_validate_sequence(stroke_sequences(trials), ks=(2,), per_note=("gp",), folds=4, workers=1)
     rows = cv.set_index("model")
     per_note = rows.loc["per-note gp", "on_velocity_rmse"]
     context = rows.loc["sequence k=2", "on_velocity_rmse"]

@@ -27,7 +27,7 @@ from sklearn.model_selection import GroupKFold
 from threadpoolctl import threadpool_limits
 
 from pianobot.analysis.sequence.context import OUTCOMES, feature_names, features
-from pianobot.analysis.sequence.strokes import TARGETS, StrokeTable
+from pianobot.analysis.sequence.strokes import TARGETS, StrokeSequences
 from pianobot.errors import InputError
 from pianobot.spec.parameters import PARAMETERS
 
@@ -115,7 +115,7 @@ class SequenceModel:
         self.k = k
         self.seed = seed
 
-    def fit(self, table: StrokeTable) -> SequenceModel:
+    def fit(self, table: StrokeSequences) -> SequenceModel:
         """Fit both stages on the strokes of `table`.
 
         Raises:
@@ -126,7 +126,7 @@ class SequenceModel:
         with threadpool_limits(1):
             return self._fit(table)
 
-    def _fit(self, table: StrokeTable) -> SequenceModel:
+    def _fit(self, table: StrokeSequences) -> SequenceModel:
         frame = table.frame
         if int(np.isfinite(frame["on_velocity"]).sum()) < MIN_TARGET_ROWS:
             raise InputError(f"fewer than {MIN_TARGET_ROWS} sounded strokes: cannot fit a sequence model",
@@ -150,7 +150,7 @@ class SequenceModel:
             self.contexts_ = X[np.sort(pick), len(self.controls_) + 1:]
         return self
 
-    def _cross_fitted_base(self, own: FloatArray, table: StrokeTable) -> FloatArray:
+    def _cross_fitted_base(self, own: FloatArray, table: StrokeSequences) -> FloatArray:
         """Context-free on-velocity of each training stroke from a model that never saw its sequence."""
         groups = table.groups
         folds = min(RESIDUAL_FOLDS, int(np.unique(groups).size))
@@ -170,7 +170,7 @@ class SequenceModel:
         if not hasattr(self, "base_"):
             raise RuntimeError("SequenceModel is not fitted; call fit first")
 
-    def predict(self, table: StrokeTable) -> pd.DataFrame:
+    def predict(self, table: StrokeSequences) -> pd.DataFrame:
         """Each stroke's predicted outcome given its observed predecessors.
 
         Columns: `TARGETS` and `p_silent`, one row per stroke of `table` (same order).

@@ -22,7 +22,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
-from pianobot.analysis.sequence.strokes import TARGETS, StrokeTable
+from pianobot.analysis.sequence.strokes import TARGETS, StrokeSequences
 from pianobot.errors import InputError
 
 FloatArray = npt.NDArray[np.float64]
@@ -68,7 +68,7 @@ class RnnSequenceModel:
     def __init__(self, seed: int = 0, hidden: int = HIDDEN, epochs: int = EPOCHS) -> None:
         self.seed, self.hidden, self.epochs = seed, hidden, epochs
 
-    def _tensor(self, table: StrokeTable, values: FloatArray) -> tuple[Any, FloatArray]:
+    def _tensor(self, table: StrokeSequences, values: FloatArray) -> tuple[Any, FloatArray]:
         """Pad per sequence: (n_sequences, longest, features) and each stroke's (sequence, step)."""
         torch = require_torch()
         seq = table.frame["sequence"].to_numpy()
@@ -78,7 +78,7 @@ class RnnSequenceModel:
         out[position, step] = values
         return torch.from_numpy(out), np.column_stack([position, step])
 
-    def fit(self, table: StrokeTable) -> RnnSequenceModel:
+    def fit(self, table: StrokeSequences) -> RnnSequenceModel:
         torch = require_torch()
         torch.manual_seed(self.seed)
         torch.set_num_threads(1)  # a shared machine; a few thousand strokes gain nothing from more
@@ -103,7 +103,7 @@ class RnnSequenceModel:
             optimiser.step()
         return self
 
-    def predict(self, table: StrokeTable) -> pd.DataFrame:
+    def predict(self, table: StrokeSequences) -> pd.DataFrame:
         """Each stroke's predicted outcome given its observed predecessors (`TARGETS`, p_silent)."""
         torch = require_torch()
         if not hasattr(self, "net_"):
