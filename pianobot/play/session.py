@@ -269,6 +269,8 @@ def play_song(
             rows = pd.concat([survey, mapped], ignore_index=True)
             warm = fit_warmup(rows, plan.geometry, lab_time_s=survey_s + mapped_s, seed=performer.seed,  # type: ignore[arg-type]
                               survey=survey_size(strokes))
+            if context is not None:
+                context = context.calibrated_on(rows)
             tables = stroke_tables(warm.predictor, settings, rig_spec, warm.geometry, levels=warm.levels_kpa,
                                    speed_ranges=warm.speed_ranges_mps)
             plan = plan_model(line.notes, warm.predictor, settings, rig_spec, dynamics=mode, tables=tables,
