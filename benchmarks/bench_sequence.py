@@ -10,7 +10,8 @@
    change against k = 0, per error.
 2. The simulated world where context matters (own-world suite, reported apart): sequence-mode
    strokes on a `World` whose finger stiffness drifts by up to 30 % between sequences and stays
-   within one; per-note GP against the sequence model on held-out sequences.
+   within one; per-note GP against the sequence model (and the GRU, with PyTorch) on held-out
+   sequences.
 3. Fit cost: wall time of fitting the sequence model (k = 2) and the per-note GP on all strokes of
    the log in the same run, as a ratio.
 
@@ -86,7 +87,8 @@ def sim_world(n_sequences: int, ks: tuple[int, ...]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for per_sequence in (False, True):
         trials = context_world_trials(n_sequences, stiffness_per_sequence=per_sequence)
-        cv = cross_validate_sequence(stroke_sequences(trials), ks=ks, per_note=("gp",), folds=4, workers=1)
+        cv = cross_validate_sequence(stroke_sequences(trials), ks=ks, per_note=("gp",), folds=4, workers=1,
+                                     rnn=_has_torch())
         out["context world" if per_sequence else "default (no state between strokes)"] = _records(cv)
     return out
 
