@@ -188,7 +188,7 @@ def _truncate(path: Path) -> None:
 
 
 def _first(run: Path, table: str) -> Path:
-    return sorted((run / "parts").glob(f"{table}-*.parquet"))[0]
+    return sorted((run / ("samples" if table == "samples" else "parts")).glob(f"{table}-*.parquet"))[0]
 
 
 def damaged(kind: str, command: str) -> Callable[[Path, Path], list[str]]:

@@ -52,3 +52,11 @@ def test_the_main_concepts_of_the_issue_each_have_a_row() -> None:
     concepts = " ".join(row[0] for row in _rows())
     for word in ("parameter", "press", "trial", "keystroke", "model", "predictor", "effect", "phase"):
         assert word in concepts, word
+
+
+def test_every_module_says_what_it_holds() -> None:
+    """A module's docstring is where a reader who opened the wrong file learns where they are."""
+    package = REPO / "pianobot"
+    silent = [str(p.relative_to(REPO)) for p in sorted(package.rglob("*.py"))
+              if not (ast.get_docstring(ast.parse(p.read_text(encoding="utf-8"))) or "").strip()]
+    assert not silent, f"modules without a docstring: {silent}"

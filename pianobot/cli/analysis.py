@@ -19,6 +19,8 @@ from pianobot.cli.common import (
     DataDir,
     JsonFlag,
     NoProgressFlag,
+    PressesOption,
+    RunIds,
     command_progress,
     emit_json,
     output_console,
@@ -37,7 +39,6 @@ from pianobot.store import load_run
 # busy machine): each command imports only what it uses, after its progress line is up.
 
 PlotOption = Annotated[Path | None, typer.Option("--plot", help="Also write a figure here (PNG).")]
-RunIds = Annotated[list[str], typer.Argument(help="Run ids (or unique prefixes).")]
 
 
 def keystrokes_per_level(runs: list[str], data: Path, vacuum_kpa: float | None, fitted: int) -> dict[float, int]:
@@ -70,9 +71,7 @@ def register(app: typer.Typer) -> None:
         force_log: Annotated[list[str] | None, typer.Option(help="P=FILE or a folder of P.txt force logs.")] = None,
         compression_m: Annotated[float, typer.Option(help="Compression of the force-log presses.")] = STUDY_COMPRESSION_M,
         plot: PlotOption = None,
-        presses: Annotated[Path | None, typer.Option(
-            "--presses", help="CSV of the commanded presses (t_start_s, speeds, acceleration, depth, distance, "
-                              "hold) for runs that do not record them, e.g. an imported Motive take.")] = None,
+        presses: PressesOption = None,
         workers: Annotated[int | None, typer.Option(
             "--workers", min=1, help="Processes for the bootstrap refits (default: the machine's cores; "
                                      "small work stays in this process).")] = None,

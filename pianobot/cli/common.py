@@ -37,6 +37,11 @@ JsonFlag = Annotated[
     bool, typer.Option("--json", help="Machine-readable JSON on stdout (no tables, no progress).")
 ]
 NoProgressFlag = Annotated[bool, typer.Option("--no-progress", help="No progress display on stderr.")]
+RunId = Annotated[str, typer.Argument(help="Run id or a unique prefix.")]
+RunIds = Annotated[list[str], typer.Argument(help="Run ids (or unique prefixes).")]
+PressesOption = Annotated[Path | None, typer.Option(
+    "--presses", help="CSV of the commanded presses (t_start_s, speeds, acceleration, depth, distance, "
+                      "hold) for runs that do not record them, e.g. an imported Motive take.")]
 DEFAULT_DATA = Path("data")
 PIPE_WIDTH = 200  # piped output is read by programs and pagers, not wrapped for a terminal
 _FLAG_VALUES = frozenset({"true", "false", "yes", "no", "on", "off"})

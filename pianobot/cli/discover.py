@@ -16,6 +16,7 @@ from pianobot.cli.common import (
     DataDir,
     JsonFlag,
     NoProgressFlag,
+    PressesOption,
     command_progress,
     emit_json,
     output_console,
@@ -28,7 +29,8 @@ from pianobot.cli.common import (
 from pianobot.executor import ExecutorSettings
 from pianobot.reports.discover_report import build_discover_report, gap_cell
 
-RunIds = Annotated[
+#: discover needs what the runs measured: mocap trajectories, MIDI outcomes, or both.
+RecordedRunIds = Annotated[
     list[str], typer.Argument(help="Run ids (or unique prefixes) with mocap and/or MIDI.")
 ]
 
@@ -75,7 +77,7 @@ def register(app: typer.Typer) -> None:
 
     @app.command()
     def discover(
-        runs: RunIds,
+        runs: RecordedRunIds,
         data: DataDir = DEFAULT_DATA,
         json_out: JsonFlag = False,
         model: Annotated[
@@ -91,9 +93,7 @@ def register(app: typer.Typer) -> None:
         vacuum_kpa: Annotated[
             float | None, typer.Option("--vacuum-kpa", help="Vacuum of runs that do not record it.")
         ] = None,
-        presses: Annotated[Path | None, typer.Option(
-            "--presses", help="CSV of the commanded presses (t_start_s, speeds, acceleration, depth, distance, "
-                              "hold) for runs that do not record them, e.g. an imported Motive take.")] = None,
+        presses: PressesOption = None,
         workers: Annotated[int | None, typer.Option(
             "--workers", min=1, help="Processes for the candidate fits (default: the machine's cores; "
                                      "small work stays in this process).")] = None,

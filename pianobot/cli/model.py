@@ -5,7 +5,6 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated, Any
 
-import numpy as np
 import typer
 
 from pianobot.cli.common import (
@@ -18,7 +17,7 @@ from pianobot.cli.common import (
     say_written,
 )
 from pianobot.errors import InputError
-from pianobot.physics.linear import frequency_response, peak_response
+from pianobot.physics.linear import peak_response
 from pianobot.physics.model import KeystrokeModel, load_model
 from pianobot.physics.trajectory import Press, press_timing
 from pianobot.physics.world import World, WorldKeystroke
@@ -43,7 +42,7 @@ def _vacuum(vacuum_kpa: float) -> float:
 
 
 @model_app.command("bode")
-def bode(
+def bode_command(
     vacuum_kpa: VacuumOpt = -60.0,
     model_file: Annotated[Path | None, typer.Option("--model", help="A model file (default: the study's).")] = None,
     plot: PlotOpt = None,
@@ -55,7 +54,11 @@ def bode(
     lp = model.msd.at(_vacuum(vacuum_kpa))
     peak_hz, gain = peak_response(lp)
     if plot is not None:
-        _plot_bode(lp, vacuum_kpa, peak_hz, plot)
+        from pianobot.reports.command_figures import save_png
+        from pianobot.reports.figures import bode
+
+        save_png(bode(model.msd, [vacuum_kpa], fingertip=True, title=f"Arm-to-key response at {vacuum_kpa:g} kPa"),
+                 plot)
     payload = {"vacuum_kpa": vacuum_kpa, "peak_hz": peak_hz, "peak_gain": gain,
                "model": str(model_file) if model_file else "study", "plot": str(plot) if plot else None}
     if json:
@@ -102,7 +105,9 @@ def simulate(
     sim = World.default(seed) if world == "default" else World.linear(seed)
     k = sim.keystroke(press, _vacuum(vacuum_kpa), key="cli")
     if plot is not None:
-        _plot_keystroke(k, press, vacuum_kpa, plot)
+        from pianobot.reports.command_figures import save_png, simulated_keystroke
+
+        save_png(simulated_keystroke(k, press, vacuum_kpa), plot)
     payload = _summary(k, world, vacuum_kpa, press)
     payload["plot"] = str(plot) if plot else None
     if json:
@@ -152,60 +157,3 @@ def _summary(k: WorldKeystroke, world: str, vacuum_kpa: float, press: Press) -> 
         "duration_s": k.duration_s,
         "midi": [e.__dict__ for e in k.midi],
     }
-
-
-def _plot_bode(lp: Any, vacuum_kpa: float, peak_hz: float, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    f = np.geomspace(0.1, 200.0, 800)
-    g2, _ = frequency_response(lp, f)
-    g1, _ = frequency_response(lp, f, output="x1")
-    fig, ax = plt.subplots(figsize=(6, 4))
-    ax.loglog(f, g2, label="|X2/X0| key")
-    ax.loglog(f, g1, label="|X1/X0| fingertip", alpha=0.7)
-    if peak_hz > 0:
-        ax.axvline(peak_hz, color="k", ls=":", label=f"peak {peak_hz:.2f} Hz")
-    ax.set(xlabel="frequency (Hz)", ylabel="gain", title=f"Arm-to-key response at {vacuum_kpa:g} kPa")
-    ax.legend()
-    ax.grid(True, which="both", alpha=0.3)
-    _save(fig, path)
-
-
-def _plot_keystroke(k: WorldKeystroke, press: Press, vacuum_kpa: float, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    t = k.truth_t_s - k.t0_s
-    fig, ax = plt.subplots(figsize=(8, 4.5))
-    ax.plot(t, k.truth_x0_m * 1e3, label="x0 arm")
-    ax.plot(t, k.truth_x1_m * 1e3, label="x1 fingertip")
-    ax.plot(t, (k.truth_x2_m + press.distance_m) * 1e3, label="x2 key (+ distance)")
-    for e in k.midi:
-        color = "tab:green" if e.type == "note_on" else "tab:red"
-        ax.axvline(e.t_s - k.t0_s, color=color, ls="--", alpha=0.8)
-        ax.text(e.t_s - k.t0_s, 0.97, f"{e.type} {e.velocity}", transform=ax.get_xaxis_transform(),
-                color=color, rotation=90, va="top", ha="right", fontsize=8)
-    ax.invert_yaxis()  # downward positive: draw "down" downwards
-    ax.set(xlabel="time since motion start (s)", ylabel="displacement, down (mm)",
-           title=f"Keystroke at {vacuum_kpa:g} kPa, {press.down_velocity_mps:g} m/s, depth {press.depth_m * 1e3:g} mm")
-    ax.legend(loc="lower right")
-    ax.grid(True, alpha=0.3)
-    _save(fig, path)
-
-
-def _save(fig: Any, path: Path) -> None:
-    import matplotlib.pyplot as plt
-
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fig.tight_layout()
-        fig.savefig(path, dpi=120)
-    except OSError as exc:
-        raise InputError(f"cannot write the figure ({exc.strerror})", str(path)) from None
-    finally:
-        plt.close(fig)

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Any
 
 import typer
 
@@ -16,6 +16,7 @@ from pianobot.cli.common import (
     Column,
     DataDir,
     JsonFlag,
+    RunId,
     emit_json,
     print_fields,
     print_table,
@@ -135,7 +136,7 @@ def register(app: typer.Typer) -> None:
 
     @runs_app.command("show")
     def show(
-        run_id: Annotated[str, typer.Argument(help="Run id or a unique prefix.")],
+        run_id: RunId,
         data: DataDir = DEFAULT_DATA,
         json_out: JsonFlag = False,
     ) -> None:
@@ -148,7 +149,7 @@ def register(app: typer.Typer) -> None:
 
     @runs_app.command("check")
     def check(
-        run_id: Annotated[str, typer.Argument(help="Run id or a unique prefix.")],
+        run_id: RunId,
         data: DataDir = DEFAULT_DATA,
         json_out: JsonFlag = False,
     ) -> None:
@@ -162,7 +163,7 @@ def register(app: typer.Typer) -> None:
 
     @runs_app.command("repair")
     def repair(
-        run_id: Annotated[str, typer.Argument(help="Run id or a unique prefix.")],
+        run_id: RunId,
         data: DataDir = DEFAULT_DATA,
         json_out: JsonFlag = False,
     ) -> None:

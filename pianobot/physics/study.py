@@ -53,7 +53,9 @@ def study_arm_input(
     t_stop_s = 2.0 * depth_m / velocity_mps + hold_s
     n = int(math.floor(t_stop_s / dt_s + 1e-9)) + 1
     t = np.arange(n, dtype=np.float64) * dt_s
-    press = Press(0.0, depth_m, velocity_mps, velocity_mps, math.inf, hold_s)
+    # The study's arm: on the key at the start, the same speed both ways, a ramp (no acceleration).
+    press = Press(distance_m=0.0, depth_m=depth_m, down_velocity_mps=velocity_mps, up_velocity_mps=velocity_mps,
+                  acceleration_mps2=math.inf, hold_s=hold_s)
     x0, _ = sample_presses([press], t, profile="ramp")
     return t, x0[0]
 

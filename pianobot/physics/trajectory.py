@@ -65,8 +65,9 @@ class Press:
 
     def as_specified(self) -> Press:
         """The same press with the spec's two moves only (no fast approach or retract)."""
-        return Press(self.distance_m, self.depth_m, self.down_velocity_mps, self.up_velocity_mps,
-                     self.acceleration_mps2, self.hold_s)
+        return Press(distance_m=self.distance_m, depth_m=self.depth_m, down_velocity_mps=self.down_velocity_mps,
+                     up_velocity_mps=self.up_velocity_mps, acceleration_mps2=self.acceleration_mps2,
+                     hold_s=self.hold_s)
 
 
 @dataclass(frozen=True)

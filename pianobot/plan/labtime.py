@@ -21,7 +21,8 @@ from pianobot.physics.trajectory import move_profile
 from pianobot.plan.trial import MOTION_COLUMNS, FloatArray, Trial, trial_columns
 from pianobot.spec import RigSpec
 
-# Vacuum levels closer than this are the same setting (the regulator's tolerance is ~2 kPa).
+# Vacuum levels closer than this are the same setting (the regulator's tolerance is ~2 kPa):
+# here, and for the station that decides when to wait for a new level (rig.station).
 SAME_VACUUM_KPA = 1e-6
 
 

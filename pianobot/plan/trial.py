@@ -136,12 +136,15 @@ def press_from(values: Mapping[Any, Any]) -> Press:
         ValueError: the down velocity or the depth is not given.
     """
     motion: dict[str, float] = {}
-    for name in PRESS_FIELDS:  # every field given (a trial, a table row): no defaults to look up
+    for name in PRESS_PARAMETERS:  # every parameter given (a trial, a table row): no defaults to look up
         value = values.get(name)
         if value is None or value != value:
-            motion = {name: float(v) for name, v in completed(values, PRESS_FIELDS).items()}
-            break
+            return Press(**{name: float(v) for name, v in completed(values, PRESS_FIELDS).items()})
         motion[name] = float(value)
+    for name in MOTION_COLUMNS:  # fast-move fields have no table default: Press's own when not given
+        value = values.get(name)
+        if value is not None and value == value:
+            motion[name] = float(value)
     return Press(**motion)
 
 

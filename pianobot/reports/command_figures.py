@@ -1,5 +1,5 @@
-"""Figures written by `--plot` on `identify`, `fit` and `import mocap`: one PNG that checks the
-result by eye.
+"""Figures written by `--plot` on `identify`, `fit`, `import mocap` and `model simulate`: one PNG
+that checks the result by eye (`model bode --plot` draws the report's `figures.bode`).
 
 Each figure is titled with what it shows and labelled with units (mm, mm/s), like the reports.
 """
@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 import pandas as pd
@@ -30,6 +30,10 @@ from pianobot.reports.style import (
     style_axes,
 )
 from pianobot.spec.parameters import PREDICTOR_INPUTS
+
+if TYPE_CHECKING:  # the simulator is not loaded for the other commands' figures
+    from pianobot.physics.trajectory import Press
+    from pianobot.physics.world import WorldKeystroke
 
 #: More vacuum levels than this are too many panels: the most populated ones are shown.
 MAX_LEVEL_PANELS = 6
@@ -212,4 +216,25 @@ def identified_model(params: MSDParams, k1_by_level: Mapping[float, tuple[float,
     gain.legend(fontsize=7)
     label_axes(gain, "frequency (Hz)", "key/arm amplitude |X2/X0| (mm/mm)")
     fig.suptitle(title, fontsize=10)
+    return fig
+
+
+def simulated_keystroke(k: WorldKeystroke, press: Press, vacuum_kpa: float) -> Figure:
+    """`model simulate --plot`: arm, fingertip and key of one simulated keystroke, downwards
+    positive, with its MIDI events marked."""
+    fig = new_figure(FULL_WIDTH_IN, 4.5)
+    ax = style_axes(fig.subplots())
+    t = k.truth_t_s - k.t0_s
+    ax.plot(t, k.truth_x0_m * 1e3, label="x0 arm")
+    ax.plot(t, k.truth_x1_m * 1e3, label="x1 fingertip")
+    ax.plot(t, (k.truth_x2_m + press.distance_m) * 1e3, label="x2 key (+ distance)")
+    for e in k.midi:
+        color = "tab:green" if e.type == "note_on" else "tab:red"
+        ax.axvline(e.t_s - k.t0_s, color=color, ls="--", alpha=0.8)
+        ax.text(e.t_s - k.t0_s, 0.97, f"{e.type} {e.velocity}", transform=ax.get_xaxis_transform(),
+                color=color, rotation=90, va="top", ha="right", fontsize=8)
+    ax.invert_yaxis()  # downward positive: draw "down" downwards
+    ax.set(xlabel="time since motion start (s)", ylabel="displacement, down (mm)",
+           title=f"Keystroke at {vacuum_kpa:g} kPa, {press.down_velocity_mps:g} m/s, depth {press.depth_m * 1e3:g} mm")
+    ax.legend(loc="lower right")
     return fig

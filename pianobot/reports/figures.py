@@ -197,8 +197,9 @@ def stages(t_s: FloatArray, x0: FloatArray, x1: FloatArray, x2: FloatArray,
     return fig
 
 
-def bode(params: MSDParams, levels_kpa: list[float]) -> Figure:
-    """|X2/X0| and phase of the model at the given vacuum levels, each resonance peak marked."""
+def bode(params: MSDParams, levels_kpa: list[float], *, fingertip: bool = False, title: str = "") -> Figure:
+    """|X2/X0| and phase of the model at the given vacuum levels, each resonance peak marked
+    (`fingertip`: the fingertip's |X1/X0| too, dashed). The report's figure and `model bode --plot`."""
     fig = new_figure(FULL_WIDTH_IN * 0.8, 5.0)
     mag, ph = fig.subplots(2, 1, sharex=True)
     style_axes(mag)
@@ -209,12 +210,17 @@ def bode(params: MSDParams, levels_kpa: list[float]) -> Figure:
         gain, phase = frequency_response(lp, f)
         label, peak_hz, peak_gain = resonance_label(lp, f"{p:g} kPa")
         mag.loglog(f, gain, color=f"C{i % 10}", label=label)
+        if fingertip:
+            gain1, _ = frequency_response(lp, f, output="x1")
+            mag.loglog(f, gain1, color=f"C{i % 10}", ls="--", alpha=0.7, label=f"{p:g} kPa: fingertip |X1/X0|")
         if math.isfinite(peak_hz):
             mag.plot([peak_hz], [peak_gain], "o", ms=4, color=f"C{i % 10}")
         ph.semilogx(f, np.degrees(phase), color=f"C{i % 10}")
-    mag.set_ylabel("key/arm amplitude |X2/X0| (mm/mm)")
+    mag.set_ylabel("key (fingertip)/arm amplitude (mm/mm)" if fingertip else "key/arm amplitude |X2/X0| (mm/mm)")
     label_axes(ph, "frequency (Hz)", "phase (°)")
     mag.legend(fontsize=7)
+    if title:
+        mag.set_title(title)
     return fig
 
 

@@ -31,6 +31,7 @@ from dataclasses import dataclass
 from typing import Any, Protocol
 
 from pianobot.physics.trajectory import Press, check_press, press_timing
+from pianobot.plan.labtime import SAME_VACUUM_KPA
 from pianobot.rig.errors import SafetyViolation
 from pianobot.rig.protocols import Arm, Clock, Keyboard, KeystrokeResult, Mocap, Trace, Vacuum
 
@@ -60,8 +61,8 @@ class TrialLike(Protocol):
 # world the keystroke's identity and to fire injected faults.
 BeforePress = Callable[[TrialLike, int], None]
 
-# Vacuum levels (kPa) and hover distances (m) closer than these are the same setting.
-SAME_VACUUM_KPA = 1e-9
+# Hover distances (m) closer than this are the same setting (vacuum levels: SAME_VACUUM_KPA,
+# the one tolerance the plan's lab time counts vacuum changes with too).
 SAME_DISTANCE_M = 1e-9
 
 

@@ -1,11 +1,18 @@
 """Where a run's files live, how run ids are made and found, and how its Parquet files are written.
 
     <data>/runs/<run_id>/
-      run.json  plan.parquet  journal.jsonl  parts/{trials,samples,midi}-NNNNNN.parquet
-      trials.parquet  samples.parquet  midi.parquet          (after compaction)
+      run.json  plan.parquet  journal.jsonl  parts/{trials,midi}-NNNNNN.parquet
+      samples/samples-NNNNNN.parquet                          (the samples, one file per batch)
+      trials.parquet  midi.parquet                            (after compaction)
 
 A part batch `NNNNNN` is committed by its trials part: the samples and midi parts of a batch are
 written first, so a reader (or a resume) ignores samples/midi parts whose trials part is missing.
+Compaction merges the small tables (trials, midi) into one file each; then a batch counts as
+committed when trials.parquet holds it. Samples, the bulk of a run, are written once: their parts
+are the stored samples, never re-encoded; samples/ is a Parquet dataset folder
+(`pd.read_parquet(run / "samples")`; a killed batch's file, not yet committed, is skipped by
+pianobot's readers and removed on resume). Runs of an older pianobot keep a compacted
+samples.parquet (and samples parts in parts/), which readers still join.
 """
 
 from __future__ import annotations
@@ -33,7 +40,9 @@ from pianobot.errors import InputError
 
 RUNS_FOLDER = "runs"
 QUARANTINE_FOLDER = "quarantine"
+SAMPLES_FOLDER = "samples"
 TABLE_NAMES = ("trials", "samples", "midi")
+COMPACTED_TABLES = ("trials", "midi")  # merged into one file each at the end of a run
 _PART_RE = re.compile(r"^(trials|samples|midi)-(\d{6})\.parquet$")
 
 
@@ -93,14 +102,26 @@ class RunPaths:
         """The compacted file of table `name`."""
         return self.root / f"{name}.parquet"
 
+    @property
+    def samples(self) -> Path:
+        """The folder of the samples parts: the run's samples, one Parquet file per batch."""
+        return self.root / SAMPLES_FOLDER
+
     def part(self, name: str, batch: int) -> Path:
-        return self.parts / f"{name}-{batch:06d}.parquet"
+        folder = self.samples if name == "samples" else self.parts
+        return folder / f"{name}-{batch:06d}.parquet"
 
     def part_batches(self) -> dict[str, dict[int, Path]]:
-        """Every finished part file, by table and batch number (temporary files are skipped)."""
+        """Every finished part file, by table and batch number (temporary files are skipped).
+
+        Samples parts live in samples/ (in parts/ for runs of an older pianobot)."""
         found: dict[str, dict[int, Path]] = {name: {} for name in TABLE_NAMES}
-        if self.parts.is_dir():
-            for entry in os.scandir(self.parts):
+        for folder in (self.parts, self.samples):
+            try:
+                entries = list(os.scandir(folder))
+            except FileNotFoundError:
+                continue
+            for entry in entries:
                 match = _PART_RE.match(entry.name)
                 if match:
                     found[match.group(1)][int(match.group(2))] = Path(entry.path)

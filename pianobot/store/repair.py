@@ -9,10 +9,12 @@ What it does, file by file (`check_run` says which are damaged):
   of it); accepted only if it has the recorded checksum, or at least the same trial ids.
 - **a trials part** — restored from its copy in the journal (the bytes that were written).
 - **a samples or midi part** — its data is gone: the whole batch (its trials part too) goes
-  to quarantine, so its trials count as not done and a resume redoes them.
+  to quarantine, so its trials count as not done and a resume redoes them. In a finished run
+  (trials merged into trials.parquet, samples parts kept as written) the batch's trials and MIDI
+  are taken out of trials.parquet and midi.parquet instead (the old files to quarantine).
 - **trials.parquet** — rebuilt as parts from the journal's copies of every batch it held.
-- **samples.parquet or midi.parquet** — gone: the compacted tables go to quarantine and the
-  trials they held are redone (their samples or MIDI cannot be had otherwise).
+- **samples.parquet (older runs) or midi.parquet** — gone: the compacted tables go to
+  quarantine and the trials they held are redone (their samples or MIDI cannot be had otherwise).
 
 Nothing is deleted: damaged files move to `quarantine/<UTC time>/` under their own names. The
 journal gets a `repaired` event and run.json a `repairs` entry; a run that lost trials is
@@ -30,12 +32,14 @@ from pathlib import Path
 from typing import Any
 
 import pyarrow as pa
+import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 from pianobot.errors import InputError
 from pianobot.store.integrity import READ_ERRORS, Damage, RunHealth, check_run
 from pianobot.store.journal import Journal
 from pianobot.store.layout import (
+    COMPACTED_TABLES,
     TABLE_NAMES,
     RunPaths,
     encode_parquet,
@@ -46,7 +50,14 @@ from pianobot.store.layout import (
     write_json_atomic,
 )
 from pianobot.store.lock import RunLock
-from pianobot.store.records import META, REPAIRED, FileRecord, JournalIndex, index_journal
+from pianobot.store.records import (
+    COMPACTED,
+    META,
+    REPAIRED,
+    FileRecord,
+    JournalIndex,
+    index_journal,
+)
 from pianobot.store.schema import batches_of, with_metadata
 
 
@@ -117,6 +128,7 @@ class _Repair:
     index: JournalIndex
     report: RepairReport
     folder: Path | None = None
+    dropped: set[int] = field(default_factory=set)  # lost batches whose parts were quarantined
 
     def run(self, damage: tuple[Damage, ...]) -> None:
         by_table: dict[str, list[Damage]] = {}
@@ -132,6 +144,7 @@ class _Repair:
             self._repair_batch(batch, [d for d in parts if d.batch == batch])
         if compacted:
             self._repair_compacted({d.table for d in compacted})
+        self._drop_from_compacted(self.dropped)  # once: quarantine keeps the files as they were
         self._record()
 
     # --- files -----------------------------------------------------------------------------
@@ -237,7 +250,7 @@ class _Repair:
         held = self._compacted_batches()
         if damaged == {"trials"} and held and all(self._has_copy(b) for b in held):
             # Every batch it held is in the journal: back to parts, compacted again at the end.
-            for batch in sorted(held):
+            for batch in sorted(held - self.dropped):  # a lost batch's trials stay lost
                 if not self.paths.part("trials", batch).exists():
                     copy = self.index.copy_of(batch)
                     assert copy is not None
@@ -281,7 +294,57 @@ class _Repair:
                         self._quarantine(parts[name][batch])
             record = self.index.parts.get(batch, {}).get("trials")
             self.report.trials_lost += record.rows if record is not None else 0
+        if quarantine_parts:
+            self.dropped |= batches
         self.report.lost_batches = sorted(set(self.report.lost_batches) | batches)
+
+    def _drop_from_compacted(self, batches: set[int]) -> None:
+        """Take the trials (and MIDI) of lost batches out of trials.parquet and midi.parquet.
+
+        A finished run's samples files outlive their trials parts (merged into trials.parquet):
+        when such a file is lost, its trials must stop counting as done, or a resume would never
+        redo them (nor may their MIDI stay, or a redo would double it). Which trials a batch
+        held: the journal's copy of its trials part. The old files go to quarantine; the new
+        ones are journalled before they replace them.
+        """
+        if not batches:
+            return
+        rewrites: list[tuple[str, Path, set[int]]] = []
+        for name in COMPACTED_TABLES:
+            path = self.paths.table(name)
+            try:
+                held = batches_of(pq.read_schema(path).metadata)
+            except (*READ_ERRORS, TypeError):
+                continue  # absent, or damaged and repaired on its own (`_repair_compacted`)
+            if held & batches:
+                rewrites.append((name, path, held))
+        lost = set().union(*(held & batches for _, _, held in rewrites))
+        ids: set[str] = set()
+        for batch in sorted(lost):
+            copy = self.index.copy_of(batch)
+            if copy is None:
+                self.report.unrepairable.append(
+                    f"trials.parquet: the journal holds no copy of batch {batch}'s trials, so they "
+                    "cannot be marked as not done")
+                return
+            ids |= set(pq.read_table(pa.BufferReader(copy), columns=["trial_id"])
+                       .column("trial_id").to_pylist())
+        journal = Journal(self.paths.journal)
+        try:
+            for name, path, held in rewrites:
+                table = pq.read_table(path)
+                keep = pc.invert(pc.is_in(table.column("trial_id").cast(pa.string()),
+                                          value_set=pa.array(sorted(ids), type=pa.string())))
+                kept_batches = sorted(held - batches)
+                data = encode_parquet(with_metadata(table.filter(keep), name, kept_batches))
+                rows = pq.read_metadata(pa.BufferReader(data)).num_rows
+                record = FileRecord.of_bytes(self.paths.relative(path), data, rows, tuple(kept_batches))
+                journal.write(COMPACTED, {"files": {name: record.to_dict()}})
+                self._quarantine(path)
+                write_bytes_atomic(path, data)
+                self.report.rebuilt.append(f"{name}.parquet (without batches {_listed(held & batches)})")
+        finally:
+            journal.close()
 
     # --- the record of it -------------------------------------------------------------------
 
@@ -324,6 +387,10 @@ class _Repair:
             journal.write(META, {"fields": fields})
         finally:
             journal.close()
+
+
+def _listed(batches: set[int]) -> str:
+    return ", ".join(str(b) for b in sorted(batches))
 
 
 def _plan_problem(meta: dict[str, Any]) -> str | None:

@@ -15,16 +15,23 @@ from pianobot.store.schema import TABLE_SCHEMAS, as_declared, batches_of, with_m
 _READ_ERRORS = (OSError, ValueError, pa.ArrowException)
 
 
-def committed_batches(paths: RunPaths) -> set[int]:
-    """Batches whose trials part (or a compacted trials file holding them) is on disk."""
+def committed_batches(paths: RunPaths, parts: dict[str, dict[int, Path]] | None = None) -> set[int]:
+    """Batches whose trials part (or a compacted trials file holding them) is on disk.
+
+    `parts`: the run's parts as just listed (`paths.part_batches()`). They are listed before
+    the compacted file is read: compaction replaces trials.parquet before it removes the trials
+    parts it merged, so a batch is seen committed in one or the other, never in neither.
+    """
+    listed = set((paths.part_batches() if parts is None else parts)["trials"])
     held: set[int] = set()
     compacted = paths.table("trials")
-    if compacted.is_file():
-        try:
-            held |= batches_of(pq.read_schema(compacted).metadata)
-        except _READ_ERRORS as exc:
-            raise _damaged(paths, compacted, exc) from None
-    return held | set(paths.part_batches()["trials"])
+    try:
+        held |= batches_of(pq.read_schema(compacted).metadata)
+    except FileNotFoundError:
+        pass
+    except _READ_ERRORS as exc:
+        raise _damaged(paths, compacted, exc) from None
+    return held | listed
 
 
 def _damaged(paths: RunPaths, path: Path, exc: BaseException) -> RunDamaged:
@@ -34,18 +41,18 @@ def _damaged(paths: RunPaths, path: Path, exc: BaseException) -> RunDamaged:
 
 def drop_orphan_parts(paths: RunPaths) -> list[Path]:
     """Remove what a killed writer left half-done: temp files, and samples/midi parts of a batch
-    whose trials part never landed.
+    whose trials part never landed (nor is in a compacted trials file).
 
     Only the run's writer calls this (it holds the run lock, so no temp file is still being
     written); readers simply skip such files.
     """
     removed: list[Path] = []
-    for folder in (paths.root, paths.parts):
+    for folder in (paths.root, paths.parts, paths.samples):
         for temp in folder.glob(".*.tmp"):
             temp.unlink(missing_ok=True)
             removed.append(temp)
     parts = paths.part_batches()
-    committed = set(parts["trials"])
+    committed = committed_batches(paths, parts)
     for name in ("samples", "midi"):
         for batch, path in parts[name].items():
             if batch not in committed:
@@ -58,7 +65,8 @@ def read_run_table(paths: RunPaths, name: str, columns: list[str] | None = None)
     """Table `name` of a run: the compacted file plus every committed part it does not hold.
 
     Safe while the writer is running or was killed: parts appear by atomic rename, a part batch
-    counts only once its trials part exists, and batches already compacted are not read twice.
+    counts only once its trials part exists (or trials.parquet holds it), and batches already
+    compacted are not read twice. A finished run's samples are its samples parts, as written.
 
     Raises:
         RunDamaged: a file is truncated or unreadable (one line naming it and the repair).
@@ -78,7 +86,8 @@ def _read_run_table(paths: RunPaths, name: str, columns: list[str] | None) -> pa
     if name not in TABLE_NAMES:
         raise ValueError(f"table must be one of {TABLE_NAMES}, got {name!r}")
     parts = paths.part_batches()
-    committed = set(parts["trials"])
+    # Samples parts outlive their trials parts (compaction merges only trials and midi).
+    committed = committed_batches(paths, parts) if name != "trials" else set(parts["trials"])
     tables: list[pa.Table] = []
     held: set[int] = set()
     compacted = paths.table(name)

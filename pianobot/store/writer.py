@@ -21,11 +21,12 @@ from pianobot.errors import InputError
 from pianobot.store.integrity import check_run
 from pianobot.store.journal import Journal
 from pianobot.store.layout import (
-    TABLE_NAMES,
+    COMPACTED_TABLES,
     RunDamaged,
     RunPaths,
     check_data_dir,
     encode_parquet,
+    fsync_dir,
     git_commit,
     new_run_id,
     parquet_options,
@@ -72,7 +73,8 @@ class RunWriter:
 
     Create with `RunWriter.create(...)` (a new run) or `RunWriter.reopen(...)` (resume). Each
     `append` writes one batch of parts atomically; `journal` appends an fsync'd line; `finish`
-    compacts the parts into one file per table and records the final status in run.json.
+    compacts the trials and midi parts into one file each (samples parts stay as written) and
+    records the final status in run.json.
     """
 
     def __init__(self, paths: RunPaths, *, fsync: bool = True) -> None:
@@ -85,6 +87,7 @@ class RunWriter:
         except BaseException:
             self._lock.release()
             raise
+        self._has_samples_folder = False
         # A batch number is never used twice, not even one a repair quarantined.
         self._next_batch = max(max(known, default=0), index_journal(paths.journal).max_batch) + 1
 
@@ -139,6 +142,7 @@ class RunWriter:
         plan: pd.DataFrame | None, fsync: bool,
     ) -> RunWriter:
         paths.parts.mkdir()
+        paths.samples.mkdir()
         now = utc_now()
         record: dict[str, Any] = {
             "run_id": paths.run_id,
@@ -201,6 +205,7 @@ class RunWriter:
             "trials": to_table(trials, "trials", self.run_id),
         }
         self._lock.verify()
+        self._samples_folder()
         batch = self._next_batch
         files: dict[str, FileRecord] = {}
         trials_bytes = b""
@@ -221,6 +226,7 @@ class RunWriter:
         if "trials" not in parts:
             raise ValueError("an encoded batch needs its trials part")
         self._lock.verify()  # the run is still ours (a parallel sweep's driver holds the lock)
+        self._samples_folder()
         batch = self._next_batch
         files: dict[str, FileRecord] = {}
         for name in ("samples", "midi", "trials"):
@@ -233,6 +239,14 @@ class RunWriter:
         self._next_batch += 1
         self._journal.write(PART, part_record(batch, files, parts["trials"]))
         return batch
+
+    def _samples_folder(self) -> None:
+        """samples/ exists (a run an older pianobot started has none until it is resumed)."""
+        if not self._has_samples_folder:
+            if not self.paths.samples.is_dir():
+                self.paths.samples.mkdir()
+                fsync_dir(self.paths.root)  # the folder's entry is as durable as the files in it
+            self._has_samples_folder = True
 
     def replace_plan(self, plan: pd.DataFrame) -> None:
         """Write a new plan.parquet (atomically) and record it: its rows and SHA-256 in run.json
@@ -288,7 +302,8 @@ class RunWriter:
         self.update_meta(status=status, reason=reason, end_utc=utc_now(), **fields)
 
     def compact(self) -> None:
-        """Merge committed parts into one file per table; parts are removed only afterwards.
+        """Merge committed trials and midi parts into one file each; parts are removed only
+        afterwards. Samples parts are the stored samples: written once, never re-encoded.
 
         Every part is verified first (readable, rows and SHA-256 as journalled); each compacted
         file is checked (rows) and journalled before it replaces the old one. It records in its
@@ -300,16 +315,18 @@ class RunWriter:
         """
         self._lock.verify()
         drop_orphan_parts(self.paths)
-        health = check_run(self.paths, deep=True)
+        # The parts about to be merged are hashed against their records (no damage is folded
+        # into a new file); samples parts stay as written, so their rows are checked only.
+        health = check_run(self.paths, deep=True, hash_tables=COMPACTED_TABLES)
         if not health.ok:
             raise RunDamaged(health.reason, self.run_id)
         parts = self.paths.part_batches()
         committed = sorted(parts["trials"])
         if not committed:
             return
-        for name in TABLE_NAMES:
+        for name in COMPACTED_TABLES:
             _compact_table(self.paths, name, committed, parts[name], self._journal)
-        for name in TABLE_NAMES:
+        for name in COMPACTED_TABLES:
             for path in parts[name].values():
                 path.unlink(missing_ok=True)
 

@@ -63,3 +63,27 @@ def test_resolve_model(tmp_path: Path) -> None:
     assert resolve_model("study") == KeystrokeModel.study()
     with pytest.raises(InputError):
         resolve_model(str(tmp_path / "missing.json"))
+
+
+def test_a_batch_press_follows_the_parameter_table_and_the_drive_reuses_it() -> None:
+    """An unrecorded or impossible up velocity is the down velocity, an unrecorded hold the
+    table's default; the commanded drive rebuilds its presses only for another acceleration."""
+    from pianobot.analysis.greybox.commanded import Commanded
+    from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
+    from pianobot.physics.trajectory import Press
+    from pianobot.spec.parameters import PARAMETERS
+
+    n = 3
+    batch = KeystrokeBatch(("a", "b", "c"), np.full(n, -40.0), np.zeros(0), np.zeros((n, 0)), np.zeros((n, 0)),
+                           np.zeros((n, 0)), down_velocity_mps=np.array([0.05, 0.06, 0.07]),
+                           up_velocity_mps=np.array([np.nan, 0.0, 0.2]), acceleration_mps2=np.array([1.0, np.nan, 2.0]),
+                           depth_m=np.full(n, 0.01), hold_s=np.array([np.nan, 0.1, 0.2]))
+    assert [batch.press(i, 0.5).up_velocity_mps for i in range(n)] == [0.05, 0.06, 0.2]
+    assert batch.press(0).hold_s == PARAMETERS["hold_s"].default
+    assert batch.press(1, 0.5) == Press(distance_m=0.0, depth_m=0.01, down_velocity_mps=0.06, up_velocity_mps=0.06,
+                                        acceleration_mps2=0.5, hold_s=0.1)
+    drive = Commanded(batch)
+    first = drive.presses(0.5)
+    assert all(a is b for a, b in zip(drive.presses(0.5), first, strict=True))  # reused
+    other = drive.presses(0.8)
+    assert other[1].acceleration_mps2 == 0.8 and other[0] == first[0] and other[1] is not first[1]

@@ -58,3 +58,28 @@ def test_a_midi_only_log_names_the_trapezoid_cap(zhang2022: Path, tmp_path: Path
     assert result.accepted_effects[:1] == ("arm_acceleration",)
     first = result.accepted[0]
     assert first.measure == "hold_s" and first.ratio >= 3.0
+
+
+def test_a_log_whose_every_keystroke_stayed_silent_is_a_one_line_input_error(
+        zhang2022: Path, tmp_path: Path, cli: Run) -> None:
+    """soft_0 (0 kPa: the unstiffened finger never sounds the key): nothing to compare with."""
+    data = tmp_path / "data"
+    run_id = import_keystroke_log(zhang2022 / "data" / "soft" / "ctrl_midi" / "soft_0_angle_20.txt", data).run_id
+    code, out, err = invoke_cli(["discover", run_id, "--data", str(data)], *cli)
+    assert code == 2 and len(err.strip().splitlines()) == 1
+    assert "stayed silent" in err and run_id in err
+
+
+@pytest.mark.slow
+def test_a_midi_only_log_names_the_saturating_velocity_curve(zhang2022: Path, tmp_path: Path) -> None:
+    """soft_60 (−60 kPa): after the trapezoid's cap, the measured on-velocity grows more slowly
+    with arm speed than the linear model says (the study's §6.3): the velocity curve is named
+    and the held-out on-velocity gap shrinks."""
+    from pianobot.analysis.discover.run import discover_runs
+
+    data = tmp_path / "data"
+    run_id = import_keystroke_log(zhang2022 / "data" / "soft" / "ctrl_midi" / "soft_60_angle_45.txt", data).run_id
+    result = discover_runs([run_id], data)
+    assert "velocity_curve" in result.accepted_effects
+    step = next(v for v in result.accepted if v.effect == "velocity_curve")
+    assert step.gap_after.on_velocity < 0.75 * step.gap_before.on_velocity

@@ -85,3 +85,14 @@ def test_silent_map_of_a_continuous_sweep_is_one_unlabelled_panel(n_depths: int)
     panels = [ax for ax in fig.axes if ax.get_title()]
     assert len(panels) == 1 and not panels[0].texts
     assert len(panels[0].collections[0].get_offsets()) == n
+
+
+def test_bode_draws_the_fingertip_only_when_asked() -> None:
+    """The report's Bode figure is also `model bode --plot`'s, which adds the fingertip's |X1/X0|."""
+    plain = figures.bode(MSDParams(), [-20.0, -60.0])
+    both = figures.bode(MSDParams(), [-60.0], fingertip=True, title="at -60 kPa")
+    labels = [line.get_label() for line in plain.axes[0].get_lines()]
+    assert sum("fingertip" in lab for lab in labels) == 0 and sum("kPa: " in lab for lab in labels) == 2
+    lines = [line for line in both.axes[0].get_lines() if "fingertip" in str(line.get_label())]
+    assert len(lines) == 1 and np.max(lines[0].get_ydata()) > 1.0  # the fingertip resonates too
+    assert both.axes[0].get_title() == "at -60 kPa"

@@ -31,7 +31,18 @@ def _truncate(path: Path) -> None:
 
 
 def _first(run: Path, table: str) -> Path:
-    return sorted((run / "parts").glob(f"{table}-*.parquet"))[0]
+    """The first part of `table` (samples parts live in samples/, the others in parts/)."""
+    return sorted((run / ("samples" if table == "samples" else "parts")).glob(f"{table}-*.parquet"))[0]
+
+
+def _batch_trials(run: Path, part: Path) -> int:
+    """How many trial rows the batch of `part` committed (its journalled trials part)."""
+    batch = int(part.stem.rsplit("-", 1)[1])
+    for line in (run / "journal.jsonl").read_text().splitlines():
+        event = json.loads(line)
+        if event.get("event") == "part" and event.get("batch") == batch:
+            return int(event["files"]["trials"]["rows"])
+    raise AssertionError(f"batch {batch} is not in the journal")
 
 
 def _rows(path: Path) -> int:
@@ -51,8 +62,10 @@ KINDS: dict[str, tuple[str, Damage, Callable[[Path], int]]] = {
     "plan.parquet truncated": ("killed", lambda r: _truncate(r / "plan.parquet"), _none),
     "run.json garbled": ("killed", lambda r: (r / "run.json").write_text('{"run_id": "x", gar'), _none),
     "trials.parquet truncated": ("stopped", lambda r: _truncate(r / "trials.parquet"), _none),
-    "samples.parquet truncated": ("stopped", lambda r: _truncate(r / "samples.parquet"),
-                                  lambda r: _rows(r / "trials.parquet")),  # no other copy
+    # A finished run: its trials are in trials.parquet, its samples files stay as written.
+    "finished run's samples file truncated": (
+        "stopped", lambda r: _truncate(_first(r, "samples")),
+        lambda r: _batch_trials(r, _first(r, "samples"))),  # that batch's trials are redone
 }
 
 

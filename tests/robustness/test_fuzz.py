@@ -290,12 +290,13 @@ def test_a_learned_predictor_sidecar_loads_or_refuses_in_one_line(
 
 # --- stored runs ---------------------------------------------------------------------------
 
-STORE_FILES = ["plan.parquet", "run.json", "journal.jsonl", "parts/trials", "parts/samples", "parts/midi"]
+STORE_FILES = ["plan.parquet", "run.json", "journal.jsonl", "parts/trials", "samples/samples", "parts/midi"]
 
 
 def _target(run: Path, name: str, pick: int) -> Path:
-    if name.startswith("parts/"):
-        parts = sorted((run / "parts").glob(name.split("/")[1] + "-*.parquet"))
+    if "/" in name:
+        folder, table = name.split("/")
+        parts = sorted((run / folder).glob(table + "-*.parquet"))
         assume(parts)
         return parts[pick % len(parts)]
     return run / name

@@ -70,9 +70,13 @@ def test_round_trip_writes_layout_and_metadata(data_dir: Path) -> None:
         writer.finish("completed", lab_time_s=12.5)
         root = writer.path
     assert sorted(p.name for p in root.iterdir()) == [
-        "journal.jsonl", "midi.parquet", "parts", "plan.parquet", "run.json", "samples.parquet", "trials.parquet",
+        "journal.jsonl", "midi.parquet", "parts", "plan.parquet", "run.json", "samples", "trials.parquet",
     ]
     assert list((root / "parts").iterdir()) == []
+    # The samples are written once, one file per batch, and stay: a Parquet dataset folder.
+    assert sorted(p.name for p in (root / "samples").iterdir()) == [
+        "samples-000001.parquet", "samples-000002.parquet"]
+    assert len(pd.read_parquet(root / "samples")) == 30
     run = load_run(root.name, data_dir)
     meta = run.meta
     assert meta["status"] == "completed" and meta["kind"] == "sweep" and meta["seed"] == 7
@@ -88,7 +92,7 @@ def test_round_trip_writes_layout_and_metadata(data_dir: Path) -> None:
     assert run.samples["x2_m"].isna().all()
     assert list(run.midi["trial_id"]) == ids[:3]
     assert list(run.plan["trial_id"]) == ids
-    for name in ("trials", "samples", "midi", "plan"):
+    for name in ("trials", "samples/samples-000001", "midi", "plan"):
         metadata = pq.read_schema(root / f"{name}.parquet").metadata
         assert metadata[b"pianobot.schema_version"] == SCHEMA_VERSION.encode()
     assert [e["event"] for e in run.journal] == ["started"]
@@ -115,17 +119,18 @@ def test_uncommitted_and_temporary_parts_are_invisible(data_dir: Path) -> None:
     ids = ["a", "b"]
     writer = _create(data_dir, ids)
     writer.append(_trials(ids[:1]), _samples(ids[:1]))
-    parts = writer.path / "parts"
+    parts, samples = writer.path / "parts", writer.path / "samples"
     # A killed writer: the samples part of batch 2 landed, its trials part did not, and a
     # half-written temp file lies around.
-    shutil.copy(parts / "samples-000001.parquet", parts / "samples-000002.parquet")
+    shutil.copy(samples / "samples-000001.parquet", samples / "samples-000002.parquet")
     (parts / ".trials-000002.parquet.123.abc.tmp").write_bytes(b"PAR1 torn")
     run = load_run(writer.run_id, data_dir)
     assert len(run.samples) == 5 and list(run.trials["trial_id"]) == ["a"]
     writer.close()
     # Reopening (resume) removes the orphan and continues numbering after the committed batch.
     writer = RunWriter.reopen(data_dir, writer.run_id)
-    assert not (parts / "samples-000002.parquet").exists()
+    assert not (samples / "samples-000002.parquet").exists()
+    assert not (parts / ".trials-000002.parquet.123.abc.tmp").exists()
     assert writer.append(_trials(["b"]), _samples(["b"])) == 2
     writer.finish("completed")
     assert list(load_run(writer.run_id, data_dir).trials["trial_id"]) == ids
@@ -149,6 +154,87 @@ def test_compaction_interrupted_before_parts_removed_counts_once(data_dir: Path)
     run = load_run(writer.run_id, data_dir)
     assert list(run.trials["trial_id"]) == ids and len(run.samples) == 15 and len(run.midi) == 3
     writer.close()
+
+
+def test_samples_are_written_once_and_stay_committed_after_compaction(data_dir: Path) -> None:
+    """Compaction merges trials and midi only: the samples files keep their bytes, count as
+    committed through trials.parquet, and a resumed run adds files beside them."""
+    from pianobot.store import check_run
+
+    ids = ["a", "b", "c"]
+    writer = _create(data_dir, ids)
+    writer.append(_trials(ids[:2]), _samples(ids[:2]), _midi(ids[:2]))
+    samples = writer.path / "samples" / "samples-000001.parquet"
+    written = samples.read_bytes()
+    writer.finish("stopped", reason="operator")
+    writer.close()
+    assert samples.read_bytes() == written  # not re-encoded
+    assert not list((writer.path / "parts").glob("trials-*.parquet"))
+    run = load_run(writer.run_id, data_dir)
+    assert len(run.samples) == 10 and check_run(run.paths).ok
+    # Resume: the orphan cleanup keeps the files of batches trials.parquet holds.
+    writer = RunWriter.reopen(data_dir, writer.run_id)
+    assert samples.exists()
+    writer.update_meta(status="running", reason=None)
+    writer.append(_trials(ids[2:]), _samples(ids[2:]), _midi(ids[2:]))
+    writer.finish("completed")
+    writer.close()
+    run = load_run(writer.run_id, data_dir)
+    assert sorted(set(run.samples["trial_id"])) == ids and len(run.samples) == 15
+    assert list(run.trials["trial_id"]) == ids and check_run(run.paths).ok
+
+
+def test_a_run_with_samples_parts_of_an_older_pianobot_reads_and_resumes(data_dir: Path) -> None:
+    """Samples parts in parts/ (where an older pianobot wrote them) are read and kept."""
+    writer = _create(data_dir, ["a", "b"])
+    writer.append(_trials(["a"]), _samples(["a"]))
+    writer.close()
+    old = writer.path / "parts" / "samples-000001.parquet"
+    os.replace(writer.path / "samples" / "samples-000001.parquet", old)
+    shutil.rmtree(writer.path / "samples")
+    writer = RunWriter.reopen(data_dir, writer.run_id)
+    writer.append(_trials(["b"]), _samples(["b"]))
+    writer.finish("completed")
+    writer.close()
+    run = load_run(writer.run_id, data_dir)
+    assert old.exists() and sorted(set(run.samples["trial_id"])) == ["a", "b"]
+
+
+def test_repair_of_a_finished_run_takes_out_the_trials_whose_samples_were_lost(data_dir: Path) -> None:
+    """Two damaged samples files of a compacted run: their trials and MIDI leave trials.parquet
+    and midi.parquet (the originals kept in quarantine, once), and a resume redoes them."""
+    from pianobot.store import check_run
+    from pianobot.store.repair import repair_run
+
+    ids = ["a", "b", "c", "d"]
+    writer = _create(data_dir, ids)
+    for batch in (ids[:2], ids[2:3], ids[3:]):
+        writer.append(_trials(batch), _samples(batch), _midi(batch))
+    writer.finish("completed")
+    writer.close()
+    root = writer.path
+    original = {name: (root / f"{name}.parquet").read_bytes() for name in ("trials", "midi")}
+    for batch in (1, 3):
+        part = root / "samples" / f"samples-{batch:06d}.parquet"
+        part.write_bytes(part.read_bytes()[:100])
+    report = repair_run(RunPaths(root))
+    assert report.ok and report.lost_batches == [1, 3] and report.trials_lost == 3
+    run = load_run(root.name, data_dir)
+    assert run.status == "interrupted"
+    assert list(run.trials["trial_id"]) == ["c"] and list(run.midi["trial_id"]) == ["c"]
+    assert set(run.samples["trial_id"]) == {"c"}
+    for name, data in original.items():
+        (kept,) = (root / "quarantine").rglob(f"{name}.parquet")
+        assert kept.read_bytes() == data
+    writer = RunWriter.reopen(data_dir, root.name)
+    lost = ["a", "b", "d"]
+    writer.append(_trials(lost), _samples(lost), _midi(lost))
+    writer.finish("completed")
+    writer.close()
+    run = load_run(root.name, data_dir)
+    assert sorted(run.trials["trial_id"]) == ids and sorted(run.midi["trial_id"]) == ids
+    assert run.samples.groupby("trial_id").size().to_dict() == dict.fromkeys(ids, 5)
+    assert check_run(run.paths).ok
 
 
 def test_resume_after_finish_appends_and_recompacts(data_dir: Path) -> None:

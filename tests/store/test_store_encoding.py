@@ -55,8 +55,9 @@ def test_block_samples_keep_ids_as_dictionaries_and_read_back_as_strings(tmp_pat
         got = frame.drop(columns=["run_id"]).reset_index(drop=True)
         pd.testing.assert_frame_equal(got, _expected(rows), check_dtype=False)
     assert set(run.samples["run_id"]) == {writer.run_id}
-    # The compacted file keeps the ids as dictionaries and the floats split into byte streams.
-    stored = pq.ParquetFile(run.path / "samples.parquet")
+    # The stored samples (one file per batch, never re-encoded) keep the ids as dictionaries
+    # and the floats split into byte streams.
+    stored = pq.ParquetFile(run.path / "samples" / "samples-000002.parquet")
     assert pa.types.is_dictionary(stored.schema_arrow.field("trial_id").type)
     assert "BYTE_STREAM_SPLIT" in stored.metadata.row_group(0).column(3).encodings
 

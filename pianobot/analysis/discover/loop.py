@@ -32,10 +32,16 @@ from pianobot.analysis.discover import search
 from pianobot.analysis.discover.candidates import CandidateSpec, candidates, size_params
 from pianobot.analysis.discover.decide import Rule, Verdict, choose, something_to_explain, verdict
 from pianobot.analysis.discover.localise import localise
-from pianobot.analysis.discover.measured import Finding, arm_checks, clock_check, readout_check
+from pianobot.analysis.discover.measured import (
+    MeasuredCheck,
+    arm_checks,
+    clock_check,
+    readout_check,
+)
 from pianobot.analysis.discover.result import DiscoveryResult, Iteration, verdict_text
 from pianobot.analysis.discover.search import Evaluated, Setting
 from pianobot.analysis.discover.sparse import Proposal, outcome_proposals, trajectory_proposals
+from pianobot.analysis.greybox.covariance import Z95
 from pianobot.analysis.greybox.fitter import GreyBoxFit
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
 from pianobot.analysis.greybox.pieces import Mapper, serial_map
@@ -43,8 +49,6 @@ from pianobot.analysis.greybox.split import holdout_indices
 from pianobot.analysis.identify.fit import rms_x2_m
 from pianobot.physics.model import KeystrokeModel
 from pianobot.progress import NO_PROGRESS, Progress
-
-Z95 = 1.959963984540054
 
 
 @dataclass(frozen=True)
@@ -92,7 +96,10 @@ def _promising(v: Verdict, rule: Rule) -> bool:
 
 
 def _iterate(setting: Setting, current: GreyBoxFit, start: KeystrokeModel, settings: Settings, sigma_m: float,
-             index: int, progress: Progress, mapper: Mapper) -> tuple[Iteration, GreyBoxFit | None]:
+             index: int, progress: Progress, mapper: Mapper,
+             earlier: dict[str, dict[str, float]]) -> tuple[Iteration, GreyBoxFit | None]:
+    """One round of candidates against `current`. `earlier` maps a candidate's label to the
+    values it reached in the previous round (a start for this one); it is updated in place."""
     rule = settings.rule
     criterion = search.criterion_of(current)
     reference = search.evaluate(setting, current, criterion, sigma_m, "current", None)
@@ -108,7 +115,7 @@ def _iterate(setting: Setting, current: GreyBoxFit, start: KeystrokeModel, setti
     total = len(specs) + min(settings.joint_refits, len(specs))
     with progress.task(f"discover, iteration {index + 1}: candidate fits", total=total) as task:
         def screen_one(spec: CandidateSpec) -> Evaluated:
-            screened = search.screen(setting, current, spec)
+            screened = search.screen(setting, current, spec, earlier.get(spec.label))
             full = search.as_full(setting, current, spec, screened)
             return search.evaluate(setting, full, criterion, sigma_m, spec.label, spec, joint=False)
 
@@ -129,6 +136,9 @@ def _iterate(setting: Setting, current: GreyBoxFit, start: KeystrokeModel, setti
             refitted[e.label] = e
             task.advance(note=f"{e.label} (joint)")
     final = [refitted.get(e.label, e) for e in evaluated]
+    for e in final:
+        assert e.spec is not None
+        earlier[e.label] = {k: v for k, v in e.fit.params_.items() if k.split(".", 1)[0] in (e.spec.effect, "readout")}
     verdicts = [_verdict(e, reference, rule, False) for e in final]
     # Intervals (a central Jacobian and noise draws each) only where the rest of the rule holds,
     # and only at an optimum: away from it the residuals still hold the misfit the fit was about
@@ -166,7 +176,7 @@ def _residual_search(setting: Setting, fit: GreyBoxFit) -> tuple[Proposal, ...]:
     return outcome_proposals(batch.down_velocity_mps, batch.acceleration_mps2, batch.depth_m, batch.vacuum_kpa, residual)
 
 
-def _with_findings(model: KeystrokeModel, findings: Sequence[Finding]) -> KeystrokeModel:
+def _with_findings(model: KeystrokeModel, findings: Sequence[MeasuredCheck]) -> KeystrokeModel:
     """The model with the effects measured on the set-up switched on (they do not change what the
     measured-arm drive predicts, but a commanded press, as `play` sends, needs them)."""
     for f in findings:
@@ -193,7 +203,7 @@ def _discover(batch: KeystrokeBatch, start: KeystrokeModel | None, settings: Set
     if held_idx.size == 0:
         raise ValueError(f"cannot split {batch.n} keystrokes into training and held-out ones")
     setting = Setting.of(batch.subset(train_idx), batch.subset(held_idx))
-    findings: list[Finding] = []
+    findings: list[MeasuredCheck] = []
     if setting.mode == "trajectories":
         findings += arm_checks(batch)
         findings += [f for f in (clock_check(batch), readout_check(batch)) if f is not None]
@@ -206,8 +216,9 @@ def _discover(batch: KeystrokeBatch, start: KeystrokeModel | None, settings: Set
     current = base
     iterations: list[Iteration] = []
     unexplained: Proposal | None = None
+    earlier: dict[str, dict[str, float]] = {}
     for index in range(settings.max_iterations):
-        iteration, chosen = _iterate(setting, current, start, settings, sigma_m, index, progress, mapper)
+        iteration, chosen = _iterate(setting, current, start, settings, sigma_m, index, progress, mapper, earlier)
         if chosen is None:
             proposals = _residual_search(setting, current) if iteration.explainable else ()
             iteration = Iteration(iteration.index, iteration.gap_before, iteration.before, iteration.verdicts,

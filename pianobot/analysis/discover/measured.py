@@ -47,7 +47,7 @@ _MIN_DELAY_S = 1e-3
 
 
 @dataclass(frozen=True)
-class Finding:
+class MeasuredCheck:
     """One measured check: what was measured, its value, the evidence, and whether it holds."""
 
     effect: str
@@ -131,7 +131,7 @@ def _refine(ics: list[float], k: int) -> tuple[float, tuple[float, float]]:
     return math.exp(centre), (math.exp(centre - half), math.exp(centre + half))
 
 
-def arm_checks(batch: KeystrokeBatch) -> list[Finding]:
+def arm_checks(batch: KeystrokeBatch) -> list[MeasuredCheck]:
     """`arm_acceleration` and `arm_lag` against the measured arm trace (empty without one)."""
     if not batch.arm_measured:
         return []
@@ -164,7 +164,7 @@ def arm_checks(batch: KeystrokeBatch) -> list[Finding]:
     text = (f"the measured arm accelerates at {a_best:.3g} m/s² [{ci[0]:.3g}, {ci[1]:.3g}]{said}: a trapezoid, not a "
             f"ramp (ΔIC {delta:.0f})" if accepted else f"the measured arm is as well described by a constant-speed ramp "
                                                          f"(ΔIC {delta:.1f} for a trapezoid)")
-    out = [Finding("arm_acceleration", a_best, ci, delta, accepted, text, {})]
+    out = [MeasuredCheck("arm_acceleration", a_best, ci, delta, accepted, text, {})]
     if timed:
         # Against the command's own profile: its acceleration where recorded (a lag would read
         # as a gentler acceleration if that were free), started where the command started.
@@ -174,7 +174,7 @@ def arm_checks(batch: KeystrokeBatch) -> list[Finding]:
         se = float(1.2533 * np.std(starts, ddof=1) / math.sqrt(starts.size)) if starts.size > 1 else math.inf
         z = lag / se if se > 0 else math.inf
         lagging = lag > _MIN_DELAY_S and z > 3.0
-        out.append(Finding("arm_lag", lag, (lag - 1.96 * se, lag + 1.96 * se), z * z, lagging,
+        out.append(MeasuredCheck("arm_lag", lag, (lag - 1.96 * se, lag + 1.96 * se), z * z, lagging,
                            f"the measured arm starts {_ms(lag)} ± {_ms(1.96 * se)} ms after the commanded start"
                            + ("" if lagging else " (no lag worth modelling)"), {"arm_lag_s": lag}))
     return out
@@ -186,7 +186,7 @@ def _ms(seconds: float) -> str:
     return f"{value + 0.0:.2f}"
 
 
-def clock_check(batch: KeystrokeBatch) -> Finding | None:
+def clock_check(batch: KeystrokeBatch) -> MeasuredCheck | None:
     """`mocap_delay` from the clock offset between the arm log and the arm marker (None when the
     batch's arm trace is the marker itself: then one clock serves both)."""
     if batch.arm_source != "arm" or not batch.has_motion:
@@ -194,13 +194,13 @@ def clock_check(batch: KeystrokeBatch) -> Finding | None:
     tau, se = batch.clock_offset_s, batch.clock_offset_se_s
     z = abs(tau) / se if se > 0 else (math.inf if tau else 0.0)
     accepted = abs(tau) > _MIN_DELAY_S and z > 3.0
-    return Finding("mocap_delay", tau, (tau - 1.96 * se, tau + 1.96 * se), z * z, accepted,
+    return MeasuredCheck("mocap_delay", tau, (tau - 1.96 * se, tau + 1.96 * se), z * z, accepted,
                    f"motion capture runs {1e3 * tau:.2f} ± {1.96e3 * se:.2f} ms behind the arm log "
                    f"(measured on the arm marker{'' if accepted else '; too small to model'})",
                    {"mocap_delay_s": tau})
 
 
-def readout_check(batch: KeystrokeBatch) -> Finding | None:
+def readout_check(batch: KeystrokeBatch) -> MeasuredCheck | None:
     """`velocity_curve` against the measured key speed at the trigger depth (None without both a
     tracked key and MIDI, or with too few sounded keystrokes)."""
     if not (batch.has_motion and batch.has_midi):
@@ -219,5 +219,5 @@ def readout_check(batch: KeystrokeBatch) -> Finding | None:
     accepted = delta > MARGIN and abs(fit.curve_exponent - 1.0) > 0.05
     text = (f"measured key speed → MIDI velocity follows a power {fit.curve_exponent:.2f} (RMSE {rmse_power:.2f} "
             f"against {rmse_line:.2f} MIDI for a straight line; ΔIC {delta:.0f})")
-    return Finding("velocity_curve", fit.curve_exponent, (math.nan, math.nan), delta, accepted, text,
+    return MeasuredCheck("velocity_curve", fit.curve_exponent, (math.nan, math.nan), delta, accepted, text,
                    {"curve_exponent": min(max(fit.curve_exponent, 0.5), 4.0), "curve_saturation": 0.0})

@@ -14,7 +14,7 @@ from typing import Any
 from pianobot.analysis.discover.decide import Rule, Verdict
 from pianobot.analysis.discover.gap import Gap
 from pianobot.analysis.discover.localise import Localisation
-from pianobot.analysis.discover.measured import Finding
+from pianobot.analysis.discover.measured import MeasuredCheck
 from pianobot.analysis.discover.sparse import Proposal
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
 from pianobot.analysis.greybox.prediction import Prediction
@@ -57,7 +57,7 @@ class DiscoveryResult:
 
     mode: str  # "trajectories" (measured arm drives the model) | "midi" (commanded presses)
     iterations: tuple[Iteration, ...]
-    findings: tuple[Finding, ...]  # checks against the measurements themselves (arm, clock, readout)
+    findings: tuple[MeasuredCheck, ...]  # checks against the measurements themselves (arm, clock, readout)
     start_model: KeystrokeModel
     base_model: KeystrokeModel  # the start model with its base parameters fitted
     final_model: KeystrokeModel
@@ -169,7 +169,7 @@ def decision_line(result: DiscoveryResult) -> str:
     return "\n".join(lines) if lines else "No missing effect found."
 
 
-def verdict_text(iterations: Sequence[Iteration], findings: Sequence[Finding], final: Gap,
+def verdict_text(iterations: Sequence[Iteration], findings: Sequence[MeasuredCheck], final: Gap,
                  unexplained: Proposal | None, explainable: bool, worst: Sequence[str]) -> tuple[str, bool]:
     """The closing sentence, and whether what is left is at the noise level."""
     accepted = [it.accepted.label for it in iterations if it.accepted]

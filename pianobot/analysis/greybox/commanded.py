@@ -18,13 +18,14 @@ are simulated in blocks of similar length.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
-from pianobot.analysis.greybox.prediction import Prediction, integration_step_s
+from pianobot.analysis.greybox.prediction import GROUP, SIM_STEP_S, Prediction, integration_step_s
 from pianobot.physics.model import KeystrokeModel
 from pianobot.physics.piano import PianoParams, on_velocity_from_speed
 from pianobot.physics.simulate import simulate_presses
@@ -33,23 +34,17 @@ from pianobot.physics.trajectory import Press, press_timing
 FloatArray = npt.NDArray[np.float64]
 
 OUT_DT_S = 1e-3
-SIM_STEP_S = 2e-4  # or less: `prediction.integration_step_s`
-#: Keystrokes per simulated block (the simulator's SIMD block).
-GROUP = 16
 #: Simulated past the arm's rise through the pressed depth: the key settles above release.
 RISE_MARGIN_M = 5e-3
-TAIL_S = 0.15
-
-
-def _presses(batch: KeystrokeBatch, acceleration_mps2: float | None) -> list[Press]:
-    return [batch.press(i, acceleration_mps2) for i in range(batch.n)]
+#: Simulated past that, so the key rises through its release depth and the note-off registers.
+RELEASE_TAIL_S = 0.15
 
 
 def _cut_s(press: Press, profile: str, lag_s: float) -> float:
     """How long keystroke `press` must be simulated for its MIDI outcome."""
     tm = press_timing(press, "trapezoid" if profile == "trapezoid" else "ramp")
     rise = min(press.depth_m + RISE_MARGIN_M, tm.up.distance_m)
-    return float(tm.t_hold_end_s + tm.up.time_at_m(rise) + TAIL_S + lag_s)
+    return float(tm.t_hold_end_s + tm.up.time_at_m(rise) + RELEASE_TAIL_S + lag_s)
 
 
 def _first(mask: npt.NDArray[np.bool_]) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.bool_]]:
@@ -105,6 +100,17 @@ class Commanded:
 
     batch: KeystrokeBatch
     out_dt_s: float = OUT_DT_S
+    # The presses of the last acceleration asked for: a fit varies the model far more often
+    # than the drive's acceleration, and a Press is immutable.
+    _last: list[Any] = field(default_factory=lambda: [None, None], init=False, repr=False, compare=False)
+
+    def presses(self, acceleration_mps2: float | None) -> list[Press]:
+        """The batch's commanded presses (`acceleration_mps2` where none is recorded)."""
+        key, presses = self._last
+        if presses is None or key != acceleration_mps2:
+            presses = [self.batch.press(i, acceleration_mps2) for i in range(self.batch.n)]
+            self._last[:] = [acceleration_mps2, presses]
+        return list(presses)
 
     @property
     def observed(self) -> KeystrokeBatch:
@@ -120,7 +126,7 @@ class Commanded:
         """The model's MIDI outcome for every keystroke of the batch."""
         batch = self.batch
         accel = (drive or {}).get("acceleration_mps2")
-        presses = _presses(batch, accel)
+        presses = self.presses(accel)
         lag = model.effects.value("arm_lag", "arm_lag_s", 0.0)
         cuts = np.array([_cut_s(p, model.arm_profile, lag) for p in presses])
         step_s = integration_step_s(model, batch.vacuum_kpa, SIM_STEP_S)

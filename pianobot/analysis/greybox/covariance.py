@@ -19,6 +19,9 @@ import numpy.typing as npt
 
 FloatArray = npt.NDArray[np.float64]
 
+#: The standard normal quantile of 97.5 %: a 95 % interval is the estimate ± Z95 standard errors.
+Z95 = 1.959963984540054
+
 
 def hac_covariance(J: FloatArray, r: FloatArray, series: npt.NDArray[np.intp], position: npt.NDArray[np.intp],
                    n_offsets: int = 0) -> FloatArray:

@@ -34,7 +34,7 @@ import numpy as np
 import numpy.typing as npt
 
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
-from pianobot.analysis.greybox.prediction import Prediction, integration_step_s
+from pianobot.analysis.greybox.prediction import GROUP, SIM_STEP_S, Prediction, integration_step_s
 from pianobot.analysis.greybox.stages import KEY_MOTION_THRESHOLD_M, fill_gaps
 from pianobot.physics.effects import Effects
 from pianobot.physics.model import KeystrokeModel
@@ -43,18 +43,11 @@ from pianobot.physics.simulate import simulate_arm
 
 FloatArray = npt.NDArray[np.float64]
 
-#: Largest internal integration step. The fastest mode of the published model is near 20 Hz;
-#: at 0.2 ms the semi-implicit scheme's phase error over a keystroke stays far below mocap noise
-#: (a stiffer or more heavily damped model takes a smaller one: `prediction.integration_step_s`).
-SIM_STEP_S = 2e-4
 #: Largest spacing of the resampled input.
 INPUT_STEP_S = 5e-4
 #: The fingertip has left the key once the fingertip-key gap has reopened by this much (well
 #: above mocap noise, well below a finger's compression in a press).
 LIFT_OFF_M = 5e-4
-#: Keystrokes simulated side by side (the simulator's SIMD block): rows are grouped by length,
-#: so short keystrokes are not integrated through the long ones' rest.
-GROUP = 16
 
 
 @dataclass(frozen=True, eq=False)

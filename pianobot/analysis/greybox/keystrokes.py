@@ -25,7 +25,8 @@ import numpy.typing as npt
 
 from pianobot.analysis.greybox.noise import noise_sigma_m
 from pianobot.physics.trajectory import Press
-from pianobot.spec.parameters import PRESS_PARAMETERS
+from pianobot.plan.trial import press_from
+from pianobot.spec.parameters import PRESS_PARAMETERS, recorded_or_followed
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -101,6 +102,9 @@ class KeystrokeBatch:
                 raise ValueError(f"{name} should have {n} rows, got shape {getattr(self, name).shape}.")
         if self.input_x0_m.shape != (n, self.input_t_s.size):
             raise ValueError(f"input_x0_m should have shape {(n, self.input_t_s.size)}, got {self.input_x0_m.shape}.")
+        # An unrecorded (or impossible) up velocity is the down velocity: the parameter table's rule.
+        object.__setattr__(self, "up_velocity_mps", recorded_or_followed(
+            "up_velocity_mps", {"up_velocity_mps": self.up_velocity_mps, "down_velocity_mps": self.down_velocity_mps}))
 
     @property
     def n(self) -> int:
@@ -150,10 +154,10 @@ class KeystrokeBatch:
         down, depth = float(self.down_velocity_mps[i]), float(self.depth_m[i])
         if not (math.isfinite(down) and down > 0 and math.isfinite(depth) and depth > 0):
             raise ValueError(f"keystroke {self.trial_id[i]} records no commanded speed and depth.")
-        up = float(self.up_velocity_mps[i])
-        hold = float(self.hold_s[i])
-        return Press(float(self.distance_m[i]), depth, down, up if math.isfinite(up) and up > 0 else down,
-                     float(accel), hold if math.isfinite(hold) else 0.0)
+        # By name; an unrecorded hold takes the table's default (the up velocity already follows).
+        return press_from({"distance_m": float(self.distance_m[i]), "depth_m": depth, "down_velocity_mps": down,
+                           "up_velocity_mps": float(self.up_velocity_mps[i]), "acceleration_mps2": float(accel),
+                           "hold_s": float(self.hold_s[i])})
 
     @property
     def commanded(self) -> bool:

@@ -39,7 +39,7 @@ FloatArray = npt.NDArray[np.float64]
 BASE_RANGE = 1e3
 MASS_RANGE = 10.0
 #: A fitted value this close to a bound (in internal units) is reported as "on bound".
-BOUND_TOLERANCE = 1e-3
+INTERNAL_BOUND_TOLERANCE = 1e-3
 #: The parameter of each effect that measures its size (its "off" value switches it off).
 _SIZE_UNITS = {"m": "m", "s": "s", "n": "N", "npm": "N/m", "nspm": "N*s/m", "mps": "m/s", "per_m": "1/m"}
 
@@ -138,10 +138,10 @@ class Layout:
         return np.array([p.to_internal(values.get(p.name, p.start)) for p in self.params], dtype=np.float64)
 
     def on_bounds(self, theta: FloatArray) -> tuple[str, ...]:
-        """Parameters sitting on (within `BOUND_TOLERANCE` of) a bound."""
+        """Parameters sitting on (within `INTERNAL_BOUND_TOLERANCE` of) a bound."""
         lo, hi = self.bounds()
-        near = (theta - lo < BOUND_TOLERANCE * np.maximum(1.0, np.abs(lo))) | (
-            hi - theta < BOUND_TOLERANCE * np.maximum(1.0, np.abs(hi)))
+        near = (theta - lo < INTERNAL_BOUND_TOLERANCE * np.maximum(1.0, np.abs(lo))) | (
+            hi - theta < INTERNAL_BOUND_TOLERANCE * np.maximum(1.0, np.abs(hi)))
         return tuple(p.name for p, flag in zip(self.params, near, strict=True) if flag)
 
     def model(self, theta: FloatArray) -> KeystrokeModel:

@@ -42,8 +42,9 @@ class Loaded:
 
 def _file_hash(path: Path) -> str:
     digest = hashlib.sha256()
-    for name in ("trials.parquet", "samples.parquet"):
-        file = path / name
+    # A run's samples are samples/ (one file per batch; samples.parquet in older runs).
+    files = [path / "trials.parquet", path / "samples.parquet", *sorted((path / "samples").glob("*.parquet"))]
+    for file in files:
         if file.is_file():
             digest.update(file.read_bytes())
     return digest.hexdigest()
@@ -161,7 +162,10 @@ def load_keystrokes(run_ids: Sequence[str], data_dir: Path, *, x0_source: str = 
                                np.zeros(0), np.zeros((n, 0)), np.zeros((n, 0)), np.zeros((n, 0)),
                                distance_m=np.nan_to_num(_column(all_trials, "distance_m")))
         if not midi_recorded:
-            raise InputError("the runs have neither key trajectories nor MIDI outcomes", ",".join(run_ids))
+            silent = "n_note_on" in all_trials and bool((all_trials["n_note_on"] == 0).all())
+            raise InputError(f"every one of the {n} keystrokes stayed silent and no key was tracked: no on-velocity, "
+                             "hold or trajectory to compare with the model" if silent else
+                             "the runs have neither key trajectories nor MIDI outcomes", ",".join(run_ids))
     rows = all_trials.set_index("trial_id").loc[list(batch.trial_id)]
     notes: set[str] = set()
     if "distance_m" not in rows or rows["distance_m"].isna().any():

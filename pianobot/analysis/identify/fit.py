@@ -40,6 +40,7 @@ from typing import Any, Literal
 import numpy as np
 import numpy.typing as npt
 
+from pianobot.analysis.greybox.covariance import Z95
 from pianobot.analysis.greybox.criterion import Criterion
 from pianobot.analysis.greybox.fitter import GreyBoxFit
 from pianobot.analysis.greybox.forward import MeasuredArm, simulate_batch
@@ -54,7 +55,6 @@ from pianobot.progress import NO_PROGRESS, Progress
 FloatArray = npt.NDArray[np.float64]
 Coupling = Literal["tied", "free", "auto"]
 
-Z95 = 1.959963984540054
 #: "auto" coupling frees k0, c0 and m1 only if the information criterion drops by more than this.
 COUPLING_MARGIN = 10.0
 
@@ -135,7 +135,7 @@ def _derived(theta: FloatArray, layout: Layout) -> dict[str, float]:
     return out
 
 
-def base_fit(batch: KeystrokeBatch, prior: KeystrokeModel, free: bool, theta0: FloatArray | None = None,
+def _fit_layout(batch: KeystrokeBatch, prior: KeystrokeModel, free: bool, theta0: FloatArray | None = None,
              drive: MeasuredArm | None = None) -> GreyBoxFit:
     """The base model's fit on a batch (the prior's effects stay on, at their values)."""
     layout = base_layout(prior, batch.levels_kpa, free_coupling=free)
@@ -151,7 +151,7 @@ def fit_base(batch: KeystrokeBatch, prior: KeystrokeModel, coupling: Coupling = 
     """Identification's base fit: tied coupling, or free (k0, c0, m1) when asked or when the
     information criterion, on the tied fit's effective sample size, prefers it by > 10."""
     drive = MeasuredArm.of(batch)
-    fit = base_fit(batch, prior, coupling == "free", drive=drive)
+    fit = _fit_layout(batch, prior, coupling == "free", drive=drive)
     if coupling == "auto":
         free_layout = base_layout(prior, batch.levels_kpa, free_coupling=True)
         start = free_layout.internal(fit.params_)

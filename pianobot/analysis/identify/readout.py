@@ -28,7 +28,7 @@ import pandas as pd
 
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
 from pianobot.analysis.greybox.stages import fill_gaps, first_crossing_s
-from pianobot.physics.piano import PianoParams
+from pianobot.physics.piano import PianoParams, on_velocity_from_speed
 
 FloatArray = npt.NDArray[np.float64]
 MIN_TRIALS = 5
@@ -91,7 +91,8 @@ def _power_law(speed: FloatArray, velocity: FloatArray) -> tuple[float, float, f
     if not gamma > 0:
         return math.nan, math.nan, math.inf
     s_full = math.exp(-c / gamma)
-    pred = np.clip(127.0 * (speed[ok] / s_full) ** gamma, 1.0, 127.0)
+    curve = PianoParams(full_scale_speed_mps=s_full, curve_exponent=float(gamma))  # no saturation
+    pred = on_velocity_from_speed(speed[ok], curve, rounded=False)
     return s_full, float(gamma), float(np.sqrt(np.mean((pred - velocity[ok]) ** 2)))
 
 
@@ -135,5 +136,6 @@ def _line_rmse(speed: FloatArray, velocity: FloatArray) -> float:
     if ok.sum() < 2:
         return math.nan
     log_full = float(np.mean(np.log(speed[ok]) - np.log(velocity[ok] / 127.0)))
-    pred = np.clip(127.0 * speed[ok] / math.exp(log_full), 1.0, 127.0)
+    line = PianoParams(full_scale_speed_mps=math.exp(log_full), curve_exponent=1.0)
+    pred = on_velocity_from_speed(speed[ok], line, rounded=False)
     return float(np.sqrt(np.mean((pred - velocity[ok]) ** 2)))

@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
+from pianobot.analysis.greybox.covariance import Z95
 from pianobot.errors import InputError
 from pianobot.io.force_log import ForceCalibration, ForceLog, read_force_log
 
@@ -38,7 +39,6 @@ STUDY_COMPRESSION_M = 0.0139
 #: The study's law k1 = a + b·|p| (N/m, N/m per kPa), for comparison.
 PUBLISHED_LAW = (75.41, 1.19)
 SMOOTH_SAMPLES = 3
-Z95 = 1.959963984540054
 
 
 def press_forces_n(log: ForceLog, smooth_samples: int = SMOOTH_SAMPLES) -> FloatArray:
