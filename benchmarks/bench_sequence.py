@@ -10,7 +10,8 @@
    change against k = 0, per error.
 2. The simulated world where context matters (own-world suite, reported apart): sequence-mode
    strokes on a `World` whose finger stiffness drifts by up to 30 % between sequences and stays
-   within one; per-note GP against the sequence model on held-out sequences.
+   within one; per-note GP against the sequence model (and the GRU, with PyTorch) on held-out
+   sequences.
 3. Fit cost: wall time of fitting the sequence model (k = 2) and the per-note GP on all strokes of
    the log in the same run, as a ratio.
 
@@ -51,13 +52,13 @@ def study_log(ks: tuple[int, ...]) -> dict[str, Any]:
     from pianobot.analysis.sequence.evaluate import _per_note, cross_validate_sequence
     from pianobot.analysis.sequence.fit import choose_k
     from pianobot.analysis.sequence.model import SequenceModel
-    from pianobot.analysis.sequence.strokes import stroke_table
+    from pianobot.analysis.sequence.strokes import stroke_sequences
 
     with tempfile.TemporaryDirectory() as tmp:
         out = subprocess.run([sys.executable, "-m", "pianobot", "import", "keystroke-log", str(SEQ_LOG),
                               "--data", tmp, "--json"], check=True, capture_output=True, text=True).stdout
         run_id = json.loads(out)["run_id"]
-        table = stroke_table(load_trials([run_id], Path(tmp)))
+        table = stroke_sequences(load_trials([run_id], Path(tmp)))
     cv = cross_validate_sequence(table, ks=ks, per_note=("gp",), folds=5, workers=2, rnn=_has_torch())
     rows = cv.set_index("model")
     chosen = choose_k(cv)
@@ -80,13 +81,14 @@ def study_log(ks: tuple[int, ...]) -> dict[str, Any]:
 def sim_world(n_sequences: int, ks: tuple[int, ...]) -> dict[str, Any]:
     sys.path.insert(0, str(ROOT))
     from pianobot.analysis.sequence.evaluate import cross_validate_sequence
-    from pianobot.analysis.sequence.strokes import stroke_table
+    from pianobot.analysis.sequence.strokes import stroke_sequences
     from tests.sequence.sim_world import context_world_trials
 
     out: dict[str, Any] = {}
     for per_sequence in (False, True):
         trials = context_world_trials(n_sequences, stiffness_per_sequence=per_sequence)
-        cv = cross_validate_sequence(stroke_table(trials), ks=ks, per_note=("gp",), folds=4, workers=1)
+        cv = cross_validate_sequence(stroke_sequences(trials), ks=ks, per_note=("gp",), folds=4, workers=1,
+                                     rnn=_has_torch())
         out["context world" if per_sequence else "default (no state between strokes)"] = _records(cv)
     return out
 

@@ -16,7 +16,7 @@ played is still rising and sounds `REPEAT_FACTOR` as loud.
 Songs: the play test songs built in code (`pianobot.play.library.TEST_SONGS`), bench_play's
 held-out song and `experiments/songs/*.mid`. Results: benchmarks/results/sequence_play.json.
 
-    .venv/bin/python benchmarks/bench_sequence_play.py [--songs ode,twinkle] [--out FILE]
+    .venv/bin/python benchmarks/bench_sequence_play.py [--songs ode,twinkle] [--worlds repeat] [--seed 0] [--out FILE]
 """
 
 from __future__ import annotations
@@ -83,21 +83,21 @@ def _row(result: PlayResult) -> dict[str, Any]:
             "context_lead_abs_mean_ms": float(np.abs(frame["context_lead_s"]).mean() * 1e3)}
 
 
-def compare(names: list[str], world: str, tmp: Path) -> dict[str, Any]:
+def compare(names: list[str], world: str, tmp: Path, seed: int = 0) -> dict[str, Any]:
     """Past performances, the fed-back sequence model, and the comparison in one world."""
     data = tmp / world / "data"
     paths = _song_paths(names, tmp)
     past = []
     for name, (path, _) in paths.items():
-        past.append(play_song(path, data_dir=data, seed=0, world=_world(world, 0)).performance.run_id)  # type: ignore[union-attr]
+        past.append(play_song(path, data_dir=data, seed=seed, world=_world(world, seed)).performance.run_id)  # type: ignore[union-attr]
         print(f"{world}: past performance of {name}: {past[-1]}", file=sys.stderr)
     fit = fit_sequence_runs(past, data, out_dir=tmp / world / "models", workers=2)
     assert fit.saved is not None
     print(f"{world}: sequence model k={fit.k} over {fit.n_strokes} strokes in {fit.n_sequences} sequences", file=sys.stderr)
     rows = []
     for name, (path, _) in paths.items():
-        per_note = _row(play_song(path, data_dir=data, seed=1, world=_world(world, 1)))
-        sequence = play_song(path, data_dir=data, seed=1, model=fit.saved, world=_world(world, 1))
+        per_note = _row(play_song(path, data_dir=data, seed=seed + 1, world=_world(world, seed + 1)))
+        sequence = play_song(path, data_dir=data, seed=seed + 1, model=fit.saved, world=_world(world, seed + 1))
         seq = _row(sequence)
         rows.append({"song": name, "per_note": per_note, "sequence": seq, "context": sequence.plan.context})
         print(f"{world} {name}: per-note F1 {per_note['f1']:.3f} onset {per_note['onset_rms_ms']:.1f} ms MAE "
@@ -117,13 +117,15 @@ def main() -> None:
     parser.add_argument("--songs", default=",".join([*TEST_SONGS, "held_out", *sorted(p.stem for p in SONG_FILES.glob("*.mid"))]))
     parser.add_argument("--worlds", default="default,repeat")
     parser.add_argument("--out", type=Path, default=RESULTS)
+    parser.add_argument("--seed", type=int, default=0, help="world seed of the past runs; the compared runs use seed + 1")
     args = parser.parse_args()
     names = [s for s in args.songs.split(",") if s]
     result: dict[str, Any] = {"benchmark": "sequence_play",
-                              "setting": "soft finger, built-in sim rig; past runs seed 0, compared runs seed 1"}
+                              "setting": f"soft finger, built-in sim rig; past runs seed {args.seed}, "
+                                         f"compared runs seed {args.seed + 1}"}
     with tempfile.TemporaryDirectory() as tmp:
         for world in [w for w in args.worlds.split(",") if w]:
-            result[world] = compare(names, world, Path(tmp))
+            result[world] = compare(names, world, Path(tmp), args.seed)
             text = json.dumps(result, indent=2, default=float)
             args.out.parent.mkdir(parents=True, exist_ok=True)
             args.out.write_text(text + "\n", encoding="utf-8")

@@ -18,14 +18,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "pianobot"
 CONVENTIONS = {"FloatArray", "IntArray", "BoolArray", "T", "R", "register", "main"}
 
 #: Known duplicates, each with the modules that may hold it (left to the owners of those files).
-KNOWN: dict[str, set[str]] = {
-    # issue 16: play's finger literal, the sequence model's table of strokes, the warm-up's lab time
-    "FINGERS": {"play.session", "spec.parameters"},
-    "Finger": {"play.settings", "spec.parameters"},
-    "StrokeTable": {"analysis.sequence.strokes", "play.strokes"},
-    "estimated_lab_time_s": {"plan.size", "play.warmup"},
-    "SETTLE_S": {"physics.simulate", "play.warmup"},
-}
+KNOWN: dict[str, set[str]] = {}
 
 
 def _public_definitions() -> dict[str, set[str]]:

@@ -4,7 +4,9 @@
 plans as the per-note planner does — the warm-up fits this piano's loudness, lead and hold maps,
 and those stay the plan's absolute scale — and then asks the sequence model what the notes
 before each note change in it: its on-velocity and its lead (motion start → note-on), with the
-strokes the plan gives its predecessors (`SequenceModel.planned_effect`). The planner aims each
+strokes the plan gives its predecessors (`SequenceModel.planned_effect`), against the context the
+per-note maps were learned in (the warm-up's strokes, in the order played: after a warm-up that
+moved from key to key, a moved-to note is not corrected, a repeated one is). The planner aims each
 note at its target minus the context's loudness effect, and starts its motion earlier or later
 by the context's lead effect (never before the arm is free); two passes, since a changed stroke
 changes the context of the next.
@@ -20,6 +22,7 @@ the per-note planner, and `play` says so.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -94,6 +97,9 @@ class SongContext:
     source: str
     gains: dict[str, float]  # CV error change per target, chosen k against k = 0
     better: dict[str, bool] = field(default_factory=dict)  # beats the per-note model (CV), per target
+    #: Strokes in the order played from which the plan's per-note model was learned (a play's
+    #: warm-up): the context the effects are measured against. None: the model's training contexts.
+    reference: pd.DataFrame | None = None
 
     @classmethod
     def load(cls, path: Path) -> SongContext:
@@ -102,6 +108,12 @@ class SongContext:
         model = load_sequence_model(Path(path), payload)
         cv = list(payload.get("cv") or [])
         return cls(model, str(path), context_gains(cv, model.k), beats_per_note(cv, model.k))
+
+    def calibrated_on(self, strokes: pd.DataFrame) -> SongContext:
+        """The same context, its effects measured against the context of `strokes` (the warm-up
+        the per-note model was just fitted on: what that model predicts already includes it)."""
+        played = strokes[strokes["status"].isin(["ok", "silent"])] if "status" in strokes else strokes
+        return dataclasses.replace(self, reference=played.reset_index(drop=True))
 
     @property
     def used(self) -> tuple[str, ...]:
@@ -135,7 +147,7 @@ class SongContext:
             return dv, dlead
         strokes = pd.DataFrame({name: plan.loc[played, column].to_numpy(float)
                                 for name, column in CONTROLS.items() if column in plan})
-        effect = self.model.planned_effect(strokes)
+        effect = self.model.planned_effect(strokes, self.reference)
         if "on_velocity" in self.used:
             dv[played] = np.nan_to_num(effect["on_velocity"].to_numpy(float))
         if "lead_s" in self.used:

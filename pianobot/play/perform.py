@@ -37,7 +37,7 @@ from pianobot.plan.trial import press_from
 from pianobot.play.adapt import OnlineAdapter, adapted_stroke
 from pianobot.play.geometry import stroke_trial
 from pianobot.play.song_plan import SongPlan
-from pianobot.play.warmup import SETTLE_S as WARMUP_SETTLE_S
+from pianobot.play.warmup import WARMUP_SETTLE_S
 from pianobot.progress import NO_PROGRESS, Progress
 from pianobot.rig import open_rig
 from pianobot.rig.errors import ConnectionLost, SafetyStop, SafetyViolation

@@ -33,24 +33,24 @@ from pianobot.play.naive import plan_naive
 from pianobot.play.perform import Performance, Performer, trial_id_for
 from pianobot.play.report import write_play_report
 from pianobot.play.score import Score, score_performance
-from pianobot.play.settings import Finger, PlaySettings
+from pianobot.play.settings import PlaySettings
 from pianobot.play.song_plan import SongPlan, plan_model
 from pianobot.play.strokes import stroke_tables
 from pianobot.play.tempo import TempoRequest
 from pianobot.play.warmup import (
     WarmUp,
     design_warmup,
-    estimated_lab_time_s,
     fit_warmup,
     survey_size,
+    warmup_lab_time_s,
 )
 from pianobot.progress import NO_PROGRESS, Progress
 from pianobot.spec import RigSpec, load_rig
+from pianobot.spec.parameters import FINGERS, Finger
 from pianobot.spec.rig import Approach, Travel
 
 PlannerName = Literal["model", "naive"]
 PLANNERS: tuple[str, ...] = ("model", "naive")
-FINGERS: tuple[str, ...] = ("soft", "rigid")
 # A player's moves between keys (the built-in sim rig's travel settings are a sweep's: slow, with
 # a 50 mm lift): lift just clear of the black keys (~12 mm above the white ones) and move
 # briskly, half a UR5's top speed so the finger stays steady. One white key over: ~0.37 s.
@@ -253,7 +253,7 @@ def play_song(
         "settings": settings.model_dump(mode="json"), "tempo_request": request.describe(),
         "plan_summary_before_warmup": plan.summary(),
         "warmup_planned": {"strokes": len(design),
-                           "estimated_lab_time_s": estimated_lab_time_s(design, rig_spec, strokes)},
+                           "estimated_lab_time_s": warmup_lab_time_s(design, rig_spec, strokes)},
     }
     initial = _initial_plan(design, plan, song_key)
     adapter = OnlineAdapter() if adapt else None
@@ -269,6 +269,8 @@ def play_song(
             rows = pd.concat([survey, mapped], ignore_index=True)
             warm = fit_warmup(rows, plan.geometry, lab_time_s=survey_s + mapped_s, seed=performer.seed,  # type: ignore[arg-type]
                               survey=survey_size(strokes))
+            if context is not None:
+                context = context.calibrated_on(rows)
             tables = stroke_tables(warm.predictor, settings, rig_spec, warm.geometry, levels=warm.levels_kpa,
                                    speed_ranges=warm.speed_ranges_mps)
             plan = plan_model(line.notes, warm.predictor, settings, rig_spec, dynamics=mode, tables=tables,

@@ -12,7 +12,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
-Finger = Literal["soft", "rigid"]
+from pianobot.spec.parameters import Finger
 
 # Press depth below first contact: the soft pad needs most of its proven 20–35 mm to push the
 # key to the bottom; a rigid finger sounds the key well before its proven 8–15 mm, and every

@@ -36,7 +36,7 @@ from pianobot.play.warmup_model import WarmUpPredictor
 from pianobot.spec import RigSpec
 
 SURVEY_MIN = 4  # keystrokes per level of the first pass, at least
-SETTLE_S = 0.1  # after each warm-up stroke: the note-off arrives, the key comes to rest
+WARMUP_SETTLE_S = 0.1  # after each warm-up stroke: the note-off arrives, the key comes to rest
 
 
 def warmup_trial_id(song_key: str, index: int) -> str:
@@ -107,13 +107,13 @@ def useful_speeds(survey: pd.DataFrame, slowest_mps: float, cap_mps: float) -> t
     return (lo, hi) if hi > lo * 1.05 else (slowest_mps, cap_mps)
 
 
-def estimated_lab_time_s(survey: Sequence[Trial], rig: RigSpec, strokes_per_level: int) -> float:
+def warmup_lab_time_s(survey: Sequence[Trial], rig: RigSpec, strokes_per_level: int) -> float:
     """The warm-up's lab time before it runs: the survey's presses, key changes, vacuum settling
     and pauses, scaled to the whole warm-up (the second pass's speeds are not known yet)."""
     if not survey:
         return 0.0
     estimate = lab_time(survey, rig)
-    per_stroke = (estimate.presses_s + estimate.travel_s) / len(survey) + SETTLE_S
+    per_stroke = (estimate.presses_s + estimate.travel_s) / len(survey) + WARMUP_SETTLE_S
     levels = len({t.vacuum_kpa for t in survey})
     return estimate.vacuum_s + per_stroke * strokes_per_level * levels
 

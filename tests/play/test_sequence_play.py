@@ -17,7 +17,7 @@ import pytest
 from pianobot.analysis.sequence.evaluate import cross_validate_sequence
 from pianobot.analysis.sequence.files import save_sequence_model
 from pianobot.analysis.sequence.model import SequenceModel
-from pianobot.analysis.sequence.strokes import stroke_table
+from pianobot.analysis.sequence.strokes import stroke_sequences
 from pianobot.io.midifile import Note, write_song
 from pianobot.play import play_song
 from pianobot.play.context import SongContext
@@ -46,7 +46,7 @@ def _repeat_world(n_sequences: int, length: int, seed: int = 0) -> pd.DataFrame:
 
 @pytest.fixture(scope="module")
 def sequence_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    table = stroke_table(_repeat_world(60, 10))
+    table = stroke_sequences(_repeat_world(60, 10))
     cv = cross_validate_sequence(table, ks=(0, 1), per_note=(), folds=3, workers=1)
     folder = tmp_path_factory.mktemp("sequence")
     return save_sequence_model(SequenceModel(1).fit(table), folder / "repeats.json", cv=cv, runs=["repeat-world"])
@@ -83,6 +83,25 @@ def test_repeated_notes_are_aimed_louder_where_the_context_takes_loudness_away(
     inner = repeat | mid
     assert np.all(np.abs(plan["predicted_velocity"] - plan["target_velocity"])[inner] < 1.5)
     assert "on-velocity" in (played.plan.context or "") and "sequence model" in played.model
+
+
+def test_after_a_warm_up_that_moved_from_key_to_key_only_the_repeats_are_corrected(sequence_file: Path) -> None:
+    """The per-note maps come from the warm-up; their loudness already holds the warm-up's
+    context (a move before every stroke), so a moved-to note needs no correction and a repeat
+    needs the whole loss, not its difference to the training mix of moves and repeats."""
+    model = SongContext.load(sequence_file).model
+    pitches = [60, 60, 64, 64, 62, 62, 60, 64, 64, 62, 60, 62]
+    plan = pd.DataFrame({"note": pitches, "down_velocity_mps": 0.03, "up_velocity_mps": 0.7, "hold_s": 0.2})
+    warm_up = pd.DataFrame({"note": [60, 62, 64] * 8, "down_velocity_mps": np.geomspace(0.005, 0.06, 24),
+                            "up_velocity_mps": 0.7, "hold_s": [0.0, 0.3] * 12, "status": "ok"})
+    repeat = np.r_[False, np.diff(pitches) == 0]
+    mixed = model.planned_effect(plan)["on_velocity"].to_numpy(float)
+    moved = model.planned_effect(plan, warm_up)["on_velocity"].to_numpy(float)
+    assert mixed[~repeat][1:].mean() > 0.3  # against the training mix, a move looks loud
+    assert abs(moved[~repeat][1:].mean()) < 0.15 * REPEAT_LOSS
+    assert moved[repeat].mean() < -0.7 * REPEAT_LOSS
+    context = SongContext.load(sequence_file)
+    assert context.calibrated_on(warm_up).reference is not None and context.reference is None
 
 
 @pytest.mark.parametrize("gains, better", [

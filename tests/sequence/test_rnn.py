@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from pianobot.analysis.sequence.evaluate import cross_validate_sequence
-from pianobot.analysis.sequence.strokes import stroke_table
+from pianobot.analysis.sequence.strokes import stroke_sequences
 from tests.cli_runner import invoke_cli
 from tests.sequence.seq_truth import make_trials
 
@@ -25,7 +25,7 @@ def test_without_pytorch_the_rnn_says_how_to_install_it_and_exit_2(
 
 def test_the_rnn_learns_the_context_the_per_stroke_model_cannot_see() -> None:
     pytest.importorskip("torch")
-    table = stroke_table(make_trials(48, 10, seed=5))
+    table = stroke_sequences(make_trials(48, 10, seed=5))
     cv = cross_validate_sequence(table, ks=(0,), per_note=(), folds=3, workers=1, rnn=True).set_index("model")
     assert list(cv.index) == ["sequence k=0", "rnn gru"]
     # Each sequence's hidden finger state shows in its strokes: the GRU carries it, k = 0 cannot.

@@ -13,7 +13,7 @@ from pianobot.analysis.sequence.context import features
 from pianobot.analysis.sequence.evaluate import cross_validate_sequence
 from pianobot.analysis.sequence.files import load_sequence_model, save_sequence_model
 from pianobot.analysis.sequence.model import SequenceModel
-from pianobot.analysis.sequence.strokes import STRETCH_STROKES, stroke_table
+from pianobot.analysis.sequence.strokes import STRETCH_STROKES, stroke_sequences
 from pianobot.errors import InputError
 from tests.sequence.seq_truth import make_trials
 
@@ -25,7 +25,7 @@ def trials() -> pd.DataFrame:
 
 def test_strokes_are_put_in_play_order_with_inter_onset_intervals(trials: pd.DataFrame) -> None:
     shuffled = trials.sample(frac=1.0, random_state=0)
-    table = stroke_table(shuffled)
+    table = stroke_sequences(shuffled)
     frame = table.frame
     assert table.n_sequences == 48
     assert (frame.groupby("sequence")["order"].apply(lambda s: list(s) == sorted(s))).all()
@@ -41,13 +41,13 @@ def test_strokes_are_put_in_play_order_with_inter_onset_intervals(trials: pd.Dat
 
 
 def test_a_run_without_sequence_ids_is_cut_into_stretches(trials: pd.DataFrame) -> None:
-    table = stroke_table(trials.drop(columns=["sequence_id", "sequence_order"]))
+    table = stroke_sequences(trials.drop(columns=["sequence_id", "sequence_order"]))
     assert table.n_sequences == int(np.ceil(len(trials) / STRETCH_STROKES))
     assert table.frame["order"].max() == STRETCH_STROKES - 1
 
 
 def test_context_never_reaches_across_sequences(trials: pd.DataFrame) -> None:
-    table = stroke_table(trials)
+    table = stroke_sequences(trials)
     frame = table.frame
     n = table.n
     X = features(frame, table.controls, 2, np.zeros(n), np.ones(n))
@@ -61,7 +61,7 @@ def test_context_never_reaches_across_sequences(trials: pd.DataFrame) -> None:
 
 
 def test_context_beats_the_per_note_model_on_held_out_sequences(trials: pd.DataFrame) -> None:
-    table = stroke_table(trials)
+    table = stroke_sequences(trials)
     cv = cross_validate_sequence(table, ks=(0, 2), per_note=("gp",), folds=4, workers=1).set_index("model")
     per_note = cv.loc["per-note gp", "on_velocity_rmse"]
     alone = cv.loc["sequence k=0", "on_velocity_rmse"]
@@ -74,7 +74,7 @@ def test_context_beats_the_per_note_model_on_held_out_sequences(trials: pd.DataF
 
 
 def test_predicting_the_next_stroke_agrees_with_predicting_it_in_its_sequence(trials: pd.DataFrame) -> None:
-    table = stroke_table(trials)
+    table = stroke_sequences(trials)
     model = SequenceModel(2).fit(table)
     in_sequence = model.predict(table)
     frame = table.frame
@@ -91,7 +91,7 @@ def test_predicting_the_next_stroke_agrees_with_predicting_it_in_its_sequence(tr
 
 
 def test_model_files_round_trip_and_refuse_a_changed_estimator(trials: pd.DataFrame, tmp_path: Path) -> None:
-    table = stroke_table(trials)
+    table = stroke_sequences(trials)
     model = SequenceModel(1).fit(table)
     path = save_sequence_model(model, tmp_path / "m" / "sequence.json", runs=["truth"])
     sidecar = json.loads(path.read_text())
@@ -105,9 +105,9 @@ def test_model_files_round_trip_and_refuse_a_changed_estimator(trials: pd.DataFr
 
 def test_unfitted_model_and_hopeless_data_are_refused(trials: pd.DataFrame) -> None:
     with pytest.raises(RuntimeError, match="not fitted"):
-        SequenceModel(1).predict(stroke_table(trials))
+        SequenceModel(1).predict(stroke_sequences(trials))
     with pytest.raises(InputError, match="silent"):
-        stroke_table(trials.assign(on_velocity=np.nan, status="silent"))
+        stroke_sequences(trials.assign(on_velocity=np.nan, status="silent"))
     with pytest.raises(ValueError):
         SequenceModel(-1)
 

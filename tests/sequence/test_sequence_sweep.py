@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from pianobot.analysis.learn.run import load_trials
-from pianobot.analysis.sequence.strokes import stroke_table
+from pianobot.analysis.sequence.strokes import stroke_sequences
 from pianobot.plan import expand, plan_frame
 from pianobot.spec import parse_spec_text
 from tests.cli_runner import invoke_cli
@@ -81,5 +81,5 @@ def test_a_sequence_sweep_on_the_sim_rig_is_what_fit_model_sequence_reads(
     trials = load_trials([run_id], data)
     assert trials["sequence_id"].tolist() == [i // 6 for i in range(48)]
     assert trials["sequence_order"].tolist() == [i % 6 for i in range(48)]
-    table = stroke_table(trials)
+    table = stroke_sequences(trials)
     assert table.n_sequences == 8 and table.frame["order"].max() == 5

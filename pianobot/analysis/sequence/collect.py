@@ -71,7 +71,8 @@ def random_sequences(n_sequences: int, length: int, *, notes: Sequence[int],
 
 def play_on_world(world: World, plan: pd.DataFrame, *, stiffness_per_sequence: bool = False,
                   run_id: str = "sim-sequences") -> pd.DataFrame:
-    """Play `plan` (from `random_sequences`) on `world`; the trials table of what was heard."""
+    """Play `plan` (`random_sequences`, or a sequence-mode spec's `plan_frame`) on `world`; the
+    trials table of what was heard."""
     presses = [press_from(row) for row in plan[list(PRESS_PARAMETERS)].to_dict("records")]
     vacuum = plan["vacuum_kpa"].to_numpy(float)
     blocks: list[str | None] = ([f"sequence-{int(s)}" for s in plan["sequence_id"]] if stiffness_per_sequence

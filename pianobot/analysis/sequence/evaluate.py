@@ -29,7 +29,7 @@ from sklearn.model_selection import GroupKFold
 from pianobot.analysis.learn.models import make_regressor
 from pianobot.analysis.learn.predictors import INPUT_COLUMNS
 from pianobot.analysis.sequence.model import MIN_TARGET_ROWS, SequenceModel
-from pianobot.analysis.sequence.strokes import TARGETS, StrokeTable
+from pianobot.analysis.sequence.strokes import TARGETS, StrokeSequences
 from pianobot.errors import InputError
 from pianobot.executor import ExecutorSettings, open_executor
 from pianobot.progress import NO_PROGRESS, Progress
@@ -47,14 +47,14 @@ TASK_COST_S = 1.5
 class _Task:
     model: str  # "sequence" or a per-note kind
     k: int
-    table: StrokeTable
+    table: StrokeSequences
     train: npt.NDArray[np.intp]
     test: npt.NDArray[np.intp]
     seed: int
 
 
-def _subset(table: StrokeTable, rows: npt.NDArray[np.intp]) -> StrokeTable:
-    return StrokeTable(table.frame.iloc[rows].reset_index(drop=True), table.controls)
+def _subset(table: StrokeSequences, rows: npt.NDArray[np.intp]) -> StrokeSequences:
+    return StrokeSequences(table.frame.iloc[rows].reset_index(drop=True), table.controls)
 
 
 def _run(task: _Task) -> tuple[npt.NDArray[np.intp], pd.DataFrame]:
@@ -68,12 +68,12 @@ def _run(task: _Task) -> tuple[npt.NDArray[np.intp], pd.DataFrame]:
     return task.test, _per_note(task.model, train, test, task.seed)
 
 
-def per_note_inputs(table: StrokeTable) -> tuple[str, ...]:
+def per_note_inputs(table: StrokeSequences) -> tuple[str, ...]:
     """The per-note model's inputs: `INPUT_COLUMNS` that vary in this table."""
     return tuple(c for c in INPUT_COLUMNS if c in table.controls)
 
 
-def _per_note(kind: str, train: StrokeTable, test: StrokeTable, seed: int) -> pd.DataFrame:
+def _per_note(kind: str, train: StrokeSequences, test: StrokeSequences, seed: int) -> pd.DataFrame:
     inputs = per_note_inputs(train)
     X, Xt = (t.frame[list(inputs)].to_numpy(float) for t in (train, test))
     out = pd.DataFrame(np.nan, index=range(test.n), columns=list(TARGETS))
@@ -88,7 +88,7 @@ def _per_note(kind: str, train: StrokeTable, test: StrokeTable, seed: int) -> pd
 
 
 def cross_validate_sequence(
-    table: StrokeTable, *, ks: Sequence[int] = DEFAULT_KS, per_note: Sequence[str] = ("gp",),
+    table: StrokeSequences, *, ks: Sequence[int] = DEFAULT_KS, per_note: Sequence[str] = ("gp",),
     folds: int = 5, seed: int = 0, workers: int | None = None, progress: Progress = NO_PROGRESS,
     rnn: bool = False,
 ) -> pd.DataFrame:

@@ -21,7 +21,7 @@ from pianobot.analysis.learn.run import load_trials
 from pianobot.analysis.sequence.evaluate import DEFAULT_KS, cross_validate_sequence
 from pianobot.analysis.sequence.files import save_sequence_model
 from pianobot.analysis.sequence.model import SequenceModel
-from pianobot.analysis.sequence.strokes import stroke_table
+from pianobot.analysis.sequence.strokes import stroke_sequences
 from pianobot.errors import InputError
 from pianobot.progress import NO_PROGRESS, Progress
 
@@ -77,7 +77,7 @@ def fit_sequence_runs(
     """Cross-validate, choose k, fit on every stroke and save `sequence.json` under `out_dir`."""
     if not ks or min(ks) < 0:
         raise InputError(f"context lengths must be >= 0, got {list(ks)}", "--context")
-    table = stroke_table(load_trials(run_ids, data_dir))
+    table = stroke_sequences(load_trials(run_ids, data_dir))
     cv = cross_validate_sequence(table, ks=ks, per_note=per_note, folds=folds, seed=seed,
                                  workers=workers, progress=progress, rnn=rnn)
     k = choose_k(cv)

@@ -27,7 +27,7 @@ from sklearn.model_selection import GroupKFold
 from threadpoolctl import threadpool_limits
 
 from pianobot.analysis.sequence.context import OUTCOMES, feature_names, features
-from pianobot.analysis.sequence.strokes import TARGETS, StrokeTable
+from pianobot.analysis.sequence.strokes import TARGETS, StrokeSequences
 from pianobot.errors import InputError
 from pianobot.spec.parameters import PARAMETERS
 
@@ -115,7 +115,7 @@ class SequenceModel:
         self.k = k
         self.seed = seed
 
-    def fit(self, table: StrokeTable) -> SequenceModel:
+    def fit(self, table: StrokeSequences) -> SequenceModel:
         """Fit both stages on the strokes of `table`.
 
         Raises:
@@ -126,7 +126,7 @@ class SequenceModel:
         with threadpool_limits(1):
             return self._fit(table)
 
-    def _fit(self, table: StrokeTable) -> SequenceModel:
+    def _fit(self, table: StrokeSequences) -> SequenceModel:
         frame = table.frame
         if int(np.isfinite(frame["on_velocity"]).sum()) < MIN_TARGET_ROWS:
             raise InputError(f"fewer than {MIN_TARGET_ROWS} sounded strokes: cannot fit a sequence model",
@@ -150,7 +150,7 @@ class SequenceModel:
             self.contexts_ = X[np.sort(pick), len(self.controls_) + 1:]
         return self
 
-    def _cross_fitted_base(self, own: FloatArray, table: StrokeTable) -> FloatArray:
+    def _cross_fitted_base(self, own: FloatArray, table: StrokeSequences) -> FloatArray:
         """Context-free on-velocity of each training stroke from a model that never saw its sequence."""
         groups = table.groups
         folds = min(RESIDUAL_FOLDS, int(np.unique(groups).size))
@@ -170,7 +170,7 @@ class SequenceModel:
         if not hasattr(self, "base_"):
             raise RuntimeError("SequenceModel is not fitted; call fit first")
 
-    def predict(self, table: StrokeTable) -> pd.DataFrame:
+    def predict(self, table: StrokeSequences) -> pd.DataFrame:
         """Each stroke's predicted outcome given its observed predecessors.
 
         Columns: `TARGETS` and `p_silent`, one row per stroke of `table` (same order).
@@ -220,43 +220,52 @@ class SequenceModel:
         X[:, n_own + 1] = cand["note"].to_numpy(float) - prev_note
         return self.stage_.predict(X)
 
-    def planned_effect(self, strokes: pd.DataFrame) -> pd.DataFrame:
+    def planned_effect(self, strokes: pd.DataFrame, reference: pd.DataFrame | None = None) -> pd.DataFrame:
         """What the context changes in each stroke of a plan: with context minus without.
 
         `strokes`: the strokes of one sequence in play order, controls only (a plan). A plan
         has no outcomes yet, so each predecessor's outcome is the context-free prediction and
         its residual zero (its expected value: a finger state the plan cannot know). The effect
-        is the context model's prediction with this stroke's context minus its mean over the
-        training contexts (`REFERENCE_CONTEXTS`), the stroke's own controls held: the same
-        model on both sides, so what the context model learned better from the stroke itself
-        is not taken for context. Columns `TARGETS` (NaN where a target was not learned), one
-        row per stroke; all zero for k = 0.
+        is the context model's prediction with this stroke's context minus its mean over
+        reference contexts, the stroke's own controls held: the same model on both sides, so
+        what the context model learned better from the stroke itself is not taken for context.
+
+        The reference is the context in which the per-note model the plan starts from was
+        learned: `reference`, strokes played in order (a play's warm-up; their contexts are
+        built as a plan's are, from controls alone), or by default the training contexts
+        (`REFERENCE_CONTEXTS`). Columns `TARGETS` (NaN where a target was not learned), one row
+        per stroke; all zero for k = 0.
         """
         self._check()
         rows = self._controls_of(strokes.reset_index(drop=True))
-        own = rows[list(self.controls_)].to_numpy(float)
-        base = self.base_.predict(own)
         if self.k == 0 or rows.empty:
             return pd.DataFrame(0.0, index=range(len(rows)), columns=list(TARGETS))
-        silent = base["p_silent"].to_numpy(float) >= 0.5
-        base_on = base["on_velocity"].to_numpy(float)
-        rows["sequence"] = 0
-        rows["silent"] = silent.astype(float)
-        rows["on_velocity"] = np.where(silent, np.nan, base_on)
-        rows["midi_hold_s"] = np.where(silent, np.nan, base["midi_hold_s"].to_numpy(float))
-        residual = np.where(silent, np.nan, 0.0)
-        X = features(rows, self.controls_, self.k, base_on, residual)
-        reference = getattr(self, "contexts_", None)
+        n_own = len(self.controls_) + 1
         with threadpool_limits(1):
+            X = self._planned_features(rows)
             context = self.stage_.predict(X)
-            if reference is None:  # a model saved before the reference contexts: against k = 0
-                typical = base
+            contexts = getattr(self, "contexts_", None)
+            if reference is not None and len(reference) >= 2:
+                ref = self._planned_features(self._controls_of(reference.reset_index(drop=True)))[1:, n_own:]
+                pick = np.unique(np.linspace(0, len(ref) - 1, min(REFERENCE_CONTEXTS, len(ref))).round().astype(int))
+                contexts = ref[pick]
+            if contexts is None:  # a model saved before the reference contexts: against k = 0
+                typical = self.base_.predict(rows[list(self.controls_)].to_numpy(float))
             else:
-                n_own = len(self.controls_) + 1
-                m = len(reference)
-                grid = np.column_stack([np.repeat(X[:, :n_own], m, axis=0), np.tile(reference, (len(X), 1))])
+                m = len(contexts)
+                grid = np.column_stack([np.repeat(X[:, :n_own], m, axis=0), np.tile(contexts, (len(X), 1))])
                 typical = self.stage_.predict(grid)[list(TARGETS)].groupby(np.repeat(np.arange(len(X)), m)).mean()
         return pd.DataFrame({name: context[name].to_numpy(float) - typical[name].to_numpy(float) for name in TARGETS})
+
+    def _planned_features(self, rows: pd.DataFrame) -> FloatArray:
+        """The context model's matrix of one planned sequence (controls only): each
+        predecessor's outcome is its context-free prediction, its residual zero."""
+        base = self.base_.predict(rows[list(self.controls_)].to_numpy(float))
+        silent = base["p_silent"].to_numpy(float) >= 0.5
+        base_on = base["on_velocity"].to_numpy(float)
+        rows = rows.assign(sequence=0, silent=silent.astype(float), on_velocity=np.where(silent, np.nan, base_on),
+                           midi_hold_s=np.where(silent, np.nan, base["midi_hold_s"].to_numpy(float)))
+        return features(rows, self.controls_, self.k, base_on, np.where(silent, np.nan, 0.0))
 
     def _controls_of(self, frame: pd.DataFrame) -> pd.DataFrame:
         out = pd.DataFrame(index=range(len(frame)))

@@ -39,7 +39,7 @@ TARGETS: tuple[str, ...] = ("on_velocity", "midi_hold_s", "lead_s", "ioi_s")
 
 
 @dataclass(frozen=True)
-class StrokeTable:
+class StrokeSequences:
     """Executed strokes in play order: one row per stroke, grouped into sequences.
 
     `frame` columns: `sequence` (int, one per (run, sequence)), `order` (position in it, from
@@ -63,7 +63,7 @@ class StrokeTable:
         return int(self.frame["sequence"].nunique())
 
 
-def stroke_table(trials: pd.DataFrame, controls: tuple[str, ...] | None = None) -> StrokeTable:
+def stroke_sequences(trials: pd.DataFrame, controls: tuple[str, ...] | None = None) -> StrokeSequences:
     """Order executed trials into sequences and compute the targets.
 
     `controls`: the control columns to use (a fitted model's); default: those that vary.
@@ -99,7 +99,7 @@ def stroke_table(trials: pd.DataFrame, controls: tuple[str, ...] | None = None) 
         controls = tuple(c for c in CONTROL_COLUMNS if out[c].notna().all() and out[c].nunique() > 1)
         if "down_velocity_mps" not in controls:
             controls = ("down_velocity_mps", *controls)
-    return StrokeTable(out.reset_index(drop=True), tuple(controls))
+    return StrokeSequences(out.reset_index(drop=True), tuple(controls))
 
 
 def _column(frame: pd.DataFrame, name: str) -> FloatArray:
