@@ -99,7 +99,8 @@ def _iterate(setting: Setting, current: GreyBoxFit, start: KeystrokeModel, setti
              index: int, progress: Progress, mapper: Mapper,
              earlier: dict[str, dict[str, float]]) -> tuple[Iteration, GreyBoxFit | None]:
     """One round of candidates against `current`. `earlier` maps a candidate's label to the
-    values it reached in the previous round (a start for this one); it is updated in place."""
+    values it reached in the previous round when it had evidence there (a start for this one);
+    it is updated in place."""
     rule = settings.rule
     criterion = search.criterion_of(current)
     reference = search.evaluate(setting, current, criterion, sigma_m, "current", None)
@@ -136,10 +137,14 @@ def _iterate(setting: Setting, current: GreyBoxFit, start: KeystrokeModel, setti
             refitted[e.label] = e
             task.advance(note=f"{e.label} (joint)")
     final = [refitted.get(e.label, e) for e in evaluated]
-    for e in final:
-        assert e.spec is not None
-        earlier[e.label] = {k: v for k, v in e.fit.params_.items() if k.split(".", 1)[0] in (e.spec.effect, "readout")}
     verdicts = [_verdict(e, reference, rule, False) for e in final]
+    # A candidate with evidence of its own (ΔIC and held-out shrink) that was not accepted keeps
+    # its values as a start for the next round; one without evidence starts afresh there.
+    earlier.clear()
+    for e, v in zip(final, verdicts, strict=True):
+        if e.spec is not None and v.delta_ic > rule.ic_margin and v.shrink >= rule.min_shrink:
+            earlier[e.label] = {k: x for k, x in e.fit.params_.items()
+                                if k.split(".", 1)[0] in (e.spec.effect, "readout")}
     # Intervals (a central Jacobian and noise draws each) only where the rest of the rule holds,
     # and only at an optimum: away from it the residuals still hold the misfit the fit was about
     # to remove, and the sandwich covariance reads it as uncertainty of the effect's size.
