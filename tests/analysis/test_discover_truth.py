@@ -94,3 +94,17 @@ def test_a_clean_midi_log_names_only_what_the_lab_arm_does(
     # The lab's arm moves in trapezoids (its contact speed capped at low acceleration): the one
     # thing the study's model lacks here. Nothing of the key, finger or piano is named.
     assert set(payload["accepted_effects"]) <= set(truth["always_present"])
+
+
+def test_a_delay_timed_only_by_the_marker_is_reported_as_arm_lag_or_mocap_clock(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """A constant mocap clock offset (20 ms) in a Motive take with the lab's commanded presses:
+    the arm marker starts late against the commands, which an arm lag would do too. Discovery
+    measures it (never discovers it from the key) and says that both explain it."""
+    run_id, data, truth, files = _imported("mocap-mocap_delay-offset-strong", tmp_path)
+    assert truth["mocap_clock"]["delay_s"] > 0.01
+    payload = _discover([run_id, "--data", str(data), "--presses", str(files["presses"])], (capsys, monkeypatch))
+    assert not {"arm_lag", "mocap_delay"} & set(payload["accepted_effects"])
+    lag = next(m for m in payload["measured"] if m["effect"] == "arm_lag")
+    assert lag["accepted"] and lag["value"] == pytest.approx(truth["mocap_clock"]["delay_s"], abs=0.005)
+    assert "motion-capture clock" in lag["text"]
