@@ -9,6 +9,7 @@ multiply), deep nesting, truncated and bit-flipped files, and journals cut at an
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import shutil
@@ -32,6 +33,18 @@ SONGS = Path(__file__).resolve().parents[2] / "experiments" / "songs"
 
 def _one_line(exc: InputError) -> None:
     assert "\n" not in str(exc) and str(exc).strip(), repr(str(exc))
+
+
+def _assert_finite(value: Any) -> None:
+    """Every float in a nested structure of dicts, lists and tuples is finite."""
+    if isinstance(value, float):
+        assert math.isfinite(value)
+    elif isinstance(value, dict):
+        for v in value.values():
+            _assert_finite(v)
+    elif isinstance(value, list | tuple):
+        for v in value:
+            _assert_finite(v)
 
 
 # --- values a hostile file may hold ---------------------------------------------------------
@@ -125,9 +138,14 @@ def test_the_spec_loader_loads_or_refuses_in_one_line(text: str, tmp_path_factor
     spec_file.write_text(text)
     try:
         spec = load_spec(spec_file)
-        expand(spec)
+        trials = expand(spec)
     except InputError as exc:
         _one_line(exc)
+        return
+    # What loads plans physical trials, in run order, the same each time.
+    assert [t.index for t in trials] == list(range(len(trials)))
+    _assert_finite([dataclasses.asdict(t) for t in trials])
+    assert expand(spec) == trials
 
 
 RIG_PATHS = [("kind",), ("seed",), ("realtime",), ("settle_s", "between_presses_s"),
@@ -155,18 +173,7 @@ def test_the_rig_loader_loads_or_refuses_in_one_line(changes: list[tuple[tuple[s
     except InputError as exc:
         _one_line(exc)
         return
-    # What loads is physical: every number finite.
-    def finite(value: Any) -> None:
-        if isinstance(value, float):
-            assert math.isfinite(value)
-        elif isinstance(value, dict):
-            for v in value.values():
-                finite(v)
-        elif isinstance(value, list | tuple):
-            for v in value:
-                finite(v)
-
-    finite(rig.model_dump())
+    _assert_finite(rig.model_dump())  # what loads is physical: every number finite
 
 
 @FEW
@@ -263,11 +270,20 @@ def test_model_and_predictor_files_load_or_refuse_in_one_line(
     if data.draw(st.booleans()):
         as_text = as_text[: data.draw(st.integers(0, len(as_text)))]
     path.write_text(as_text)
-    for reader in (read_model_file, load_predictor):
-        try:
-            reader(path)
-        except InputError as exc:
-            _one_line(exc)
+    try:
+        model_file = read_model_file(path)
+    except InputError as exc:
+        _one_line(exc)
+    else:  # what loads is a physical model: every number finite, and it saves again
+        _assert_finite(model_file.model.to_dict())
+        again = read_model_file(save_model(model_file.model, folder / "again.json"))
+        assert again.model.to_dict() == model_file.model.to_dict()
+    try:
+        predictor = load_predictor(path)
+    except InputError as exc:
+        _one_line(exc)
+    else:
+        assert callable(predictor.predict)
 
 
 @FUZZ
