@@ -107,6 +107,13 @@ class RunPaths:
         """The folder of the samples parts: the run's samples, one Parquet file per batch."""
         return self.root / SAMPLES_FOLDER
 
+    def measurement_files(self) -> list[Path]:
+        """The files holding the run's trials and samples, in a stable order (samples.parquet in
+        runs of an older pianobot, else one file per batch in samples/): what an analysis
+        fingerprints."""
+        candidates = [self.table("trials"), self.table("samples"), *sorted(self.samples.glob("*.parquet"))]
+        return [path for path in candidates if path.is_file()]
+
     def part(self, name: str, batch: int) -> Path:
         folder = self.samples if name == "samples" else self.parts
         return folder / f"{name}-{batch:06d}.parquet"

@@ -27,7 +27,7 @@ from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
 from pianobot.analysis.greybox.trajectories import OUTPUT_SOURCES, keystroke_batch
 from pianobot.errors import InputError
 from pianobot.spec.parameters import PRESS_PARAMETERS, recorded_or_followed
-from pianobot.store import load_run
+from pianobot.store import RunPaths, load_run
 
 
 @dataclass(frozen=True)
@@ -42,11 +42,8 @@ class Loaded:
 
 def _file_hash(path: Path) -> str:
     digest = hashlib.sha256()
-    # A run's samples are samples/ (one file per batch; samples.parquet in older runs).
-    files = [path / "trials.parquet", path / "samples.parquet", *sorted((path / "samples").glob("*.parquet"))]
-    for file in files:
-        if file.is_file():
-            digest.update(file.read_bytes())
+    for file in RunPaths(path).measurement_files():
+        digest.update(file.read_bytes())
     return digest.hexdigest()
 
 
