@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -49,6 +49,9 @@ from pianobot.analysis.greybox.split import holdout_indices
 from pianobot.analysis.identify.fit import rms_x2_m
 from pianobot.physics.model import KeystrokeModel
 from pianobot.progress import NO_PROGRESS, Progress
+
+#: A candidate's label -> the values (its own and the readout's) it reached in the last round.
+Starts = dict[str, dict[str, float]]
 
 
 @dataclass(frozen=True)
@@ -97,10 +100,11 @@ def _promising(v: Verdict, rule: Rule) -> bool:
 
 def _iterate(setting: Setting, current: GreyBoxFit, start: KeystrokeModel, settings: Settings, sigma_m: float,
              index: int, progress: Progress, mapper: Mapper,
-             earlier: dict[str, dict[str, float]]) -> tuple[Iteration, GreyBoxFit | None]:
-    """One round of candidates against `current`. `earlier` maps a candidate's label to the
-    values it reached in the previous round when it had evidence there (a start for this one);
-    it is updated in place."""
+             earlier: Mapping[str, Mapping[str, float]]) -> tuple[Iteration, GreyBoxFit | None, Starts]:
+    """One round of candidates against `current`, and the starts it leaves for the next round.
+
+    `earlier` maps a candidate's label to the values it reached in the previous round when it
+    had evidence there (a second start for it in this one)."""
     rule = settings.rule
     criterion = search.criterion_of(current)
     reference = search.evaluate(setting, current, criterion, sigma_m, "current", None)
@@ -111,7 +115,7 @@ def _iterate(setting: Setting, current: GreyBoxFit, start: KeystrokeModel, setti
     if not explainable:
         # No candidate can pass (condition 2 of the rule fails for all alike): fitting them
         # would cost most of a clean take's discovery and decide nothing.
-        return Iteration(index, reference.gap, before, (), None, None, explainable), None
+        return Iteration(index, reference.gap, before, (), None, None, explainable), None, {}
     specs = candidates(current.model_, setting.train)
     total = len(specs) + min(settings.joint_refits, len(specs))
     with progress.task(f"discover, iteration {index + 1}: candidate fits", total=total) as task:
@@ -140,11 +144,9 @@ def _iterate(setting: Setting, current: GreyBoxFit, start: KeystrokeModel, setti
     verdicts = [_verdict(e, reference, rule, False) for e in final]
     # A candidate with evidence of its own (ΔIC and held-out shrink) that was not accepted keeps
     # its values as a start for the next round; one without evidence starts afresh there.
-    earlier.clear()
-    for e, v in zip(final, verdicts, strict=True):
-        if e.spec is not None and v.delta_ic > rule.ic_margin and v.shrink >= rule.min_shrink:
-            earlier[e.label] = {k: x for k, x in e.fit.params_.items()
-                                if k.split(".", 1)[0] in (e.spec.effect, "readout")}
+    starts: Starts = {e.label: {k: x for k, x in e.fit.params_.items() if k.split(".", 1)[0] in (e.spec.effect, "readout")}
+                      for e, v in zip(final, verdicts, strict=True)
+                      if e.spec is not None and v.delta_ic > rule.ic_margin and v.shrink >= rule.min_shrink}
     # Intervals (a central Jacobian and noise draws each) only where the rest of the rule holds,
     # and only at an optimum: away from it the residuals still hold the misfit the fit was about
     # to remove, and the sandwich covariance reads it as uncertainty of the effect's size.
@@ -164,7 +166,7 @@ def _iterate(setting: Setting, current: GreyBoxFit, start: KeystrokeModel, setti
     if chosen is not None:
         after = localise(GreyBoxFit(setting.held_drive, chosen.layout, channels=chosen.channels,
                                     sigma=chosen.sigma).evaluate(chosen.theta_), sigma_m)
-    return Iteration(index, reference.gap, before, tuple(judged), accepted, after, explainable), chosen
+    return Iteration(index, reference.gap, before, tuple(judged), accepted, after, explainable), chosen, starts
 
 
 def _residual_search(setting: Setting, fit: GreyBoxFit) -> tuple[Proposal, ...]:
@@ -221,9 +223,10 @@ def _discover(batch: KeystrokeBatch, start: KeystrokeModel | None, settings: Set
     current = base
     iterations: list[Iteration] = []
     unexplained: Proposal | None = None
-    earlier: dict[str, dict[str, float]] = {}
+    starts: Starts = {}
     for index in range(settings.max_iterations):
-        iteration, chosen = _iterate(setting, current, start, settings, sigma_m, index, progress, mapper, earlier)
+        iteration, chosen, starts = _iterate(setting, current, start, settings, sigma_m, index, progress, mapper,
+                                             starts)
         if chosen is None:
             proposals = _residual_search(setting, current) if iteration.explainable else ()
             iteration = Iteration(iteration.index, iteration.gap_before, iteration.before, iteration.verdicts,
