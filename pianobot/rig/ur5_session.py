@@ -131,6 +131,9 @@ def reconnect(links: Links, io: Any, host: str) -> None:
     try:
         if not control.isConnected():
             dropped = True
+            # Stop the client's own receive thread first: it retries the link by itself, and a
+            # reconnect() racing it corrupted ur_rtde's heap (malloc abort) on a dropped link.
+            quietly(control, "disconnect")
             if not control.reconnect():  # re-uploads the control script as needed
                 raise ConnectionLost(f"arm: RTDE control did not reconnect to {host}")
         elif not control.isProgramRunning():
