@@ -35,7 +35,8 @@ FloatArray = npt.NDArray[np.float64]
 COMMAND_FIELDS: tuple[str, ...] = tuple(n for n in PRESS_PARAMETERS if n != "distance_m")
 #: Per-keystroke arrays (n,) of a batch; `subset` indexes these and the (n, ...) trajectories.
 _ROW_FIELDS = ("vacuum_kpa", "x0_m", "x1_m", "x2_m", "distance_m", "t_offset_s", "input_x0_m",
-               *COMMAND_FIELDS, "command_start_s", "on_velocity", "t_on_s", "hold_midi_s", "sounded")
+               *COMMAND_FIELDS, "command_start_s", "motion_start_s", "on_velocity", "t_on_s", "hold_midi_s",
+               "sounded")
 
 
 def _empty() -> FloatArray:
@@ -75,6 +76,9 @@ class KeystrokeBatch:
     # When the press was commanded to start, on the keystroke's clock (t = 0 is where its motion
     # was seen to start): 0 for a run's own arm log, NaN when no one logged the command.
     command_start_s: FloatArray = field(default_factory=_empty)
+    # Where the keystroke's motion was seen to start on its run's own clock (NaN: not known); a
+    # clock that runs at another rate than the command's shows as a lag growing along the run.
+    motion_start_s: FloatArray = field(default_factory=_empty)
     # The MIDI outcome (NaN: silent or not recorded; `sounded` NaN: no MIDI recorded).
     on_velocity: FloatArray = field(default_factory=_empty)
     t_on_s: FloatArray = field(default_factory=_empty)  # note-on after motion start
@@ -86,7 +90,8 @@ class KeystrokeBatch:
         for name in ("distance_m", "t_offset_s"):
             if getattr(self, name).size == 0:
                 object.__setattr__(self, name, np.zeros(n))
-        for name in (*COMMAND_FIELDS, "command_start_s", "on_velocity", "t_on_s", "hold_midi_s", "sounded"):
+        for name in (*COMMAND_FIELDS, "command_start_s", "motion_start_s", "on_velocity", "t_on_s", "hold_midi_s",
+                     "sounded"):
             if getattr(self, name).size == 0:
                 object.__setattr__(self, name, np.full(n, np.nan))
         for name in ("x0_m", "x1_m", "x2_m"):
@@ -175,6 +180,6 @@ class KeystrokeBatch:
         n = self.n
         keep = {f.name: getattr(self, f.name) for f in fields(self)
                 if f.name in ("trial_id", "vacuum_kpa", "distance_m", *COMMAND_FIELDS, "command_start_s",
-                              "on_velocity", "t_on_s", "hold_midi_s", "sounded")}
+                              "motion_start_s", "on_velocity", "t_on_s", "hold_midi_s", "sounded")}
         return KeystrokeBatch(t_s=np.zeros(0), x0_m=np.zeros((n, 0)), x1_m=np.zeros((n, 0)),
                               x2_m=np.zeros((n, 0)), **keep)
