@@ -53,6 +53,8 @@ Kind = Literal["in-process", "local-cluster", "scheduler"]
 
 # Below this much estimated serial work (seconds) a local cluster costs more than it saves.
 MIN_PARALLEL_WORK_S = 8.0
+#: The glibc tunable Dask sets for its workers (see `_local_client`).
+MALLOC_TRIM = "MALLOC_TRIM_THRESHOLD_"
 ENV_WORKERS = "PIANOBOT_WORKERS"
 ENV_SCHEDULER = "PIANOBOT_SCHEDULER"
 ENV_CONFIG = "PIANOBOT_CONFIG"
@@ -200,14 +202,21 @@ def _local_client(workers: int) -> Any:
     if workers in _LOCAL:
         return _LOCAL[workers]
     distributed: Any = importlib.import_module("distributed")
-    cluster = distributed.LocalCluster(
-        # ":0": any free port. None still tries 8787 and warns on stderr when another cluster
-        # (another user's, another command's) holds it.
-        n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0",
-        worker_dashboard_address=None, silence_logs=50,
-        # Each task is one block of numba-compiled work: keep BLAS/numba from oversubscribing.
-        env={"OMP_NUM_THREADS": "1", "NUMBA_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"},
-    )
+    dask: Any = importlib.import_module("dask")
+    # Dask starts its workers with glibc's MALLOC_TRIM_THRESHOLD_ fixed at 64 KiB, which also
+    # fixes the mmap threshold: every array above 128 KiB is then mapped and unmapped afresh, and
+    # a bootstrap refit ran 2.2x slower in a worker than in this process (measured;
+    # benchmarks/bench_dask_fits.py). Our tasks hold bounded memory: glibc's defaults serve them.
+    # A value the user exported still wins (Dask's own precedence).
+    with dask.config.set({f"distributed.nanny.pre-spawn-environ.{MALLOC_TRIM}": None}):
+        cluster = distributed.LocalCluster(
+            # ":0": any free port. None still tries 8787 and warns on stderr when another cluster
+            # (another user's, another command's) holds it.
+            n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0",
+            worker_dashboard_address=None, silence_logs=50,
+            # Each task is one block of numba-compiled work: keep BLAS/numba from oversubscribing.
+            env={"OMP_NUM_THREADS": "1", "NUMBA_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"},
+        )
     client = distributed.Client(cluster, set_as_default=False)
     _LOCAL[workers] = client
 
