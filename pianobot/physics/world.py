@@ -287,7 +287,8 @@ class World:
         v2 = truth.v2_mps[:keep]
 
         # Read on the run clock, so timestamps fall on its 1 ms MIDI ticks.
-        midi, _ = key_events(t0_s + t, x2, self._readout, note=note, rng=rng)
+        t_run = t0_s + t
+        midi, _ = key_events(t_run, x2, self._readout, note=note, rng=rng)
 
         t_arm = np.arange(0.0, duration + 1e-9, 1.0 / cfg.arm_rate_hz)
         arm = np.interp(t_arm, t, x0) + rng.normal(0.0, cfg.arm_noise_m, t_arm.size)
@@ -312,10 +313,11 @@ class World:
         return WorldKeystroke(
             t0_s=t0_s,
             duration_s=float(duration),
-            truth_t_s=t0_s + t,
-            truth_x0_m=x0.copy(),
-            truth_x1_m=x1.copy(),
-            truth_x2_m=x2.copy(),
+            truth_t_s=t_run,
+            # Views: the prefetched batch they belong to lives one block (its truth), no longer.
+            truth_x0_m=x0,
+            truth_x1_m=x1,
+            truth_x2_m=x2,
             arm_t_s=t0_s + t_arm,
             arm_x0_m=arm,
             mocap_t_s=t0_s + tau + self._mocap_offset_s,

@@ -100,6 +100,7 @@ class SimArm:
         self.connected = False
         self.connects = 0
         self.note: int | None = None
+        self._retrigger: tuple[Any, float] | None = None  # (world, its re-trigger depth)
 
     def connect(self) -> None:
         self.connected = True
@@ -141,7 +142,7 @@ class SimArm:
                         "above its re-trigger depth",)
         stroke = state.world.keystroke(press, state.vacuum_kpa, note=note, t0_s=t0_s, key=state.key)
         self._publish(stroke)
-        back_s, ready_s = stroke_times(stroke, press, _retrigger_m(state.world))
+        back_s, ready_s = stroke_times(stroke, press, self._retrigger_m())
         t_up_s = t0_s + back_s
         state.key_ready_s[note] = t0_s + ready_s
         state.clock.sleep(t_up_s - state.clock.now())
@@ -174,6 +175,13 @@ class SimArm:
             "key_speed_at_trigger_mps": float(stroke.key_speed_at_trigger_mps),
             "max_key_travel_m": float(stroke.max_key_travel_m),
         }
+
+    def _retrigger_m(self) -> float:
+        """The world's re-trigger depth, worked out once per world (it is fixed)."""
+        world = self.state.world
+        if self._retrigger is None or self._retrigger[0] is not world:
+            self._retrigger = (world, _retrigger_m(world))
+        return self._retrigger[1]
 
     def _require_link(self) -> None:
         if not self.connected:
@@ -245,6 +253,11 @@ class SimMocap:
         if not chunks:
             empty = np.empty(0)
             return Trace(t_s=empty, x0_m=empty, x1_m=empty, x2_m=empty, source="mocap")
+        if len(chunks) == 1 and chunks[0].t_s[0] >= t_from_s and chunks[0].t_s[-1] < t_to_s:
+            # The usual case: one keystroke's frames, all inside the window (times increase).
+            only = chunks[0]
+            return Trace(t_s=only.t_s, x0_m=_column(only, "x0_m"), x1_m=_column(only, "x1_m"),
+                         x2_m=_column(only, "x2_m"), source="mocap")
         t_s = np.concatenate([c.t_s for c in chunks])
         inside = (t_s >= t_from_s) & (t_s < t_to_s)
 
