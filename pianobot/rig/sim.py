@@ -29,6 +29,7 @@ Fault randomness is seeded by (rig seed, key), so it too repeats exactly for a r
 from __future__ import annotations
 
 import hashlib
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -245,11 +246,16 @@ class SimMocap:
 
     def __init__(self, state: SimState) -> None:
         self.state = state
+        self._buffer: list[Trace] | None = None  # the state's buffer that `_spans` describes
+        self._spans: list[tuple[float, float, Trace]] = []  # (first, last frame time, chunk)
 
     def trace_between(self, t_from_s: float, t_to_s: float) -> Trace:
-        chunks = [c for c in self.state.mocap if len(c.t_s) and c.t_s[-1] >= t_from_s and c.t_s[0] < t_to_s]
+        spans = self._indexed()
+        chunks = [c for first, last, c in spans if last >= t_from_s and first < t_to_s]
         horizon = t_from_s - BUFFER_HORIZON_S
-        self.state.mocap = [c for c in self.state.mocap if len(c.t_s) and c.t_s[-1] >= horizon]
+        if any(last < horizon for _, last, _ in spans):
+            self._spans = [span for span in spans if span[1] >= horizon]
+            self.state.mocap = self._buffer = [c for _, _, c in self._spans]
         if not chunks:
             empty = np.empty(0)
             return Trace(t_s=empty, x0_m=empty, x1_m=empty, x2_m=empty, source="mocap")
@@ -265,6 +271,24 @@ class SimMocap:
             return np.concatenate([_column(c, name) for c in chunks])[inside]
 
         return Trace(t_s=t_s[inside], x0_m=cut("x0_m"), x1_m=cut("x1_m"), x2_m=cut("x2_m"), source="mocap")
+
+    def _indexed(self) -> list[tuple[float, float, Trace]]:
+        """The buffered chunks with their first and last frame times as floats (a keystroke's
+        chunk is looked at by every later window for a minute: its times are read once).
+
+        The buffer only grows at its end between two calls (`SimArm._publish`); anything else
+        done to it (a new list, a clear) is noticed and the spans are worked out again.
+        """
+        buffer, spans = self.state.mocap, self._spans
+        if buffer is not self._buffer or len(spans) > len(buffer) or (
+            spans and buffer[len(spans) - 1] is not spans[-1][2]
+        ):
+            self._buffer, spans = buffer, []
+        for c in buffer[len(spans):]:
+            # An empty chunk never matches a window and is dropped with the stale ones.
+            spans.append((float(c.t_s[0]), float(c.t_s[-1]), c) if len(c.t_s) else (math.inf, -math.inf, c))
+        self._spans = spans
+        return spans
 
     def describe(self) -> dict[str, Any]:
         return {"kind": "sim-mocap", "mocap_drop_prob": self.state.faults.mocap_drop_prob}
