@@ -115,3 +115,12 @@ def settled(
         if v > deepest:
             deepest = v
     return duration, keep, speed, deepest
+
+
+@njit(cache=True)
+def last_beyond(x: FloatArray, level: float, absolute: bool) -> int:  # pragma: no cover (compiled)
+    """The last index k where |x[k]| > level (`absolute`), else where x[k] >= level; -1 if none."""
+    for k in range(x.size - 1, -1, -1):
+        if (abs(x[k]) > level) if absolute else (x[k] >= level):
+            return k
+    return -1

@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from pianobot.physics._observe_kernel import last_beyond
 from pianobot.physics.trajectory import Press, press_duration_s
 from pianobot.plan import key_change_s
 from pianobot.rig.clock import VirtualClock
@@ -317,18 +318,17 @@ def _arm_back_s(stroke: Any, press: Press, t_s: FloatArray) -> float:
     """
     if not t_s.size:
         return float(stroke.duration_s)
-    away = np.nonzero(np.abs(_f64(stroke.truth_x0_m)) > ARM_AT_REST_M)[0]
-    last_s = float(t_s[away[-1]]) if away.size else 0.0
+    away = last_beyond(_f64(stroke.truth_x0_m), ARM_AT_REST_M, True)
+    last_s = float(t_s[away]) if away >= 0 else 0.0
     k = int(np.searchsorted(t_s, max(press_duration_s(press), last_s) - 1e-9))
     return float(t_s[min(k, t_s.size - 1)])
 
 
 def _key_ready_s(stroke: Any, retrigger_m: float, t_s: FloatArray) -> float:
     """Motion start → the key is above its re-trigger depth for the rest of the stroke."""
-    deep = np.nonzero(_f64(stroke.truth_x2_m) >= retrigger_m)[0]
-    if not deep.size:
+    k = last_beyond(_f64(stroke.truth_x2_m), float(retrigger_m), False)
+    if k < 0:
         return 0.0
-    k = int(deep[-1])
     return float(t_s[min(k + 1, t_s.size - 1)])
 
 

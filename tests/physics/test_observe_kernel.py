@@ -119,3 +119,18 @@ def test_world_keystrokes_observed_alone_and_in_a_batch_are_the_same() -> None:
         assert got.midi == alone.midi
         assert _same_bits(np.array([got.key_speed_at_trigger_mps, got.max_key_travel_m]),
                           np.array([alone.key_speed_at_trigger_mps, alone.max_key_travel_m]))
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_last_beyond_equals_the_array_form(seed: int) -> None:
+    from pianobot.physics._observe_kernel import last_beyond
+
+    rng = np.random.default_rng(seed)
+    _, x = _trace(rng, 1500)
+    x[rng.integers(0, x.size)] = np.nan
+    x[-1] = -0.02 if seed == 2 else x[-1]  # the last sample itself beyond (by its size)
+    for level in (2e-5, 0.001, 0.0038, 1.0):
+        away = np.nonzero(np.abs(x) > level)[0]
+        deep = np.nonzero(x >= level)[0]
+        assert last_beyond(x, level, True) == (int(away[-1]) if away.size else -1)
+        assert last_beyond(x, level, False) == (int(deep[-1]) if deep.size else -1)
