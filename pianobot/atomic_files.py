@@ -53,8 +53,9 @@ def write_bytes_atomic(path: Path, data: bytes | memoryview) -> None:
             handle.flush()
             os.fsync(handle.fileno())
         os.replace(temp, path)
-    finally:
-        temp.unlink(missing_ok=True)
+    except BaseException:
+        temp.unlink(missing_ok=True)  # after a rename there is nothing left to remove
+        raise
     fsync_dir(path.parent)
 
 
