@@ -32,7 +32,7 @@ from pianobot.physics.effects import Effects
 from pianobot.physics.model import KeystrokeModel
 from pianobot.physics.msd import MSDParams
 from pianobot.physics.piano import PianoEvent, PianoParams, key_events
-from pianobot.physics.simulate import SimBatch, output_count, simulate_presses
+from pianobot.physics.simulate import BATCH_LANES, SimBatch, output_count, simulate_presses
 from pianobot.physics.trajectory import Press, press_duration_s
 
 FloatArray = npt.NDArray[np.float64]
@@ -182,7 +182,7 @@ class World:
 
     def prefetch(
         self, presses: Sequence[Press], vacuum_kpa: npt.ArrayLike,
-        blocks: Sequence[str | None] | None = None, *, lanes: int = 64,
+        blocks: Sequence[str | None] | None = None, *, lanes: int = BATCH_LANES,
     ) -> None:
         """Simulate the true trajectories of keystrokes about to be asked for, in batches.
 
