@@ -23,8 +23,10 @@ from typing import Any
 class ParamSpec:
     """One parameter of an effect: default, fit bounds, and the value that means "off".
 
-    `off` is None when no single value of this parameter switches the effect off (the
-    effect's other parameters do). `forms` names the forms that use it (empty: all forms).
+    `off` is the value at which this parameter adds nothing of its own (a zero force); None
+    when it is a shape, not a size (a depth, a width, a speed scale). An effect with several
+    sizes (Stribeck friction: sliding and breakaway force) is on when any of them is away from
+    its `off`. `forms` names the forms that use it (empty: all forms).
     """
 
     name: str
@@ -85,7 +87,7 @@ _SPECS: tuple[EffectSpec, ...] = (
         "Dry friction in the key action (Coulomb, or Stribeck with a higher breakaway force).",
         (
             ParamSpec("friction_n", 0.12, 0.0, 0.5, 0.0, "N", "kinetic (Coulomb) friction force"),
-            ParamSpec("static_friction_n", 0.18, 0.0, 0.8, None, "N", "breakaway force", ("stribeck",)),
+            ParamSpec("static_friction_n", 0.18, 0.0, 0.8, 0.0, "N", "breakaway force", ("stribeck",)),
             ParamSpec("stribeck_velocity_mps", 0.005, 1e-4, 0.05, None, "m/s", "Stribeck speed", ("stribeck",)),
         ),
         ("coulomb", "stribeck"),

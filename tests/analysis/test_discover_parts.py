@@ -7,7 +7,13 @@ import math
 import numpy as np
 import pytest
 
-from pianobot.analysis.discover.candidates import candidates, family_of
+from pianobot.analysis.discover.candidates import (
+    candidate_params,
+    candidates,
+    family_of,
+    size_params,
+    start_points,
+)
 from pianobot.analysis.discover.decide import Rule, choose, something_to_explain, verdict
 from pianobot.analysis.discover.gap import Gap, consistency, score
 from pianobot.analysis.discover.result import params_text
@@ -20,7 +26,9 @@ from pianobot.analysis.discover.sparse import (
 )
 from pianobot.analysis.greybox.criterion import Criterion
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
+from pianobot.analysis.greybox.layout import Layout
 from pianobot.analysis.greybox.noise import autocorrelation_time, noise_sigma_m, systematic_rms
+from pianobot.physics.effects import EFFECTS
 from pianobot.physics.model import KeystrokeModel
 
 
@@ -147,3 +155,23 @@ def test_outcome_search_points_at_the_velocity_map() -> None:
     residual = 3000.0 * v**2 - 60.0 * v  # a convex map the linear readout misses
     found = outcome_proposals(v, a, np.full_like(v, 0.03), np.full_like(v, -60.0), residual)
     assert found and found[0].family == "velocity_curve"
+
+
+def test_a_stribeck_friction_is_started_small_in_both_its_forces() -> None:
+    """Each start of a small sliding force comes with a breakaway force scaled alike (the
+    default breakaway, 0.18 N, grips a key that a 0.05 N friction lets move: from there a fit
+    sees a stuck key and no gradient), and either force away from zero is friction."""
+    n, T = 3, 20
+    traj = KeystrokeBatch(("a", "b", "c"), np.zeros(n), np.arange(T) / 120, np.zeros((n, T)), np.zeros((n, T)),
+                          np.ones((n, T)) * 1e-3, arm_source="mocap")
+    spec = next(c for c in candidates(KeystrokeModel.study(), traj) if c.label == "key_friction/stribeck")
+    layout = Layout(KeystrokeModel.study(), tuple(candidate_params(spec, traj)), (0.0,), {spec.effect: spec.form})
+    friction = EFFECTS["key_friction"]
+    shape = friction.param("static_friction_n").default / friction.param("friction_n").default
+    starts = [s for s in start_points(layout, spec, traj) if s]
+    assert len(starts) >= 3
+    for s in starts:
+        kinetic, static = s["key_friction.friction_n"], s["key_friction.static_friction_n"]
+        assert static == pytest.approx(kinetic * shape)
+    assert {p.name for p in size_params(layout, "key_friction")} == {"key_friction.friction_n",
+                                                                   "key_friction.static_friction_n"}

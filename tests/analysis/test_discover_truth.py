@@ -12,11 +12,13 @@ import json
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 from cli_runner import invoke_cli
 
 from pianobot.analysis.discover.candidates import family_of
-from pianobot.analysis.greybox.load import load_keystrokes
+from pianobot.analysis.discover.measured import arm_checks
+from pianobot.analysis.greybox.load import load_keystrokes, read_schedule
 from pianobot.analysis.greybox.split import split_holdout
 from pianobot.analysis.identify.fit import identify_trajectories, rms_x2_m
 from pianobot.io.importers import import_keystroke_log, import_mocap
@@ -108,3 +110,33 @@ def test_a_delay_timed_only_by_the_marker_is_reported_as_arm_lag_or_mocap_clock(
     lag = next(m for m in payload["measured"] if m["effect"] == "arm_lag")
     assert lag["accepted"] and lag["value"] == pytest.approx(truth["mocap_clock"]["delay_s"], abs=0.005)
     assert "motion-capture clock" in lag["text"]
+
+
+def test_a_mocap_clock_running_at_another_rate_is_measured_as_a_clock_error(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """The independent lab's mocap clock gains 100 ppm on its script's (no offset): the arm
+    marker falls further behind the commands the longer the take runs, which no arm lag does.
+    Discovery names the clock from the marker's timing, and finds no arm lag."""
+    run_id, data, truth, files = _imported("mocap-mocap_delay-drifting-weak", tmp_path)
+    rate = truth["mocap_clock"]["rate_ppm"] * 1e-6
+    payload = _discover([run_id, "--data", str(data), "--presses", str(files["presses"])], (capsys, monkeypatch))
+    assert not {"arm_lag", "mocap_delay"} & set(payload["accepted_effects"])
+    clock = next(m for m in payload["measured"] if m["effect"] == "mocap_delay")
+    assert clock["accepted"] and "ppm" in clock["text"]
+    span = float(clock["text"].split(" ms over ")[1].split(" s")[0])
+    assert clock["value"] == pytest.approx(rate * span, rel=0.3)
+    lag = next(m for m in payload["measured"] if m["effect"] == "arm_lag")
+    assert not lag["accepted"]
+
+
+@pytest.mark.parametrize("name", ["mocap-clean-light-finger-deep-1", "mocap-arm_lag-servo-strong"])
+def test_presses_run_slow_to_fast_do_not_read_as_a_drifting_clock(name: str, tmp_path: Path) -> None:
+    """The lab runs its speeds in order, slowest first, and a slow move's start is read some ms
+    late: a lag that changes along the take without any clock error. Repeated presses carry their
+    own offsets, so no drift is claimed (before they did, these takes read as 130 ppm)."""
+    made = materialise(scenario(name), tmp_path / "files")
+    run_id = import_mocap(made.files["take"], tmp_path / "data", vacuum_kpa=float(made.truth["vacuum_kpa"])).run_id
+    batch = load_keystrokes([run_id], tmp_path / "data", schedule=read_schedule(made.files["presses"])).batch
+    assert np.isfinite(batch.motion_start_s).all() and np.isfinite(batch.command_start_s).any()
+    checks = {c.effect: c for c in arm_checks(batch)}
+    assert "mocap_delay" not in checks or not checks["mocap_delay"].accepted

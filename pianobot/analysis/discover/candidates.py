@@ -121,7 +121,7 @@ def start_points(layout: Layout, spec: CandidateSpec, batch: KeystrokeBatch) -> 
         for fraction in (0.05, 0.2, 0.45, 0.8):
             value = size.from_internal(lo + fraction * (hi - lo))
             if value != size.off:
-                sizes.append({size.name: value})
+                sizes.append({size.name: value, **_scaled_siblings(params, size, value)})
     depth = next((p for p in params if p.name.endswith(("bed_depth_m", "letoff_depth_m"))), None)
     if depth is None:
         return sizes
@@ -129,6 +129,17 @@ def start_points(layout: Layout, spec: CandidateSpec, batch: KeystrokeBatch) -> 
     depths = ([f * travel for f in (0.5, 0.7, 0.85, 0.97)] if travel is not None
               else list(np.linspace(depth.lower, depth.upper, 6)[1:-1]))
     return [{depth.name: min(max(d, depth.lower), depth.upper), **s} for d in depths for s in sizes]
+
+
+def _scaled_siblings(params: Sequence[Param], size: Param, value: float) -> dict[str, float]:
+    """The effect's other parameters in the size's unit, scaled with it so that the start keeps
+    the default's shape: a Stribeck breakaway started above a small sliding force, not at a
+    default that grips the key so hard it never moves (a stuck key gives a fit no gradient)."""
+    if size.start <= 0 or size.unit == "1":
+        return {}
+    ratio = value / size.start
+    return {p.name: min(max(p.start * ratio, p.lower), p.upper)
+            for p in params if p is not size and p.unit == size.unit}
 
 
 def size_params(layout: Layout, effect: str) -> list[Param]:

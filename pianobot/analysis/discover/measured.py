@@ -11,7 +11,10 @@ instead the arm trace itself is compared with the commanded press:
   measured arm follows it; an imported Motive take alone defines t = 0 from the arm marker
   itself, so there a lag cannot be seen.
 - `mocap_delay`: the motion-capture clock offset against the arm log, estimated when the batch
-  was built from the arm marker seen by both (`trajectories._clock_offset_s`).
+  was built from the arm marker seen by both (`trajectories._clock_offset_s`); with the arm
+  timed only by its marker and the commands known, a clock *rate* error: the marker's lag
+  behind the commands growing along the run (`_clock_drift`). A constant offset of that clock
+  reads exactly like a late arm and is reported with `arm_lag`.
 - `velocity_curve`: with the key tracked and MIDI recorded, the piano's key-speed → velocity
   map is fitted against the measured key speed at the trigger depth (`identify.readout`): a
   power law or a saturating curve against the straight line through the origin.
@@ -28,7 +31,7 @@ import numpy.typing as npt
 import pandas as pd
 from scipy.optimize import least_squares
 
-from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
+from pianobot.analysis.greybox.keystrokes import COMMAND_FIELDS, KeystrokeBatch
 from pianobot.analysis.greybox.noise import (
     VELOCITY_QUANTUM_SIGMA,
     autocorrelation_time,
@@ -170,6 +173,10 @@ def arm_checks(batch: KeystrokeBatch) -> list[MeasuredCheck]:
         # as a gentler acceleration if that were free), started where the command started.
         a_cmd = float(np.median(recorded)) if recorded.size else a_best
         starts = np.array([_fit_move(t, x, a_cmd, True)[1] for t, x in moves]) - command[rows]
+        drift = _clock_drift(batch, rows, starts) if batch.arm_source == "mocap" else None
+        if drift is not None and drift.accepted:
+            out.append(drift.check)
+            starts = drift.starts  # the lag at each run's start, the clock's drift taken out
         lag = float(np.median(starts))
         se = float(1.2533 * np.std(starts, ddof=1) / math.sqrt(starts.size)) if starts.size > 1 else math.inf
         z = lag / se if se > 0 else math.inf
@@ -185,6 +192,72 @@ def arm_checks(batch: KeystrokeBatch) -> list[MeasuredCheck]:
         out.append(MeasuredCheck("arm_lag", lag, (lag - 1.96 * se, lag + 1.96 * se), z * z, lagging, text,
                                  {"arm_lag_s": lag}))
     return out
+
+
+@dataclass(frozen=True)
+class _Drift:
+    check: MeasuredCheck
+    starts: FloatArray  # the arm's start against the command with the drift taken out
+
+    @property
+    def accepted(self) -> bool:
+        return self.check.accepted
+
+
+#: A clock-rate error is named when the lag it builds up over the run is this many standard errors
+#: from none (stricter than a lag's 3: the start estimates carry speed-dependent biases).
+_DRIFT_Z = 4.0
+
+
+def _clock_drift(batch: KeystrokeBatch, rows: npt.NDArray[np.intp], starts: FloatArray) -> _Drift | None:
+    """`mocap_delay` as a clock running at another rate: the marker's start against the lab
+    script's command growing along the run (an arm's lag does not grow with the time a run has
+    been going; a clock whose rate is off by r falls r·t behind after t).
+
+    The rate is shared; each run (trial ids are `run/trial`) and each commanded press that was
+    repeated has an offset of its own, which takes up how a trapezoid fit's start estimate
+    depends on the press (a slow move's start is read late) even when the lab ran its speeds in
+    order. None without the keystrokes' times on the run's clock or without repeated presses."""
+    times = batch.motion_start_s[rows]
+    if not (np.isfinite(times).all() and np.isfinite(starts).all()) or rows.size < 6:
+        return None
+    runs = np.array([batch.trial_id[i].split("/", 1)[0] for i in rows])
+    press = np.column_stack([getattr(batch, name)[rows] for name in (*COMMAND_FIELDS, "distance_m")])
+    keys = [f"{run}|" + "|".join(f"{v:.4g}" for v in row) for run, row in zip(runs, press, strict=True)]
+    groups = sorted(set(keys))
+    if len(groups) > rows.size - 4:
+        return None  # too few repeats to tell a drift from the presses' own offsets
+    design = np.column_stack([np.array([k == g for k in keys], dtype=np.float64) for g in groups]
+                             + [times - times.mean()])
+    spans = [float(np.ptp(times[runs == r])) for r in np.unique(runs)]
+    if max(spans) <= 0:
+        return None
+    # Each press weighted by how well its starts repeat (a slow move's start scatters by ms, a
+    # fast one's by µs), never above the typical press's weight.
+    member = design[:, : len(groups)].astype(bool)
+    spread = np.array([np.var(starts[m], ddof=1) if m.sum() > 1 else np.nan for m in member.T])
+    typical = float(np.nanmedian(spread)) if np.isfinite(spread).any() else 0.0
+    variance = np.fmax(np.where(np.isfinite(spread), spread, np.inf), max(typical, 1e-12))
+    root_w = 1.0 / np.sqrt(member @ variance)
+    wx, wy = design * root_w[:, None], starts * root_w
+    coef, *_ = np.linalg.lstsq(wx, wy, rcond=None)
+    residual = wy - wx @ coef
+    sigma2 = float(residual @ residual) / (rows.size - design.shape[1])  # an outlier widens it: no false alarm
+    cov = sigma2 * np.linalg.pinv(wx.T @ wx)
+    j = len(groups)
+    rate, se = float(coef[j]), math.sqrt(max(float(cov[j, j]), 0.0))
+    span = max(spans)
+    z = abs(rate) / se if se > 0 else math.inf
+    built = rate * span
+    accepted = abs(built) > _MIN_DELAY_S and z > _DRIFT_Z
+    first = np.array([times[runs == r].min() for r in runs])
+    offset = float(np.clip(rate * np.median(times - first), -0.05, 0.05))
+    text = (f"the arm marker falls behind the commanded starts by {1e6 * rate:.0f} ± {1.96e6 * se:.0f} ppm of the "
+            f"run's time ({_ms(built)} ms over {span:.0f} s): the motion-capture clock runs at another rate than "
+            "the lab script's (a clock error: an arm's lag does not grow along a run)")
+    check = MeasuredCheck("mocap_delay", built, (built - 1.96 * se * span, built + 1.96 * se * span), z * z,
+                          accepted, text, {"mocap_delay_s": offset})
+    return _Drift(check, starts - rate * (times - first))
 
 
 def _ms(seconds: float) -> str:

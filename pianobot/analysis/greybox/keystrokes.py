@@ -33,9 +33,11 @@ FloatArray = npt.NDArray[np.float64]
 #: Columns of the commanded press (the parameter table's press parameters but the distance, a
 #: row field of its own; NaN where not recorded).
 COMMAND_FIELDS: tuple[str, ...] = tuple(n for n in PRESS_PARAMETERS if n != "distance_m")
+#: Per-keystroke facts of a batch besides its trajectories: NaN where not recorded.
+_FACT_FIELDS = (*COMMAND_FIELDS, "command_start_s", "motion_start_s", "on_velocity", "t_on_s", "hold_midi_s",
+                "sounded")
 #: Per-keystroke arrays (n,) of a batch; `subset` indexes these and the (n, ...) trajectories.
-_ROW_FIELDS = ("vacuum_kpa", "x0_m", "x1_m", "x2_m", "distance_m", "t_offset_s", "input_x0_m",
-               *COMMAND_FIELDS, "command_start_s", "on_velocity", "t_on_s", "hold_midi_s", "sounded")
+_ROW_FIELDS = ("vacuum_kpa", "x0_m", "x1_m", "x2_m", "distance_m", "t_offset_s", "input_x0_m", *_FACT_FIELDS)
 
 
 def _empty() -> FloatArray:
@@ -75,6 +77,9 @@ class KeystrokeBatch:
     # When the press was commanded to start, on the keystroke's clock (t = 0 is where its motion
     # was seen to start): 0 for a run's own arm log, NaN when no one logged the command.
     command_start_s: FloatArray = field(default_factory=_empty)
+    # Where the keystroke's motion was seen to start on its run's own clock (NaN: not known); a
+    # clock that runs at another rate than the command's shows as a lag growing along the run.
+    motion_start_s: FloatArray = field(default_factory=_empty)
     # The MIDI outcome (NaN: silent or not recorded; `sounded` NaN: no MIDI recorded).
     on_velocity: FloatArray = field(default_factory=_empty)
     t_on_s: FloatArray = field(default_factory=_empty)  # note-on after motion start
@@ -86,7 +91,7 @@ class KeystrokeBatch:
         for name in ("distance_m", "t_offset_s"):
             if getattr(self, name).size == 0:
                 object.__setattr__(self, name, np.zeros(n))
-        for name in (*COMMAND_FIELDS, "command_start_s", "on_velocity", "t_on_s", "hold_midi_s", "sounded"):
+        for name in _FACT_FIELDS:
             if getattr(self, name).size == 0:
                 object.__setattr__(self, name, np.full(n, np.nan))
         for name in ("x0_m", "x1_m", "x2_m"):
@@ -174,7 +179,6 @@ class KeystrokeBatch:
         """The same keystrokes with only what was commanded and heard (no frames)."""
         n = self.n
         keep = {f.name: getattr(self, f.name) for f in fields(self)
-                if f.name in ("trial_id", "vacuum_kpa", "distance_m", *COMMAND_FIELDS, "command_start_s",
-                              "on_velocity", "t_on_s", "hold_midi_s", "sounded")}
+                if f.name in ("trial_id", "vacuum_kpa", "distance_m", *_FACT_FIELDS)}
         return KeystrokeBatch(t_s=np.zeros(0), x0_m=np.zeros((n, 0)), x1_m=np.zeros((n, 0)),
                               x2_m=np.zeros((n, 0)), **keep)

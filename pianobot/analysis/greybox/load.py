@@ -170,6 +170,7 @@ def load_keystrokes(run_ids: Sequence[str], data_dir: Path, *, x0_source: str = 
     columns: dict[str, Any] = {**_commands(rows, notes), **_midi(rows, midi_recorded)}
     # A run's own arm log starts at the commanded motion start; an imported take does not know it.
     columns["command_start_s"] = np.full(batch.n, 0.0 if batch.arm_source == "arm" else np.nan)
+    columns["motion_start_s"] = _column(rows, "t_start_s")
     batch = replace(batch, **columns)
     if schedule is not None:
         batch = attach_schedule(batch, rows, schedule, notes)

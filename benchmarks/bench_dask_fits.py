@@ -1,0 +1,156 @@
+"""Dask benchmark of the fits that split: identify's bootstrap refits and discovery's candidates.
+
+    python benchmarks/bench_dask_fits.py            # both, best of 2, ~3-6 min on 2 idle cores
+    python benchmarks/bench_dask_fits.py --quick    # small sizes, to check the script
+
+The keystrokes are an independent truth-lab take (tests/truth: a simulator sharing no code with
+pianobot, written as Motive CSV and imported as a lab imports it). Each workload runs in three
+ways, interleaved `--repeat` times (best wall time kept), like `bench_dask.py` does for sweeps:
+
+- `serial`: every piece in this process (`serial_map`, what one worker does);
+- `cluster_1`: the pieces on a LocalCluster of 1 worker process (`Executor.imap`);
+- `cluster_2`: the same on a LocalCluster of 2 worker processes.
+
+`speedup_2_vs_1_process` answers "does a second process help" for the same code path. The
+results are checked equal to the serial ones (bootstrap intervals; discovery's decisions and
+fitted values), since a piece's result may depend only on its arguments.
+
+JSON goes to stdout and benchmarks/results/dask_fits.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from bench_dask import _cluster, _workers_cpu_s  # noqa: E402
+
+RESULTS = ROOT / "benchmarks" / "results"
+#: A clean take for the bootstrap (identify's refits) and a let-off take for discovery (two
+#: iterations of candidates).
+BOOTSTRAP_TAKE = "mocap-clean-light-finger-deep-1"
+DISCOVERY_TAKE = "mocap-letoff-gaussian-strong"
+
+
+def _batch(name: str, folder: Path) -> Any:
+    from bench_discover import truth_batch
+
+    from tests.truth import materialise, scenario
+
+    made = materialise(scenario(name), folder / "files")
+    batch, _ = truth_batch(made, folder / "data")
+    return batch
+
+
+def _bootstrap(batch: Any, replicates: int) -> Callable[[Any], Any]:
+    from pianobot.analysis.identify.fit import identify_trajectories
+    from pianobot.physics.msd import MSDParams
+
+    def run(mapper: Any) -> Any:
+        fit = identify_trajectories(batch, prior=MSDParams(), bootstrap=replicates, seed=3, mapper=mapper)
+        return json.dumps({e.name: (e.value, e.ci_bootstrap) for e in fit.estimates}, sort_keys=True)
+
+    return run
+
+
+def _candidates(batch: Any) -> Callable[[Any], Any]:
+    from pianobot.analysis.discover.loop import discover
+
+    def run(mapper: Any) -> Any:
+        result = discover(batch, mapper=mapper)
+        return json.dumps([result.accepted_effects, result.final_model.effects.to_dict(), result.verdict],
+                          sort_keys=True)
+
+    return run
+
+
+def _time(work: Callable[[Any], Any], executor: Any | None) -> dict[str, Any]:
+    from pianobot.analysis.greybox.pieces import serial_map
+
+    client = getattr(executor, "_client", None)
+    before = _workers_cpu_s(client) if client is not None else 0.0
+    wall, cpu = time.perf_counter(), time.process_time()
+    value = work(serial_map if executor is None else executor.imap)
+    wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+    workers = (_workers_cpu_s(client) - before) if client is not None else 0.0
+    return {"wall_s": wall, "driver_cpu_s": cpu, "workers_cpu_s": workers, "value": value}
+
+
+def _workload(name: str, work: Callable[[Any], Any], configs: dict[str, Any], repeat: int) -> dict[str, Any]:
+    from pianobot.analysis.greybox.pieces import serial_map
+
+    work(serial_map)  # imports and compiled kernels, here and in each worker process: not timed
+    for executor in (configs["cluster_1"], configs["cluster_2"]):
+        work(executor.imap)
+    runs: dict[str, list[dict[str, Any]]] = {c: [] for c in configs}
+    for rep in range(repeat):
+        for c in (list(configs) if rep % 2 == 0 else list(reversed(configs))):
+            runs[c].append(_time(work, configs[c]))
+    best = {c: min(rs, key=lambda r: r["wall_s"]) for c, rs in runs.items()}
+    same = all(r["value"] == best["serial"]["value"] for rs in runs.values() for r in rs)
+    two, one = best["cluster_2"], best["cluster_1"]
+    return {
+        "workload": name,
+        "wall_s": {c: round(r["wall_s"], 2) for c, r in best.items()},
+        "all_wall_s": {c: [round(r["wall_s"], 2) for r in rs] for c, rs in runs.items()},
+        "cpu_s": {c: {"driver": round(r["driver_cpu_s"], 2), "workers": round(r["workers_cpu_s"], 2)}
+                  for c, r in best.items()},
+        "speedup_2_vs_1_process": round(one["wall_s"] / two["wall_s"], 2),
+        "speedup_2_vs_serial": round(best["serial"]["wall_s"] / two["wall_s"], 2),
+        "identical_to_serial": same,
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeat", type=int, default=2, help="interleaved repetitions (best kept)")
+    parser.add_argument("--replicates", type=int, default=32, help="bootstrap refits")
+    parser.add_argument("--only", choices=("bootstrap", "candidates"), default=None)
+    parser.add_argument("--quick", action="store_true", help="8 refits, once")
+    args = parser.parse_args()
+    repeat, replicates = (1, 8) if args.quick else (max(1, args.repeat), args.replicates)
+    from pianobot.executor import usable_cores
+
+    load_start = os.getloadavg()
+    started = time.perf_counter()
+    os.environ.setdefault("OMP_NUM_THREADS", "1")  # as the cluster's workers run
+    configs: dict[str, Any] = {"serial": None, "cluster_1": _cluster(1), "cluster_2": _cluster(2)}
+    workloads = []
+    with tempfile.TemporaryDirectory(prefix="pianobot-bench-dask-fits-") as tmp:
+        root = Path(tmp)
+        if args.only in (None, "bootstrap"):
+            work = _bootstrap(_batch(BOOTSTRAP_TAKE, root / "boot"), replicates)
+            workloads.append({**_workload("bootstrap", work, configs, repeat), "take": BOOTSTRAP_TAKE,
+                              "replicates": replicates})
+        if args.only in (None, "candidates"):
+            work = _candidates(_batch(DISCOVERY_TAKE, root / "disc"))
+            workloads.append({**_workload("candidates", work, configs, repeat), "take": DISCOVERY_TAKE})
+    result = {
+        "benchmark": "dask_fits", "quick": args.quick, "repeat": repeat,
+        "machine": {"python": platform.python_version(), "cpus": os.cpu_count(), "usable_cores": usable_cores(),
+                    "platform": platform.platform(), "load_average_start": load_start,
+                    "load_average_end": os.getloadavg()},
+        "workloads": workloads,
+        "took_s": round(time.perf_counter() - started, 1),
+    }
+    text = json.dumps(result, indent=2)
+    print(text)
+    if not args.quick:
+        RESULTS.mkdir(parents=True, exist_ok=True)
+        (RESULTS / "dask_fits.json").write_text(text + "\n")
+
+
+if __name__ == "__main__":
+    main()
