@@ -44,7 +44,7 @@ def temp_name(path: Path) -> Path:
     return path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(3)}.tmp")
 
 
-def write_bytes_atomic(path: Path, data: bytes) -> None:
+def write_bytes_atomic(path: Path, data: bytes | memoryview) -> None:
     """Write a file's bytes so readers see either nothing (or the old file) or all of `data`."""
     temp = temp_name(path)
     try:
@@ -53,8 +53,9 @@ def write_bytes_atomic(path: Path, data: bytes) -> None:
             handle.flush()
             os.fsync(handle.fileno())
         os.replace(temp, path)
-    finally:
-        temp.unlink(missing_ok=True)
+    except BaseException:
+        temp.unlink(missing_ok=True)  # after a rename there is nothing left to remove
+        raise
     fsync_dir(path.parent)
 
 

@@ -138,6 +138,23 @@ def on_velocity_from_speed(
     return float(velocity) if np.ndim(speed_mps) == 0 else np.asarray(velocity, dtype=np.float64)
 
 
+# Traces longer than this go through the compiled loop (numba, imported on first use: a
+# command that never reads a key trace does not pay for it).
+_COMPILED_FROM = 64
+
+
+def _crossing_times(t: FloatArray, x: FloatArray, level: float, downward: bool) -> list[float]:
+    """The times x passes `level` (see `_crossings`), interpolated between samples."""
+    if x.size > _COMPILED_FROM and t.shape == x.shape:
+        # One compiled pass, the same times: the array operations cost more than the arithmetic.
+        from pianobot.physics._observe_kernel import crossing_times
+
+        times: list[float] = crossing_times(t, x, float(level), bool(downward)).tolist()
+        return times
+    k, frac = _crossings(x, level, downward)
+    return (t[k - 1] + frac * (t[k] - t[k - 1])).tolist()  # type: ignore[no-any-return]
+
+
 def _crossings(x: FloatArray, level: float, downward: bool) -> tuple[npt.NDArray[np.intp], FloatArray]:
     """Sample indices k where x passes `level` between k-1 and k, with the fractional position."""
     if downward:
@@ -170,9 +187,7 @@ def key_events(
         (1, params.lower_sensor_m, True),
         (2, params.release_m, False),
     ):
-        k, frac = _crossings(x, level, down)
-        times = t[k - 1] + frac * (t[k] - t[k - 1])
-        marks.extend((float(tc), kind) for tc in times)
+        marks.extend((tc, kind) for tc in _crossing_times(t, x, level, down))
     marks.sort()
     events: list[PianoEvent] = []
     first_speed = math.nan

@@ -27,14 +27,18 @@ import numpy as np
 import numpy.typing as npt
 from pydantic import BaseModel, ConfigDict, Field
 
+from pianobot.physics._observe_kernel import interp, settled
 from pianobot.physics.effects import Effects
 from pianobot.physics.model import KeystrokeModel
 from pianobot.physics.msd import MSDParams
 from pianobot.physics.piano import PianoEvent, PianoParams, key_events
-from pianobot.physics.simulate import SimBatch, output_count, simulate_presses
+from pianobot.physics.simulate import BATCH_LANES, SimBatch, output_count, simulate_presses
 from pianobot.physics.trajectory import Press, press_duration_s
 
 FloatArray = npt.NDArray[np.float64]
+
+# A keystroke is at rest once arm and key stay this close to their rest positions.
+REST_TOL_M = 2e-5
 
 # The default world's piano (PianoParams' defaults: sensors at 1.8 and 3.8 mm of the 10 mm dip)
 # with a velocity curve that maps the soft finger's key speeds between the sensors (a few mm/s
@@ -178,7 +182,7 @@ class World:
 
     def prefetch(
         self, presses: Sequence[Press], vacuum_kpa: npt.ArrayLike,
-        blocks: Sequence[str | None] | None = None, *, lanes: int = 64,
+        blocks: Sequence[str | None] | None = None, *, lanes: int = BATCH_LANES,
     ) -> None:
         """Simulate the true trajectories of keystrokes about to be asked for, in batches.
 
@@ -279,18 +283,22 @@ class World:
         cfg = self.config
         rng = np.random.default_rng([self.seed, _seed_of(key)])
         t_end = press_duration_s(press, self.model.arm_profile)
-        duration = _rest_time(truth.t_s, truth.x1_m, truth.x2_m, t_end)
+        # Rest time (`_rest_time`), the samples up to it, the key speed where it first passes
+        # the lower sensor and its deepest point, in one compiled pass over the truth.
+        duration, keep, speed, deepest = settled(
+            truth.t_s, truth.x1_m, truth.x2_m, truth.v2_mps, t_end, REST_TOL_M,
+            self._readout.lower_sensor_m,
+        )
         # The samples up to `duration` (t_s is increasing): views, not copies.
-        keep = int(np.searchsorted(truth.t_s, duration + 1e-9, side="right"))
         t = truth.t_s[:keep]
         x0, x1, x2 = truth.x0_m[:keep], truth.x1_m[:keep], truth.x2_m[:keep]
-        v2 = truth.v2_mps[:keep]
 
         # Read on the run clock, so timestamps fall on its 1 ms MIDI ticks.
-        midi, _ = key_events(t0_s + t, x2, self._readout, note=note, rng=rng)
+        t_run = t0_s + t
+        midi, _ = key_events(t_run, x2, self._readout, note=note, rng=rng)
 
         t_arm = np.arange(0.0, duration + 1e-9, 1.0 / cfg.arm_rate_hz)
-        arm = np.interp(t_arm, t, x0) + rng.normal(0.0, cfg.arm_noise_m, t_arm.size)
+        arm = interp(t_arm, t, x0) + rng.normal(0.0, cfg.arm_noise_m, t_arm.size)
 
         # Mocap frames fall at true times τ; the mocap clock stamps them τ + offset.
         frame = 1.0 / cfg.mocap.rate_hz
@@ -298,24 +306,17 @@ class World:
         lost = rng.random(tau.size) < cfg.mocap.drop_prob
         mocap = []
         for x in (x0, x1, x2):
-            m = np.interp(tau, t, x) + rng.normal(0.0, cfg.mocap.noise_m, tau.size)
+            m = interp(tau, t, x) + rng.normal(0.0, cfg.mocap.noise_m, tau.size)
             m[lost] = np.nan  # a lost frame loses every marker at once
             mocap.append(m)
-
-        lower = self._readout.lower_sensor_m
-        hit = np.nonzero((x2[:-1] < lower) & (x2[1:] >= lower))[0]
-        speed = math.nan
-        if hit.size:
-            k = int(hit[0])
-            f = (lower - x2[k]) / (x2[k + 1] - x2[k])
-            speed = float(v2[k] + f * (v2[k + 1] - v2[k]))
         return WorldKeystroke(
             t0_s=t0_s,
             duration_s=float(duration),
-            truth_t_s=t0_s + t,
-            truth_x0_m=x0.copy(),
-            truth_x1_m=x1.copy(),
-            truth_x2_m=x2.copy(),
+            truth_t_s=t_run,
+            # Views: the prefetched batch they belong to lives one block (its truth), no longer.
+            truth_x0_m=x0,
+            truth_x1_m=x1,
+            truth_x2_m=x2,
             arm_t_s=t0_s + t_arm,
             arm_x0_m=arm,
             mocap_t_s=t0_s + tau + self._mocap_offset_s,
@@ -324,7 +325,7 @@ class World:
             mocap_x2_m=mocap[2],
             midi=tuple(midi),
             key_speed_at_trigger_mps=speed,
-            max_key_travel_m=float(np.max(x2)),
+            max_key_travel_m=deepest,
             rel_t_s=t,
         )
 
@@ -351,7 +352,7 @@ class _Truth:
 
 
 def _rest_time(
-    t_s: FloatArray, x1_m: FloatArray, x2_m: FloatArray, t_end_s: float, tol_m: float = 2e-5
+    t_s: FloatArray, x1_m: FloatArray, x2_m: FloatArray, t_end_s: float, tol_m: float = REST_TOL_M
 ) -> float:
     """Motion start → arm back up and the key at rest (within `tol_m` of rest from then on),
     at most the end of the given samples (the keystroke's own horizon)."""

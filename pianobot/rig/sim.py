@@ -29,12 +29,14 @@ Fault randomness is seeded by (rig seed, key), so it too repeats exactly for a r
 from __future__ import annotations
 
 import hashlib
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
+from pianobot.physics._observe_kernel import last_beyond
 from pianobot.physics.trajectory import Press, press_duration_s
 from pianobot.plan import key_change_s
 from pianobot.rig.clock import VirtualClock
@@ -100,6 +102,7 @@ class SimArm:
         self.connected = False
         self.connects = 0
         self.note: int | None = None
+        self._retrigger: tuple[Any, float] | None = None  # (world, its re-trigger depth)
 
     def connect(self) -> None:
         self.connected = True
@@ -141,7 +144,7 @@ class SimArm:
                         "above its re-trigger depth",)
         stroke = state.world.keystroke(press, state.vacuum_kpa, note=note, t0_s=t0_s, key=state.key)
         self._publish(stroke)
-        back_s, ready_s = stroke_times(stroke, press, _retrigger_m(state.world))
+        back_s, ready_s = stroke_times(stroke, press, self._retrigger_m())
         t_up_s = t0_s + back_s
         state.key_ready_s[note] = t0_s + ready_s
         state.clock.sleep(t_up_s - state.clock.now())
@@ -174,6 +177,13 @@ class SimArm:
             "key_speed_at_trigger_mps": float(stroke.key_speed_at_trigger_mps),
             "max_key_travel_m": float(stroke.max_key_travel_m),
         }
+
+    def _retrigger_m(self) -> float:
+        """The world's re-trigger depth, worked out once per world (it is fixed)."""
+        world = self.state.world
+        if self._retrigger is None or self._retrigger[0] is not world:
+            self._retrigger = (world, _retrigger_m(world))
+        return self._retrigger[1]
 
     def _require_link(self) -> None:
         if not self.connected:
@@ -237,14 +247,24 @@ class SimMocap:
 
     def __init__(self, state: SimState) -> None:
         self.state = state
+        self._buffer: list[Trace] | None = None  # the state's buffer that `_spans` describes
+        self._spans: list[tuple[float, float, Trace]] = []  # (first, last frame time, chunk)
 
     def trace_between(self, t_from_s: float, t_to_s: float) -> Trace:
-        chunks = [c for c in self.state.mocap if len(c.t_s) and c.t_s[-1] >= t_from_s and c.t_s[0] < t_to_s]
+        spans = self._indexed()
+        chunks = [c for first, last, c in spans if last >= t_from_s and first < t_to_s]
         horizon = t_from_s - BUFFER_HORIZON_S
-        self.state.mocap = [c for c in self.state.mocap if len(c.t_s) and c.t_s[-1] >= horizon]
+        if any(last < horizon for _, last, _ in spans):
+            self._spans = [span for span in spans if span[1] >= horizon]
+            self.state.mocap = self._buffer = [c for _, _, c in self._spans]
         if not chunks:
             empty = np.empty(0)
             return Trace(t_s=empty, x0_m=empty, x1_m=empty, x2_m=empty, source="mocap")
+        if len(chunks) == 1 and chunks[0].t_s[0] >= t_from_s and chunks[0].t_s[-1] < t_to_s:
+            # The usual case: one keystroke's frames, all inside the window (times increase).
+            only = chunks[0]
+            return Trace(t_s=only.t_s, x0_m=_column(only, "x0_m"), x1_m=_column(only, "x1_m"),
+                         x2_m=_column(only, "x2_m"), source="mocap")
         t_s = np.concatenate([c.t_s for c in chunks])
         inside = (t_s >= t_from_s) & (t_s < t_to_s)
 
@@ -252,6 +272,24 @@ class SimMocap:
             return np.concatenate([_column(c, name) for c in chunks])[inside]
 
         return Trace(t_s=t_s[inside], x0_m=cut("x0_m"), x1_m=cut("x1_m"), x2_m=cut("x2_m"), source="mocap")
+
+    def _indexed(self) -> list[tuple[float, float, Trace]]:
+        """The buffered chunks with their first and last frame times as floats (a keystroke's
+        chunk is looked at by every later window for a minute: its times are read once).
+
+        The buffer only grows at its end between two calls (`SimArm._publish`); anything else
+        done to it (a new list, a clear) is noticed and the spans are worked out again.
+        """
+        buffer, spans = self.state.mocap, self._spans
+        if buffer is not self._buffer or len(spans) > len(buffer) or (
+            spans and buffer[len(spans) - 1] is not spans[-1][2]
+        ):
+            self._buffer, spans = buffer, []
+        for c in buffer[len(spans):]:
+            # An empty chunk never matches a window and is dropped with the stale ones.
+            spans.append((float(c.t_s[0]), float(c.t_s[-1]), c) if len(c.t_s) else (math.inf, -math.inf, c))
+        self._spans = spans
+        return spans
 
     def describe(self) -> dict[str, Any]:
         return {"kind": "sim-mocap", "mocap_drop_prob": self.state.faults.mocap_drop_prob}
@@ -280,18 +318,17 @@ def _arm_back_s(stroke: Any, press: Press, t_s: FloatArray) -> float:
     """
     if not t_s.size:
         return float(stroke.duration_s)
-    away = np.nonzero(np.abs(_f64(stroke.truth_x0_m)) > ARM_AT_REST_M)[0]
-    last_s = float(t_s[away[-1]]) if away.size else 0.0
+    away = last_beyond(_f64(stroke.truth_x0_m), ARM_AT_REST_M, True)
+    last_s = float(t_s[away]) if away >= 0 else 0.0
     k = int(np.searchsorted(t_s, max(press_duration_s(press), last_s) - 1e-9))
     return float(t_s[min(k, t_s.size - 1)])
 
 
 def _key_ready_s(stroke: Any, retrigger_m: float, t_s: FloatArray) -> float:
     """Motion start → the key is above its re-trigger depth for the rest of the stroke."""
-    deep = np.nonzero(_f64(stroke.truth_x2_m) >= retrigger_m)[0]
-    if not deep.size:
+    k = last_beyond(_f64(stroke.truth_x2_m), float(retrigger_m), False)
+    if k < 0:
         return 0.0
-    k = int(deep[-1])
     return float(t_s[min(k + 1, t_s.size - 1)])
 
 

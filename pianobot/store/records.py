@@ -52,7 +52,7 @@ class FileRecord:
         return out
 
     @classmethod
-    def of_bytes(cls, file: str, data: bytes, rows: int, batches: tuple[int, ...] = ()) -> FileRecord:
+    def of_bytes(cls, file: str, data: bytes | memoryview, rows: int, batches: tuple[int, ...] = ()) -> FileRecord:
         return cls(file, rows, len(data), hashlib.sha256(data).hexdigest(), batches)
 
     @classmethod
@@ -67,7 +67,9 @@ class FileRecord:
             return None
 
 
-def part_record(batch: int, files: dict[str, FileRecord], trials_copy: bytes | None) -> dict[str, Any]:
+def part_record(
+    batch: int, files: dict[str, FileRecord], trials_copy: bytes | memoryview | None
+) -> dict[str, Any]:
     """The fields of a `part` event."""
     record: dict[str, Any] = {"batch": batch, "files": {n: f.to_dict() for n, f in files.items()}}
     if trials_copy is not None and len(trials_copy) <= COPY_MAX_BYTES:

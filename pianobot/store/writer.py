@@ -26,6 +26,7 @@ from pianobot.store.layout import (
     RunPaths,
     check_data_dir,
     encode_parquet,
+    encode_parquet_view,
     fsync_dir,
     git_commit,
     new_run_id,
@@ -208,11 +209,11 @@ class RunWriter:
         self._samples_folder()
         batch = self._next_batch
         files: dict[str, FileRecord] = {}
-        trials_bytes = b""
+        trials_bytes: bytes | memoryview = b""
         for name, table in tables.items():  # trials last: it commits the batch
             if table is not None and (table.num_rows or name == "trials"):
                 path = self.paths.part(name, batch)
-                data = encode_parquet(with_metadata(table, name), part=True)
+                data = encode_parquet_view(with_metadata(table, name), part=True)
                 write_bytes_atomic(path, data)
                 files[name] = FileRecord.of_bytes(self.paths.relative(path), data, table.num_rows)
                 trials_bytes = data

@@ -294,3 +294,46 @@ def test_keystroke_takes_a_start_time_and_a_settle_override() -> None:
         result = rig.keystroke(T("b", 1), start_at_s=start, settle_s=0.0)
         assert result.press.t_start_s == pytest.approx(start)
         assert rig.clock.now() == pytest.approx(result.press.t_end_s)
+
+
+def _naive_window(chunks: list[Any], t_from_s: float, t_to_s: float) -> tuple[np.ndarray, ...]:
+    """Every buffered frame inside [t_from, t_to), all chunks concatenated (the reference)."""
+    t = np.concatenate([c.t_s for c in chunks] or [np.empty(0)])
+    inside = (t >= t_from_s) & (t < t_to_s)
+    cols = [np.concatenate([getattr(c, n) for c in chunks] or [np.empty(0)])[inside]
+            for n in ("x0_m", "x1_m", "x2_m")]
+    return (t[inside], *cols)
+
+
+def test_mocap_windows_match_the_naive_cut_over_overlapping_chunks_and_a_replaced_buffer() -> None:
+    from pianobot.rig.protocols import Trace
+    from pianobot.rig.sim import BUFFER_HORIZON_S, SimFaults, SimMocap, SimState
+
+    rng = np.random.default_rng(5)
+    state = SimState(world=None, clock=VirtualClock(), seed=0, faults=SimFaults())
+    mocap = SimMocap(state)
+    everything: list[Trace] = []
+    start = 0.0
+    for k in range(60):
+        # Chunks overlap their neighbours (a key still moving when the next stroke starts),
+        # some are empty, all are appended between windows as a sweep does.
+        n = 0 if k % 13 == 5 else int(rng.integers(20, 60))
+        t = start + np.sort(rng.uniform(0.0, 3.0, n))
+        chunk = Trace(t_s=t, x0_m=rng.normal(size=n), x1_m=rng.normal(size=n),
+                      x2_m=rng.normal(size=n), source="mocap")
+        state.mocap.append(chunk)
+        everything.append(chunk)
+        if k == 40:
+            state.mocap = list(state.mocap)  # someone swaps the list: the spans follow
+        if k == 50:
+            state.mocap.clear()  # or empties it
+            everything = []
+        for t_from, t_to in ((start, start + 2.0), (start - 1.5, start + 0.5), (start + 5, start + 6)):
+            got = mocap.trace_between(t_from, t_to)
+            kept = [c for c in everything if len(c.t_s) and c.t_s[-1] >= t_from - BUFFER_HORIZON_S]
+            want = _naive_window(kept, t_from, t_to)
+            for a, b in zip((got.t_s, got.x0_m, got.x1_m, got.x2_m), want, strict=True):
+                assert np.array_equal(a, b)
+        start += 1.7
+    # Stale chunks are dropped: the buffer holds about a minute of strokes, not all of them.
+    assert all(c.t_s[-1] >= start - 1.7 - BUFFER_HORIZON_S for c in state.mocap)
