@@ -76,6 +76,23 @@ def _run(spec: Path, data: Path, executor: Any | None, block: int) -> dict[str, 
             "executor": "serial" if executor is None else f"local-cluster of {executor.workers}"}
 
 
+def machine(load_start: tuple[float, float, float]) -> dict[str, Any]:
+    """What the figures were measured on: Python, cores, and the load before and after."""
+    from pianobot.executor import usable_cores
+
+    return {"python": platform.python_version(), "cpus": os.cpu_count(), "usable_cores": usable_cores(),
+            "platform": platform.platform(), "load_average_start": load_start, "load_average_end": os.getloadavg()}
+
+
+def emit(result: dict[str, Any], name: str, quick: bool) -> None:
+    """Print the result as JSON and, unless a quick check, keep it in benchmarks/results/NAME."""
+    text = json.dumps(result, indent=2)
+    print(text)
+    if not quick:
+        RESULTS.mkdir(parents=True, exist_ok=True)
+        (RESULTS / name).write_text(text + "\n")
+
+
 def _same_data(data_a: Path, run_a: str, data_b: Path, run_b: str) -> bool:
     from pianobot.store import load_run
 
@@ -97,7 +114,6 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="135 trials, once")
     args = parser.parse_args()
     speeds, repeat = (1, 1) if args.quick else (args.speeds, max(1, args.repeat))
-    from pianobot.executor import usable_cores
     from pianobot.run.runner import BLOCK_TRIALS
 
     block = args.block or BLOCK_TRIALS
@@ -138,9 +154,7 @@ def main() -> None:
     result = {
         "benchmark": "dask", "quick": args.quick, "trials": trials, "block_trials": block,
         "repeat": repeat,
-        "machine": {"python": platform.python_version(), "cpus": os.cpu_count(),
-                    "usable_cores": usable_cores(), "platform": platform.platform(),
-                    "load_average_start": load_start, "load_average_end": os.getloadavg()},
+        "machine": machine(load_start),
         "cluster_start_s": start_s,
         "wall_s": {name: round(r["wall_s"], 2) for name, r in best.items()},
         "all_wall_s": {name: [round(r["wall_s"], 2) for r in rs] for name, rs in runs.items()},
@@ -155,11 +169,7 @@ def main() -> None:
         "identical_to_serial": identical,
         "took_s": round(time.perf_counter() - started, 1),
     }
-    text = json.dumps(result, indent=2)
-    print(text)
-    if not args.quick:
-        RESULTS.mkdir(parents=True, exist_ok=True)
-        (RESULTS / "dask.json").write_text(text + "\n")
+    emit(result, "dask.json", args.quick)
 
 
 if __name__ == "__main__":

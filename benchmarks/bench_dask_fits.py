@@ -23,7 +23,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import sys
 import tempfile
 import time
@@ -35,9 +34,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from bench_dask import _cluster, _workers_cpu_s  # noqa: E402
+from bench_dask import _cluster, _workers_cpu_s, emit, machine  # noqa: E402
 
-RESULTS = ROOT / "benchmarks" / "results"
 #: A clean take for the bootstrap (identify's refits) and a let-off take for discovery (two
 #: iterations of candidates).
 BOOTSTRAP_TAKE = "mocap-clean-light-finger-deep-1"
@@ -121,7 +119,6 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="8 refits, once")
     args = parser.parse_args()
     repeat, replicates = (1, 8) if args.quick else (max(1, args.repeat), args.replicates)
-    from pianobot.executor import usable_cores
 
     load_start = os.getloadavg()
     started = time.perf_counter()
@@ -139,17 +136,11 @@ def main() -> None:
             workloads.append({**_workload("candidates", work, configs, repeat), "take": DISCOVERY_TAKE})
     result = {
         "benchmark": "dask_fits", "quick": args.quick, "repeat": repeat,
-        "machine": {"python": platform.python_version(), "cpus": os.cpu_count(), "usable_cores": usable_cores(),
-                    "platform": platform.platform(), "load_average_start": load_start,
-                    "load_average_end": os.getloadavg()},
+        "machine": machine(load_start),
         "workloads": workloads,
         "took_s": round(time.perf_counter() - started, 1),
     }
-    text = json.dumps(result, indent=2)
-    print(text)
-    if not args.quick:
-        RESULTS.mkdir(parents=True, exist_ok=True)
-        (RESULTS / "dask_fits.json").write_text(text + "\n")
+    emit(result, "dask_fits.json", args.quick)
 
 
 if __name__ == "__main__":
