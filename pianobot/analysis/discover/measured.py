@@ -182,6 +182,8 @@ def arm_checks(batch: KeystrokeBatch) -> list[MeasuredCheck]:
         z = lag / se if se > 0 else math.inf
         lagging = lag > _MIN_DELAY_S and z > 3.0
         text = f"the measured arm starts {_ms(lag)} ± {_ms(1.96 * se)} ms after the commanded start"
+        if drift is not None and drift.accepted:
+            text += " at the start of the run (the clock's drift taken out)"
         if lagging and batch.arm_source == "mocap":
             # The marker is timed by the mocap clock, the command by the arm's: a constant offset
             # between the two clocks reads exactly like an arm that starts late.
