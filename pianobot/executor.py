@@ -145,9 +145,12 @@ class Executor:
             return
         window: deque[Any] = deque()
         limit = max(1, ahead if ahead is not None else 2 * self.workers)
+        # The function goes to each worker once, not with every task: a discovery round's
+        # candidate fit carries its keystrokes and current fit (tens of MB) in its closure.
+        shared = self._client.scatter(fn, broadcast=True, hash=False)
         try:
             for item in items:
-                window.append(self._client.submit(fn, item, pure=False))
+                window.append(self._client.submit(_apply, shared, item, pure=False))
                 if len(window) >= limit:
                     yield window.popleft().result()
             while window:
@@ -155,6 +158,7 @@ class Executor:
         finally:
             for future in window:  # a consumer that stops early leaves nothing running
                 future.cancel()
+            shared.release()
 
     def describe(self) -> dict[str, Any]:
         """What run.json records about where the work ran."""
@@ -192,6 +196,11 @@ def open_executor(settings: ExecutorSettings | None = None, *, work_s: float | N
     if workers <= 1 or small:
         return IN_PROCESS
     return Executor("local-cluster", workers, _local_client(workers))
+
+
+def _apply(fn: Callable[[T], R], item: T) -> R:
+    """A task: `fn` (scattered once to the workers) applied to one item."""
+    return fn(item)
 
 
 _LOCAL: dict[int, Any] = {}
