@@ -82,7 +82,7 @@ def settled(
     tol_m: float, lower_m: float,
 ) -> tuple[float, int, float, float]:  # pragma: no cover (compiled)
     """(rest time, samples kept, key speed at the lower sensor, deepest key position) of one
-    keystroke's truth up to its own horizon (see `world._rest_time`).
+    keystroke's truth up to its own horizon.
 
     Rest time: motion start to the arm back up and the key within `tol_m` of rest for good, at
     most the horizon; the samples up to it are kept. The speed is interpolated where the key

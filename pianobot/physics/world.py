@@ -235,9 +235,9 @@ class World:
         """The true trajectory `keystroke` would observe (from motion start until the arm is
         back and the key at rest), without the observation: no noise, no MIDI."""
         truth = self._take(press, vacuum_kpa, block)
-        duration = _rest_time(truth.t_s, truth.x1_m, truth.x2_m,
-                              press_duration_s(press, self.model.arm_profile))
-        keep = int(np.searchsorted(truth.t_s, duration + 1e-9, side="right"))
+        duration, keep, _, _ = settled(truth.t_s, truth.x1_m, truth.x2_m, truth.v2_mps,
+                                       press_duration_s(press, self.model.arm_profile), REST_TOL_M,
+                                       self._readout.lower_sensor_m)
         return SettledTruth(float(duration), truth.t_s[:keep], truth.x0_m[:keep], truth.x2_m[:keep])
 
     def _take(self, press: Press, vacuum_kpa: float, block: str | None) -> _Truth:
@@ -283,7 +283,7 @@ class World:
         cfg = self.config
         rng = np.random.default_rng([self.seed, _seed_of(key)])
         t_end = press_duration_s(press, self.model.arm_profile)
-        # Rest time (`_rest_time`), the samples up to it, the key speed where it first passes
+        # Rest time (arm back up, key within REST_TOL_M of rest for good), the samples up to it, the key speed where it first passes
         # the lower sensor and its deepest point, in one compiled pass over the truth.
         duration, keep, speed, deepest = settled(
             truth.t_s, truth.x1_m, truth.x2_m, truth.v2_mps, t_end, REST_TOL_M,
@@ -350,12 +350,3 @@ class _Truth:
     x2_m: FloatArray
     v2_mps: FloatArray
 
-
-def _rest_time(
-    t_s: FloatArray, x1_m: FloatArray, x2_m: FloatArray, t_end_s: float, tol_m: float = REST_TOL_M
-) -> float:
-    """Motion start → arm back up and the key at rest (within `tol_m` of rest from then on),
-    at most the end of the given samples (the keystroke's own horizon)."""
-    moving = np.nonzero((np.abs(x2_m) > tol_m) | (np.abs(x1_m) > tol_m))[0]
-    last = float(t_s[moving[-1]]) if moving.size else 0.0
-    return float(min(max(t_end_s, last + 1e-3), t_s[-1]))

@@ -9,8 +9,14 @@ import pytest
 
 from pianobot.physics._observe_kernel import crossing_times, interp, settled
 from pianobot.physics.piano import PianoParams, _crossings, key_events
-from pianobot.physics.world import REST_TOL_M, World, _rest_time
+from pianobot.physics.world import REST_TOL_M, World
 
+
+def _rest_time(t_s: np.ndarray, x1_m: np.ndarray, x2_m: np.ndarray, t_end_s: float) -> float:
+    """The NumPy form of the rest time the compiled pass replaced (the reference it must equal)."""
+    moving = np.nonzero((np.abs(x2_m) > REST_TOL_M) | (np.abs(x1_m) > REST_TOL_M))[0]
+    last = float(t_s[moving[-1]]) if moving.size else 0.0
+    return float(min(max(t_end_s, last + 1e-3), t_s[-1]))
 
 def _same_bits(a: np.ndarray, b: np.ndarray) -> bool:
     a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
