@@ -231,7 +231,9 @@ def _clock_drift(batch: KeystrokeBatch, rows: npt.NDArray[np.intp], starts: Floa
         return None  # too few repeats to tell a drift from the presses' own offsets
     design = np.column_stack([np.array([k == g for k in keys], dtype=np.float64) for g in groups]
                              + [times - times.mean()])
-    spans = [float(np.ptp(times[runs == r])) for r in np.unique(runs)]
+    run_names, run_of = np.unique(runs, return_inverse=True)
+    first = np.array([times[run_of == r].min() for r in range(run_names.size)])[run_of]  # each run's start
+    spans = [float(np.ptp(times[run_of == r])) for r in range(run_names.size)]
     if max(spans) <= 0:
         return None
     # Each press weighted by how well its starts repeat (a slow move's start scatters by ms, a
@@ -252,7 +254,6 @@ def _clock_drift(batch: KeystrokeBatch, rows: npt.NDArray[np.intp], starts: Floa
     z = abs(rate) / se if se > 0 else math.inf
     built = rate * span
     accepted = abs(built) > _MIN_DELAY_S and z > _DRIFT_Z
-    first = np.array([times[runs == r].min() for r in runs])
     offset = float(np.clip(rate * np.median(times - first), -0.05, 0.05))
     text = (f"the arm marker falls behind the commanded starts by {1e6 * rate:.0f} ± {1.96e6 * se:.0f} ppm of the "
             f"run's time ({_ms(built)} ms over {span:.0f} s): the motion-capture clock runs at another rate than "
