@@ -48,7 +48,7 @@ def _print(result: DiscoveryResult, report: Path | None, model_out: Path | None)
         console.print(f"[dim]Data: {note}[/dim]")
     for it in result.iterations:
         if not it.verdicts:
-            say(f"Iteration {it.index + 1}: held-out gap of the current model {it.gap_before.text()}: at the noise "
+            say(f"{it.heading}: held-out gap of the current model {it.gap_before.text()}: at the noise "
                 "level, no candidate fitted")
             continue
         rows = []
@@ -57,7 +57,7 @@ def _print(result: DiscoveryResult, report: Path | None, model_out: Path | None)
             rows.append([v.label, f"{v.delta_ic:.1f}", gap_cell(v.gap_after), f"{100 * v.shrink:.0f} % ({ratio})",
                          f"{100 * v.consistency:.0f} %", v.status, "; ".join(v.reasons)])
         print_table(CANDIDATE_COLUMNS, rows,
-                    title=f"Iteration {it.index + 1}: held-out gap of the current model {it.gap_before.text()}")
+                    title=f"{it.heading}: held-out gap of the current model {it.gap_before.text()}")
     say(f"{result.n_train} training / {result.n_held_out} held-out keystrokes, {result.seconds:.1f} s")
     if model_out is not None:
         say_written("model", model_out)

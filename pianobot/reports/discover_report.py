@@ -40,7 +40,7 @@ def candidate_frame(result: DiscoveryResult, index: int) -> pd.DataFrame:
 def stage_frame(result: DiscoveryResult) -> pd.DataFrame:
     """Held-out systematic error per stage and signal, base model and final model (mm)."""
     first = result.iterations[0].before
-    last = result.iterations[-1]
+    last = result.press_iterations[-1]
     final = last.after if last.accepted and last.after is not None else last.before
     after = {(r["stage"], r["signal"]): r for r in final.stages}
     rows = []
@@ -154,7 +154,7 @@ def build_discover_report(result: DiscoveryResult, path: Path, *, model_path: Pa
     sections = [summary, base, Section("Held-out gap").add(_gap_figure(result))]
     for it in result.iterations:
         title = it.accepted.label if it.accepted else "nothing accepted"
-        sec = Section(f"Iteration {it.index + 1}: {title}")
+        sec = Section(f"{it.heading}: {title}")
         sec.add(paragraph(f"Held-out gap of the current model: {it.gap_before.text()}."))
         if it.verdicts:
             sec.add(table_html(candidate_frame(result, it.index), caption="Candidates (best ΔIC first)"))

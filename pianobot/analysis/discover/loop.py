@@ -12,7 +12,10 @@ The loop (DESIGN.md, "Discovery"):
    the calibrated rule (`decide.py`), accept the best that passes, and repeat with it in the
    model until nothing passes;
 6. when nothing passes but the held-out error is above the noise, the sparse residual search
-   names the best-supported term and the discrepancy is reported as unexplained.
+   names the best-supported term and the discrepancy is reported as unexplained;
+7. when the fingertips were tracked off the key, the release is judged too (`_release`): the
+   model window is extended past lift-off, where unilateral `contact` and a sticking pad
+   (`adhesion`) show, and those two are tried there in the same way.
 
 Candidate fits are independent pieces of work, run through `mapper` (default: one after the
 other), which is what a parallel executor replaces.
@@ -43,6 +46,7 @@ from pianobot.analysis.discover.search import Evaluated, Setting
 from pianobot.analysis.discover.sparse import Proposal, outcome_proposals, trajectory_proposals
 from pianobot.analysis.greybox.covariance import Z95
 from pianobot.analysis.greybox.fitter import GreyBoxFit
+from pianobot.analysis.greybox.forward import lifts_off
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
 from pianobot.analysis.greybox.pieces import Mapper, serial_map
 from pianobot.analysis.greybox.split import holdout_indices
@@ -100,11 +104,13 @@ def _promising(v: Verdict, rule: Rule) -> bool:
 
 def _iterate(setting: Setting, current: GreyBoxFit, start: KeystrokeModel, settings: Settings, sigma_m: float,
              index: int, progress: Progress, mapper: Mapper,
-             earlier: Mapping[str, Mapping[str, float]]) -> tuple[Iteration, GreyBoxFit | None, Starts]:
+             earlier: Mapping[str, Mapping[str, float]],
+             only: tuple[str, ...] | None = None) -> tuple[Iteration, GreyBoxFit | None, Starts]:
     """One round of candidates against `current`, and the starts it leaves for the next round.
 
     `earlier` maps a candidate's label to the values it reached in the previous round when it
-    had evidence there (a second start for it in this one)."""
+    had evidence there (a second start for it in this one); `only` restricts the candidates to
+    these effects."""
     rule = settings.rule
     criterion = search.criterion_of(current)
     reference = search.evaluate(setting, current, criterion, sigma_m, "current", None)
@@ -115,8 +121,8 @@ def _iterate(setting: Setting, current: GreyBoxFit, start: KeystrokeModel, setti
     if not explainable:
         # No candidate can pass (condition 2 of the rule fails for all alike): fitting them
         # would cost most of a clean take's discovery and decide nothing.
-        return Iteration(index, reference.gap, before, (), None, None, explainable), None, {}
-    specs = candidates(current.model_, setting.train)
+        return Iteration(index, reference.gap, before, (), None, None, explainable, window=setting.window), None, {}
+    specs = [c for c in candidates(current.model_, setting.train) if only is None or c.effect in only]
     total = len(specs) + min(settings.joint_refits, len(specs))
     with progress.task(f"discover, iteration {index + 1}: candidate fits", total=total) as task:
         def screen_one(spec: CandidateSpec) -> Evaluated:
@@ -166,7 +172,42 @@ def _iterate(setting: Setting, current: GreyBoxFit, start: KeystrokeModel, setti
     if chosen is not None:
         after = localise(GreyBoxFit(setting.held_drive, chosen.layout, channels=chosen.channels,
                                     sigma=chosen.sigma).evaluate(chosen.theta_), sigma_m)
-    return Iteration(index, reference.gap, before, tuple(judged), accepted, after, explainable), chosen, starts
+    return Iteration(index, reference.gap, before, tuple(judged), accepted, after, explainable,
+                     window=setting.window), chosen, starts
+
+
+#: Effects only the release shows, judged on the release window in this order (adhesion needs a
+#: contact that can open).
+RELEASE_EFFECTS: tuple[str, ...] = ("contact", "adhesion")
+#: Training keystrokes whose fingertip must have left the key for the release to be judged.
+MIN_RELEASES = 3
+
+
+def _release(setting: Setting, current: GreyBoxFit, start: KeystrokeModel, settings: Settings, index: int,
+             progress: Progress, mapper: Mapper) -> tuple[list[Iteration], GreyBoxFit]:
+    """Rounds judged through the release (step 7 of the module docstring), and the model after.
+
+    Each round re-reads the current model's error levels on the longer window, so its candidates
+    stand on one scale with it, as in the rounds before lift-off."""
+    if setting.mode != "trajectories" or lifts_off(setting.train).sum() < MIN_RELEASES \
+            or not lifts_off(setting.held).any():
+        return [], current
+    release = Setting.of(setting.train, setting.held, "release")
+    rounds: list[Iteration] = []
+    for effect in RELEASE_EFFECTS:
+        if effect in current.model_.effects:
+            continue
+        if effect == "adhesion" and "contact" not in current.model_.effects:
+            break
+        here = search.on(release, current)
+        iteration, chosen, _ = _iterate(release, here, start, settings, search.held_noise_m(release, here),
+                                        index + len(rounds), progress, mapper, {}, only=(effect,))
+        rounds.append(iteration)
+        if chosen is None:
+            break
+        with progress.task(f"discover, {iteration.heading}: {effect} fitted to its optimum", total=None):
+            current = search.converged(release, chosen)
+    return rounds, current
 
 
 def _residual_search(setting: Setting, fit: GreyBoxFit) -> tuple[Proposal, ...]:
@@ -238,13 +279,15 @@ def _discover(batch: KeystrokeBatch, start: KeystrokeModel | None, settings: Set
         label = iteration.accepted.label if iteration.accepted else "the accepted model"
         with progress.task(f"discover, iteration {index + 1}: {label} fitted to its optimum", total=None):
             current = search.converged(setting, chosen)
+    last = iterations[-1]
+    release, current = _release(setting, current, start, settings, len(iterations), progress, mapper)
     timings["candidates_s"] = time.perf_counter() - t0 - timings["base_fit_s"]
     held_final = GreyBoxFit(setting.held_drive, current.layout, channels=current.channels,
                             sigma=current.sigma).evaluate(current.theta_)
-    last = iterations[-1]
     final_gap = last.accepted.gap_after if last.accepted else last.gap_before
     explainable = something_to_explain(final_gap, settings.rule)
     final_loc = last.after if last.accepted and last.after is not None else last.before
+    iterations += release
     text, explained = verdict_text(iterations, findings, final_gap, unexplained if explainable else None,
                                    explainable, final_loc.worst_stages())
     if not explainable:

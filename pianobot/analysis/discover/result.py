@@ -33,10 +33,17 @@ class Iteration:
     after: Localisation | None
     explainable: bool  # the current model's held-out error is above the noise
     proposals: tuple[Proposal, ...] = ()  # the residual search, when nothing was accepted
+    window: str = "press"  # trajectories modelled until lift-off, or through the release
+
+    @property
+    def heading(self) -> str:
+        """"Iteration n", saying when it judged the release (the model window past lift-off)."""
+        return f"Iteration {self.index + 1}" + (" (the release, past lift-off)" if self.window == "release" else "")
 
     def to_dict(self) -> dict[str, Any]:
         return {
             "index": self.index,
+            "window": self.window,
             "accepted_effect": self.accepted.effect if self.accepted else None,
             "accepted_form": self.accepted.form if self.accepted else None,
             "accepted_family": self.accepted.family if self.accepted else None,
@@ -92,12 +99,18 @@ class DiscoveryResult:
         return tuple(f.effect for f in self.findings if f.accepted)
 
     @property
+    def press_iterations(self) -> tuple[Iteration, ...]:
+        """The iterations judged until lift-off (the release ones model a longer window: their
+        gaps are not comparable with these)."""
+        return tuple(it for it in self.iterations if it.window == "press")
+
+    @property
     def gap_before(self) -> Gap:
         return self.iterations[0].gap_before
 
     @property
     def gap_after(self) -> Gap:
-        last = self.iterations[-1]
+        last = self.press_iterations[-1]
         return last.accepted.gap_after if last.accepted else last.gap_before
 
     @property
@@ -172,7 +185,8 @@ def decision_line(result: DiscoveryResult) -> str:
 def verdict_text(iterations: Sequence[Iteration], findings: Sequence[MeasuredCheck], final: Gap,
                  unexplained: Proposal | None, explainable: bool, worst: Sequence[str]) -> tuple[str, bool]:
     """The closing sentence, and whether what is left is at the noise level."""
-    accepted = [it.accepted.label for it in iterations if it.accepted]
+    accepted = [it.accepted.label + (" (seen after lift-off)" if it.window == "release" else "")
+                for it in iterations if it.accepted]
     text = ("missing effects found: " + ", ".join(accepted)) if accepted else "no missing effect found"
     measured = [f.effect for f in findings if f.accepted]
     if measured:

@@ -28,7 +28,7 @@ from pianobot.analysis.discover.gap import Gap, held_out_gap
 from pianobot.analysis.greybox.commanded import Commanded
 from pianobot.analysis.greybox.criterion import Criterion
 from pianobot.analysis.greybox.fitter import Drive, GreyBoxFit
-from pianobot.analysis.greybox.forward import MeasuredArm
+from pianobot.analysis.greybox.forward import MeasuredArm, Window
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
 from pianobot.analysis.greybox.layout import Layout, base_layout, model_values
 from pianobot.analysis.identify.fit import fit_base
@@ -54,11 +54,13 @@ class Setting:
     held: KeystrokeBatch
     train_drive: Drive
     held_drive: Drive
+    window: Window = "press"  # how far each trajectory is modelled (see `greybox.forward`)
 
     @classmethod
-    def of(cls, train: KeystrokeBatch, held: KeystrokeBatch) -> Setting:
+    def of(cls, train: KeystrokeBatch, held: KeystrokeBatch, window: Window = "press") -> Setting:
+        """Trajectories are modelled until lift-off, or through the release (`window`)."""
         if train.has_motion:
-            return cls("trajectories", train, held, MeasuredArm.of(train), MeasuredArm.of(held))
+            return cls("trajectories", train, held, MeasuredArm.of(train, window), MeasuredArm.of(held, window), window)
         return cls("midi", train, held, Commanded(train), Commanded(held))
 
 
@@ -141,6 +143,11 @@ def evaluate(setting: Setting, fit: GreyBoxFit, criterion: Criterion, noise_m: f
     gap = held_out_gap(held.residuals_, setting.held.n, noise_m, setting.held.sounded, held.prediction_.sounded,
                        np.isfinite(held.prediction_.margin_m))
     return Evaluated(label, spec, fit, criterion.value(fit.channels_, fit.theta_.size), gap, joint)
+
+
+def on(setting: Setting, fit: GreyBoxFit) -> GreyBoxFit:
+    """`fit`'s model evaluated on another setting's training keystrokes (its own error levels)."""
+    return GreyBoxFit(setting.train_drive, fit.layout, channels=fit.channels).evaluate(fit.theta_)
 
 
 def held_noise_m(setting: Setting, fit: GreyBoxFit) -> float:

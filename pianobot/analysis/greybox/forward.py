@@ -15,6 +15,12 @@ nothing true after lift-off; `model_window` ends each keystroke there (measured:
 deepest point, when the fingertip-key gap has reopened by `LIFT_OFF_M` beyond the gap at which
 the key started to move, or the key is back at rest), and outputs are NaN after it.
 
+A model with unilateral `contact` does describe what follows: the key returns on its own while
+the finger hangs from the arm, and a pad that sticks (`adhesion`) pulls the key above rest until
+it lets go, ringing. `MeasuredArm.of(batch, window="release")` models each keystroke further,
+until the arm is back where it started plus `SETTLE_S` (`release_window`); discovery judges
+those two effects on it (`lifts_off` says whether a keystroke's finger left the key at all).
+
 `pianobot.physics.simulate.simulate_arm` integrates exactly this (the `KeystrokeModel` without
 effects is the study's model with its free approach), thousands of keystrokes per second, which
 is fast enough to sit inside `least_squares`. What this module adds is the sampling: each
@@ -29,6 +35,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -48,6 +55,14 @@ INPUT_STEP_S = 5e-4
 #: The fingertip has left the key once the fingertip-key gap has reopened by this much (well
 #: above mocap noise, well below a finger's compression in a press).
 LIFT_OFF_M = 5e-4
+#: A fingertip has clearly left the key once the gap has reopened by this much (`lifts_off`).
+CLEAR_OF_KEY_M = 1e-3
+#: The release window runs this long after the arm is back at its start (ringing after a snap).
+SETTLE_S = 0.15
+#: The arm is back at its start within this distance of its lowest point before the press.
+ARM_BACK_M = 2e-4
+
+Window = Literal["press", "release"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -69,7 +84,9 @@ class MeasuredArm:
     observed: KeystrokeBatch  # the caller's batch (rows may repeat), which predictions are for
 
     @classmethod
-    def of(cls, batch: KeystrokeBatch) -> MeasuredArm:
+    def of(cls, batch: KeystrokeBatch, window: Window = "press") -> MeasuredArm:
+        """The preparation for `batch`, each keystroke modelled until lift-off (`window="press"`)
+        or through its release (`"release"`, for a model with unilateral contact)."""
         observed = batch
         _, first, rows = np.unique(np.asarray(batch.trial_id), return_index=True, return_inverse=True)
         if first.size < batch.n:
@@ -100,7 +117,7 @@ class MeasuredArm:
             frac = np.zeros(shifted.shape)
         measured = np.isfinite(batch.x1_m) | np.isfinite(batch.x2_m)
         last = np.where(measured.any(axis=1), batch.t_s.size - 1 - np.argmax(measured[:, ::-1], axis=1), 0)
-        last = np.minimum(last, model_window(batch))
+        last = np.minimum(last, model_window(batch) if window == "press" else release_window(batch))
         return cls(batch, t_sim, int(lead), lo, frac, _resample(batch.input_x0_m, lo, frac),
                    np.asarray(last, dtype=np.intp), np.asarray(rows, dtype=np.intp).ravel(), observed)
 
@@ -155,18 +172,56 @@ def model_window(batch: KeystrokeBatch) -> npt.NDArray[np.intp]:
     off the key (see the module docstring); the whole trace when the key never moved."""
     out = np.full(batch.n, batch.t_s.size - 1, dtype=np.intp)
     for i in range(batch.n):
-        t = batch.row_times_s(i)
-        x2 = fill_gaps(t, batch.x2_m[i])
-        moved = np.flatnonzero(x2 > KEY_MOTION_THRESHOLD_M)
-        if moved.size == 0 or not np.isfinite(batch.x1_m[i]).any():
+        press = _press(batch, i)
+        if press is None:
             continue
-        touch = int(moved[0])
-        gap = fill_gaps(t, batch.x1_m[i]) - x2
-        peak = touch + int(np.nanargmax(x2[touch:]))
+        x2, gap, touch, peak = press
         after = np.arange(x2.size) > peak
         off = np.flatnonzero(after & ((gap < gap[touch] - LIFT_OFF_M) | (x2 < KEY_MOTION_THRESHOLD_M)))
         if off.size:
             out[i] = int(off[0]) - 1
+    return out
+
+
+def _press(batch: KeystrokeBatch, i: int) -> tuple[FloatArray, FloatArray, int, int] | None:
+    """Keystroke i's key travel and fingertip-key gap (gaps filled), the sample where the key
+    started to move and its deepest one after that; None when the key never moved or the
+    fingertip was not measured."""
+    t = batch.row_times_s(i)
+    x2 = fill_gaps(t, batch.x2_m[i])
+    moved = np.flatnonzero(x2 > KEY_MOTION_THRESHOLD_M)
+    if moved.size == 0 or not np.isfinite(batch.x1_m[i]).any():
+        return None
+    touch = int(moved[0])
+    return x2, fill_gaps(t, batch.x1_m[i]) - x2, touch, touch + int(np.nanargmax(x2[touch:]))
+
+
+def release_window(batch: KeystrokeBatch) -> npt.NDArray[np.intp]:
+    """Per keystroke, the last sample of its release: `SETTLE_S` after the arm is back within
+    `ARM_BACK_M` of where it started (the whole trace when it never gets back, or without an arm
+    marker)."""
+    out = np.full(batch.n, batch.t_s.size - 1, dtype=np.intp)
+    settle = int(round(SETTLE_S / batch.dt_s)) if batch.dt_s > 0 else 0
+    for i in range(batch.n):
+        if not np.isfinite(batch.x0_m[i]).any():
+            continue
+        x0 = fill_gaps(batch.row_times_s(i), batch.x0_m[i])
+        top = int(np.nanargmax(x0))
+        back = np.flatnonzero((np.arange(x0.size) > top) & (x0 < np.nanmin(x0[: top + 1]) + ARM_BACK_M))
+        if back.size:
+            out[i] = min(x0.size - 1, int(back[0]) + settle)
+    return out
+
+
+def lifts_off(batch: KeystrokeBatch) -> npt.NDArray[np.bool_]:
+    """Per keystroke: after the key's deepest point, did the fingertip-key gap reopen by
+    `CLEAR_OF_KEY_M` beyond the gap at which the key started to move (the finger left the key)?"""
+    out = np.zeros(batch.n, dtype=bool)
+    for i in range(batch.n):
+        press = _press(batch, i)
+        if press is not None:
+            _, gap, touch, peak = press
+            out[i] = bool(np.nanmin(gap[peak:]) < gap[touch] - CLEAR_OF_KEY_M)
     return out
 
 
