@@ -128,9 +128,10 @@ def own_suite(only: list[str] | None, log: Callable[[str], None]) -> list[dict[s
             batch = ow.generate(scenario, Path(scratch))
         result, cpu = run_one(batch)
         family = scenario.expected_families[0] if scenario.expected else None
-        # pianobot's simulated arm moves in trapezoids too: naming its acceleration is right.
+        # pianobot's simulated arm moves in trapezoids too: naming its acceleration is right; a
+        # finger that leaves the key is measured on the release, never discovered.
         row = {"scenario": scenario.name, "kind": scenario.kind,
-               **score(result, family, cpu, batch.n, scenario.expected, ("arm_acceleration",))}
+               **score(result, family, cpu, batch.n, scenario.expected, ("arm_acceleration", "contact"))}
         rows.append(row)
         log(f"own   {scenario.name:30s} {cpu:6.1f}s cpu  found={row['found']} measured={row['measured']} hit={row['hit']}")
     return rows

@@ -171,6 +171,18 @@ def control(kind: str, seed: int) -> Scenario:
     return Scenario(f"control-{kind}-{seed}", "control", truth, (), seed, noise)
 
 
+def release(kind: str, seed: int) -> Scenario:
+    """The finger leaves the key at every release (unilateral contact: measured, not hidden);
+    with kind "adhesion" its pad also sticks to the key up to 0.15 N."""
+    truth = _trapezoid().with_effect("contact")
+    if kind == "adhesion":
+        return Scenario("adhesion-strong", "hidden", truth.with_effect("adhesion", pull_off_force_n=0.15),
+                        ("adhesion",), seed)
+    if kind != "contact":
+        raise ValueError(f"release kind should be contact or adhesion, got {kind!r}")
+    return Scenario(f"control-contact-{seed}", "control", truth, (), seed)
+
+
 def midi_only(effect: str = "arm_acceleration", seed: int = 0) -> Scenario:
     """MIDI logs only: the study's ramp model misses the trapezoid at low acceleration, or the
     piano's velocity map is not a straight line."""
@@ -200,6 +212,7 @@ def full_suite() -> list[Scenario]:
     suite += [structural(e, seed=20 + i) for i, e in enumerate(("keybed", "key_friction", "finger_stiffening"))]
     suite += [control("clean", seed) for seed in range(30, 35)]
     suite += [control("k2-off", 40), control("c1-off", 41), control("noise-x2", 42)]
+    suite += [release("adhesion", 43), release("contact", 44)]
     suite += [midi_only("arm_acceleration", 50), midi_only("velocity_curve", 51), midi_control(52), several(60)]
     return suite
 

@@ -44,6 +44,20 @@ def test_a_richer_form_is_caught_by_its_family(data_dir: Path) -> None:
     assert result.accepted[0].ratio >= 3.0 or "unexplained" in result.verdict
 
 
+def test_a_sticking_pad_is_found_past_lift_off_and_a_finger_that_just_leaves_is_measured(data_dir: Path) -> None:
+    """The finger leaves the key at every release: that contact is unilateral is measured on the
+    release (not discovered), and a pad sticking up to 0.15 N is named there with its force."""
+    sticky = _run(ow.release("adhesion", seed=43), data_dir)
+    assert sticky.accepted_effects == ("adhesion",)
+    assert sticky.accepted[0].params["adhesion.pull_off_force_n"] == pytest.approx(0.15, rel=0.2)
+    assert sticky.iterations[-1].window == "release"
+    clean = _run(ow.release("contact", seed=44), data_dir)
+    assert clean.accepted_effects == () and "contact" in clean.measured_effects
+    assert "contact" in clean.final_model.effects
+    for result in (sticky, clean):  # the press-window gaps are what the summary reports
+        assert result.gap_after is result.press_iterations[-1].gap_before
+
+
 def test_arm_lag_and_mocap_clock_are_judged_against_the_measurements(data_dir: Path) -> None:
     lag = _run(ow.hidden_effect("arm_lag", "strong", seed=11), data_dir)
     assert "arm_lag" in lag.measured_effects and "arm_lag" not in lag.accepted_effects

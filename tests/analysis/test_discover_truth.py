@@ -87,6 +87,37 @@ def test_an_effect_in_a_form_no_candidate_has_is_named_by_its_family(
     assert first["ratio"] is None or first["ratio"] >= 3.0, first  # null: the gap fell to the noise
 
 
+@pytest.mark.parametrize("name", ["mocap-adhesion-pull_off-strong", "mocap-adhesion-cohesive-weak"])
+def test_a_pad_that_sticks_is_named_from_the_release(
+        name: str, tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """The finger starts 5 mm above the key and leaves it at every release. Until lift-off the
+    sticking pad changes nothing; past it, the pad pulls the key above rest and lets go with a
+    snap. Discovery judges the release too and names adhesion there (the cohesive form, a pull
+    that fades with the gap, is not one pianobot's candidates were written as)."""
+    run_id, data, truth, files = _imported(name, tmp_path)
+    payload = _discover([run_id, "--data", str(data), "--presses", str(files["presses"])], (capsys, monkeypatch))
+    named = [e for e in payload["accepted_effects"] if e not in truth["always_present"]]
+    assert named == ["adhesion"], payload["verdict"]
+    release = [it for it in payload["iterations"] if it["window"] == "release"]
+    adhesion = next(c for it in release for c in it["candidates"] if c["effect"] == "adhesion")
+    assert adhesion["status"] == "accepted" and adhesion["ratio"] >= 1.5
+    assert "adhesion (seen after lift-off)" in payload["verdict"]
+
+
+def test_a_finger_that_leaves_a_clean_key_is_not_read_as_adhesion(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """The same release judged on a clean take: the finger simply leaves the key. That is
+    measured (unilateral contact: every real finger has it, the study's bilateral model lacks
+    it), not discovered; and no adhesion."""
+    run_id, data, truth, files = _imported("mocap-clean-soft-key-hover-0", tmp_path)
+    payload = _discover([run_id, "--data", str(data), "--presses", str(files["presses"])], (capsys, monkeypatch))
+    assert set(payload["accepted_effects"]) <= set(truth["always_present"]), payload["verdict"]
+    contact = next(m for m in payload["measured"] if m["effect"] == "contact")
+    assert contact["accepted"] and "leaves the key" in contact["text"]
+    release = [it for it in payload["iterations"] if it["window"] == "release"]
+    assert release and all(it["accepted_effect"] is None for it in release)
+
+
 @pytest.mark.slow
 def test_a_clean_midi_log_names_only_what_the_lab_arm_does(
         tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:

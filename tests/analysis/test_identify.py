@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from _synthetic_runs import linear_keystrokes, linear_sweep
 
-from pianobot.analysis.greybox.forward import model_window
+from pianobot.analysis.greybox.forward import MeasuredArm, lifts_off, model_window, release_window
 from pianobot.analysis.greybox.load import load_keystrokes
 from pianobot.analysis.greybox.trajectories import keystroke_batch
 from pianobot.analysis.identify.fit import (
@@ -90,6 +90,11 @@ def test_identify_a_finger_that_lets_go_of_the_key(data_dir: Path) -> None:
     window = model_window(batch)
     assert np.all(window < np.isfinite(batch.x2_m).sum(axis=1) - 10)  # the release is left out ...
     assert np.all(batch.x2_m[np.arange(batch.n), window] > 0.0)  # ... not the press
+    # Discovery's release window goes on past lift-off, until the arm is back and settled.
+    assert lifts_off(batch).all()
+    assert np.all(release_window(batch) > window + 10)
+    x1, x2 = MeasuredArm.of(batch, "release").simulate(TRUTH)
+    assert np.isfinite(x2[np.arange(batch.n), window + 10]).all()
     fit = identify_trajectories(batch, coupling="tied")
     for p in (-20.0, -60.0):
         assert fit.estimate(f"k1_npm@{p:g}kPa").value == pytest.approx(TRUTH.k1_npm(p), rel=0.05)

@@ -14,8 +14,8 @@ The loop (DESIGN.md, "Discovery"):
 6. when nothing passes but the held-out error is above the noise, the sparse residual search
    names the best-supported term and the discrepancy is reported as unexplained;
 7. when the fingertips were tracked off the key, the release is judged too (`_release`): the
-   model window is extended past lift-off, where unilateral `contact` and a sticking pad
-   (`adhesion`) show, and those two are tried there in the same way.
+   model window is extended past lift-off, where unilateral `contact` (reported with the
+   measured checks) and a sticking pad (`adhesion`, a candidate) show.
 
 Candidate fits are independent pieces of work, run through `mapper` (default: one after the
 other), which is what a parallel executor replaces.
@@ -176,38 +176,69 @@ def _iterate(setting: Setting, current: GreyBoxFit, start: KeystrokeModel, setti
                      window=setting.window), chosen, starts
 
 
-#: Effects only the release shows, judged on the release window in this order (adhesion needs a
-#: contact that can open).
-RELEASE_EFFECTS: tuple[str, ...] = ("contact", "adhesion")
 #: Training keystrokes whose fingertip must have left the key for the release to be judged.
 MIN_RELEASES = 3
 
 
 def _release(setting: Setting, current: GreyBoxFit, start: KeystrokeModel, settings: Settings, index: int,
-             progress: Progress, mapper: Mapper) -> tuple[list[Iteration], GreyBoxFit]:
-    """Rounds judged through the release (step 7 of the module docstring), and the model after.
+             progress: Progress, mapper: Mapper) -> tuple[MeasuredCheck | None, list[Iteration], GreyBoxFit]:
+    """The release judged past lift-off (step 7 of the module docstring): the contact check, the
+    adhesion round, and the model after them.
 
-    Each round re-reads the current model's error levels on the longer window, so its candidates
-    stand on one scale with it, as in the rounds before lift-off."""
-    if setting.mode != "trajectories" or lifts_off(setting.train).sum() < MIN_RELEASES \
-            or not lifts_off(setting.held).any():
-        return [], current
+    That the finger leaves the key is a property of every real finger and key (the study's
+    bilateral coupling lacks it), so it is reported with the measured checks, not as a
+    discovery (`_contact`). A pad that sticks (`adhesion`) is then a candidate like those before
+    lift-off. Each round re-reads the current model's error levels on the longer window, so its
+    candidates stand on one scale with it."""
+    if setting.mode != "trajectories":
+        return None, [], current
+    off_train, off_held = lifts_off(setting.train), lifts_off(setting.held)
+    if off_train.sum() < MIN_RELEASES or not off_held.any():
+        return None, [], current
     release = Setting.of(setting.train, setting.held, "release")
-    rounds: list[Iteration] = []
-    for effect in RELEASE_EFFECTS:
-        if effect in current.model_.effects:
-            continue
-        if effect == "adhesion" and "contact" not in current.model_.effects:
-            break
-        here = search.on(release, current)
-        iteration, chosen, _ = _iterate(release, here, start, settings, search.held_noise_m(release, here),
-                                        index + len(rounds), progress, mapper, {}, only=(effect,))
-        rounds.append(iteration)
-        if chosen is None:
-            break
-        with progress.task(f"discover, {iteration.heading}: {effect} fitted to its optimum", total=None):
+    check = None
+    if "contact" not in current.model_.effects:
+        with progress.task("discover: the release, past lift-off: contact", total=None):
+            check, fit = _contact(release, current, start, settings.rule, int(off_train.sum()))
+        if fit is None:
+            return check, [], current
+        current = fit
+    here = search.on(release, current)
+    iteration, chosen, _ = _iterate(release, here, start, settings, search.held_noise_m(release, here), index,
+                                    progress, mapper, {}, only=("adhesion",))
+    if chosen is not None:
+        with progress.task(f"discover, {iteration.heading}: adhesion fitted to its optimum", total=None):
             current = search.converged(release, chosen)
-    return rounds, current
+    return check, [iteration], current
+
+
+def _contact(release: Setting, current: GreyBoxFit, start: KeystrokeModel, rule: Rule,
+             n_off: int) -> tuple[MeasuredCheck, GreyBoxFit | None]:
+    """Unilateral contact against the bilateral coupling, through the release; with the fitted
+    model when the evidence holds.
+
+    Only the evidence (ΔIC) decides: a fingertip measured clear of the key is the observation,
+    and a pad that sticks makes the bilateral coupling look partly right (it also pulls the key
+    up), so the held-out shrink of contact alone is no test of it."""
+    here = search.on(release, current)
+    criterion = search.criterion_of(here)
+    noise_m = search.held_noise_m(release, here)
+    reference = search.evaluate(release, here, criterion, noise_m, "current", None)
+    spec = CandidateSpec("contact", "default")
+    screened = search.screen(release, here, spec)
+    fit = search.converged(release, search.joint(release, here, spec, search.as_full(release, here, spec, screened),
+                                                 start))
+    e = search.evaluate(release, fit, criterion, noise_m, spec.label, spec)
+    delta = reference.ic - e.ic
+    left = f"the fingertip leaves the key in {n_off} of {release.train.n} training keystrokes"
+    if not delta > rule.ic_margin:
+        return MeasuredCheck("contact", float(n_off), (math.nan, math.nan), delta, False,
+                             f"{left}; past lift-off the study's bilateral coupling fits as well (ΔIC {delta:.0f})",
+                             {}), None
+    return MeasuredCheck("contact", float(n_off), (math.nan, math.nan), delta, True,
+                         f"{left}: past lift-off a unilateral contact fits the release better than the study's "
+                         f"bilateral coupling, which pulls the key up with the finger (held-out "
+                         f"{reference.gap.text()} → {e.gap.text()}, ΔIC {delta:.0f})", {}), fit
 
 
 def _residual_search(setting: Setting, fit: GreyBoxFit) -> tuple[Proposal, ...]:
@@ -280,7 +311,9 @@ def _discover(batch: KeystrokeBatch, start: KeystrokeModel | None, settings: Set
         with progress.task(f"discover, iteration {index + 1}: {label} fitted to its optimum", total=None):
             current = search.converged(setting, chosen)
     last = iterations[-1]
-    release, current = _release(setting, current, start, settings, len(iterations), progress, mapper)
+    contact, release, current = _release(setting, current, start, settings, len(iterations), progress, mapper)
+    if contact is not None:
+        findings.append(contact)
     timings["candidates_s"] = time.perf_counter() - t0 - timings["base_fit_s"]
     held_final = GreyBoxFit(setting.held_drive, current.layout, channels=current.channels,
                             sigma=current.sigma).evaluate(current.theta_)
