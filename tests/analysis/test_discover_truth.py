@@ -118,6 +118,21 @@ def test_a_finger_that_leaves_a_clean_key_is_not_read_as_adhesion(
     assert release and all(it["accepted_effect"] is None for it in release)
 
 
+def test_a_hover_take_without_its_presses_has_its_distance_measured(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """A Motive take whose finger starts 5 mm above the key, discovered without the lab's presses
+    file: the distance is not recorded, so it is read from the take (the fingertip's travel
+    before the key moved) and said so. Assuming 0 (a finger resting on the key) made the base
+    model press 5 mm early, and a stiffening finger was "discovered" on this clean take."""
+    run_id, data, truth, files = _imported("mocap-clean-light-finger-hover-2", tmp_path)
+    commanded = read_schedule(files["presses"])["distance_m"].to_numpy()
+    loaded = load_keystrokes([run_id], data)
+    assert any("measured from the take" in note for note in loaded.notes)
+    assert np.all(np.abs(loaded.batch.distance_m - commanded) < 0.8e-3)
+    payload = _discover([run_id, "--data", str(data)], (capsys, monkeypatch))
+    assert set(payload["accepted_effects"]) <= set(truth["always_present"]), payload["verdict"]
+
+
 @pytest.mark.slow
 def test_a_clean_midi_log_names_only_what_the_lab_arm_does(
         tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:

@@ -4,7 +4,9 @@
   bottom of travel, so the speed where the key passes the trigger depth is what sets the
   on-velocity (the study's readout);
 - max key travel; contact time (fingertip on the key); time from motion start to the trigger
-  (the lead `play` must schedule ahead of a note).
+  (the lead `play` must schedule ahead of a note);
+- how far the fingertip travelled before the key moved (`approach_distance_m`: the hover
+  distance of a take whose commanded presses were not recorded).
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
+from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
 from pianobot.analysis.greybox.stages import (
     KEY_MOTION_THRESHOLD_M,
     fill_gaps,
@@ -139,3 +142,30 @@ def features_table(
         )
         rows.append({"trial_id": trial_id, **feats.row()})
     return pd.DataFrame(rows, columns=["trial_id", *FEATURE_COLUMNS])
+
+
+#: The key has started to move once it is this far down (well above mocap noise, well below
+#: the compression of a press).
+KEY_ONSET_M = 5e-5
+
+
+def approach_distance_m(batch: KeystrokeBatch) -> FloatArray:
+    """Per keystroke, the fingertip's travel from rest until the key started to move (NaN where
+    the key never moved or the fingertip was not tracked).
+
+    Read where the key passes `KEY_ONSET_M`, between frames: by then the finger is slightly
+    compressed, so this reads a little long (measured on independent takes: 0.2-0.4 mm over a
+    5 mm hover, 0.2 mm for a finger resting on the key).
+    """
+    out = np.full(batch.n, np.nan)
+    for i in range(batch.n):
+        t = batch.row_times_s(i)
+        x2 = fill_gaps(t, batch.x2_m[i])
+        x1 = fill_gaps(t, batch.x1_m[i])
+        above = np.flatnonzero(x2 > KEY_ONSET_M)
+        if above.size == 0 or above[0] == 0 or not np.isfinite(x1).any():
+            continue
+        j = int(above[0])
+        f = (KEY_ONSET_M - x2[j - 1]) / (x2[j] - x2[j - 1])
+        out[i] = float(x1[j - 1] + f * (x1[j] - x1[j - 1]))
+    return out

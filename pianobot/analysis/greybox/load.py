@@ -8,7 +8,8 @@ The commanded press and the MIDI outcome come from the trials table. What a run 
 is never silently assumed: a speed or depth is derived from the measured arm where an importer
 estimated it (and said so in `notes`); an acceleration that was not recorded stays NaN, and the
 commanded drive fits it (`forward.Commanded`); the distance defaults to 0 (the finger starts on
-the key, as in the study's mocap takes), which is noted.
+the key, as in the study's mocap takes), or, where the tracked fingertip clearly travelled
+before the key moved, to that travel; either is noted.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from pianobot.analysis.greybox.features import approach_distance_m
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
 from pianobot.analysis.greybox.trajectories import OUTPUT_SOURCES, keystroke_batch
 from pianobot.errors import InputError
@@ -59,16 +61,15 @@ def _has_trajectories(samples: pd.DataFrame) -> bool:
     return bool((samples["source"].isin(OUTPUT_SOURCES) & samples["x2_m"].notna()).any())
 
 
-def _commands(rows: pd.DataFrame, notes: set[str]) -> dict[str, np.ndarray]:
-    """The commanded press per trial; derived values (and what stays unknown) are noted."""
+def _commands(rows: pd.DataFrame, distance: np.ndarray, notes: set[str]) -> dict[str, np.ndarray]:
+    """The commanded press per trial (`distance`: recorded, or as `_measured_distance` found it);
+    derived values (and what stays unknown) are noted."""
     down = _column(rows, "down_velocity_mps")
     estimate = _column(rows, "arm_speed_mps")  # an imported take's arm speed estimate
     use = ~(down > 0) & (estimate > 0)
     if use.any():
         down = np.where(use, estimate, down)
         notes.add("down speed taken from the measured arm speed")
-    distance = _column(rows, "distance_m")
-    distance = np.where(np.isfinite(distance), distance, 0.0)
     depth = _column(rows, "depth_m")
     travel = _column(rows, "arm_travel_m") - distance  # measured arm travel = distance + depth
     use = ~(depth > 0) & (travel > 0)
@@ -166,8 +167,8 @@ def load_keystrokes(run_ids: Sequence[str], data_dir: Path, *, x0_source: str = 
     rows = all_trials.set_index("trial_id").loc[list(batch.trial_id)]
     notes: set[str] = set()
     if "distance_m" not in rows or rows["distance_m"].isna().any():
-        notes.add("distance 0 assumed where not recorded (the finger starts on the key)")
-    columns: dict[str, Any] = {**_commands(rows, notes), **_midi(rows, midi_recorded)}
+        batch = _measured_distance(batch, rows, notes)
+    columns: dict[str, Any] = {**_commands(rows, batch.distance_m, notes), **_midi(rows, midi_recorded)}
     # A run's own arm log starts at the commanded motion start; an imported take does not know it.
     columns["command_start_s"] = np.full(batch.n, 0.0 if batch.arm_source == "arm" else np.nan)
     columns["motion_start_s"] = _column(rows, "t_start_s")
@@ -175,6 +176,27 @@ def load_keystrokes(run_ids: Sequence[str], data_dir: Path, *, x0_source: str = 
     if schedule is not None:
         batch = attach_schedule(batch, rows, schedule, notes)
     return Loaded(batch, all_trials.reset_index(drop=True), hashes, tuple(sorted(notes)))
+
+
+#: A take whose fingertips travel this far (median) before the key moves started above the key.
+HOVER_M = 1e-3
+
+
+def _measured_distance(batch: KeystrokeBatch, rows: pd.DataFrame, notes: set[str]) -> KeystrokeBatch:
+    """Where the distance was not recorded: 0 (the finger starts on the key, as in the study's
+    takes), unless the tracked fingertips clearly travelled before the key moved; then that
+    travel, measured per keystroke (`features.approach_distance_m`), and the note says so."""
+    recorded = _column(rows, "distance_m")
+    travel = approach_distance_m(batch) if batch.has_motion else np.full(batch.n, np.nan)
+    unknown = ~np.isfinite(recorded)
+    typical = float(np.nanmedian(travel[unknown])) if np.isfinite(travel[unknown]).any() else 0.0
+    if not typical > HOVER_M:
+        notes.add("distance 0 assumed where not recorded (the finger starts on the key)")
+        return batch
+    measured = np.where(np.isfinite(travel), travel, typical)
+    notes.add(f"distance not recorded: measured from the take as the fingertip's travel before the key moved "
+              f"(median {1e3 * typical:.2f} mm; reads about 0.3 mm long: give the lab's presses for the commanded one)")
+    return replace(batch, distance_m=np.where(unknown, measured, batch.distance_m))
 
 
 #: Columns of a commanded schedule (a lab script's log of what it told the arm).
