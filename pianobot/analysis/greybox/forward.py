@@ -18,7 +18,7 @@ the key started to move, or the key is back at rest), and outputs are NaN after 
 A model with unilateral `contact` does describe what follows: the key returns on its own while
 the finger hangs from the arm, and a pad that sticks (`adhesion`) pulls the key above rest until
 it lets go, ringing. `MeasuredArm.of(batch, window="release")` models each keystroke further,
-until the arm is back where it started plus `SETTLE_S` (`release_window`); discovery judges
+until the arm is back where it started plus `RELEASE_SETTLE_S` (`release_window`); discovery judges
 those two effects on it (`lifts_off` says whether a keystroke's finger left the key at all).
 
 `pianobot.physics.simulate.simulate_arm` integrates exactly this (the `KeystrokeModel` without
@@ -58,7 +58,7 @@ LIFT_OFF_M = 5e-4
 #: A fingertip has clearly left the key once the gap has reopened by this much (`lifts_off`).
 CLEAR_OF_KEY_M = 1e-3
 #: The release window runs this long after the arm is back at its start (ringing after a snap).
-SETTLE_S = 0.15
+RELEASE_SETTLE_S = 0.15
 #: The arm is back at its start within this distance of its lowest point before the press.
 ARM_BACK_M = 2e-4
 
@@ -197,11 +197,11 @@ def _press(batch: KeystrokeBatch, i: int) -> tuple[FloatArray, FloatArray, int, 
 
 
 def release_window(batch: KeystrokeBatch) -> npt.NDArray[np.intp]:
-    """Per keystroke, the last sample of its release: `SETTLE_S` after the arm is back within
+    """Per keystroke, the last sample of its release: `RELEASE_SETTLE_S` after the arm is back within
     `ARM_BACK_M` of where it started (the whole trace when it never gets back, or without an arm
     marker)."""
     out = np.full(batch.n, batch.t_s.size - 1, dtype=np.intp)
-    settle = int(round(SETTLE_S / batch.dt_s)) if batch.dt_s > 0 else 0
+    settle = int(round(RELEASE_SETTLE_S / batch.dt_s)) if batch.dt_s > 0 else 0
     for i in range(batch.n):
         if not np.isfinite(batch.x0_m[i]).any():
             continue
