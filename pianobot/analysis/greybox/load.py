@@ -245,6 +245,9 @@ def attach_schedule(batch: KeystrokeBatch, rows: pd.DataFrame, schedule: pd.Data
         notes.discard("acceleration not recorded")
         notes.discard("down speed taken from the measured arm speed")
         notes.discard("depth taken from the measured arm travel")
+        if matched == batch.n:  # every distance and hold is the commanded one now
+            notes.difference_update({note for note in notes if note.startswith("distance ")})
+            notes.discard("hold derived from the take's stroke timing (equal down and up moves)")
         notes.add(f"commanded presses from the schedule ({matched} of {batch.n} keystrokes matched)")
     return replace(batch, **out)
 
