@@ -35,11 +35,8 @@ from pianobot.physics.msd import MSDParams
 
 FloatArray = npt.NDArray[np.float64]
 
-#: Base parameters may move this factor either way from the prior (m1: `MASS_RANGE`): for the
-#: study's prior, key damping up to 9 N·s/m (1.4× critical) and key stiffness up to 9,000 N/m.
-#: A base fit that wants more is absorbing a missing effect (a stop, friction) into damping; a
-#: wider range (1,000×) let it, and the explicit integrator then needed steps of 16-37 µs.
-BASE_RANGE = 30.0
+#: Base parameters may move this factor either way from the prior (m1: `MASS_RANGE`).
+BASE_RANGE = 1e3
 MASS_RANGE = 10.0
 #: A fitted value this close to a bound (in internal units) is reported as "on bound".
 INTERNAL_BOUND_TOLERANCE = 1e-3
