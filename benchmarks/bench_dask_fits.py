@@ -12,7 +12,9 @@ ways, interleaved `--repeat` times (best wall time kept), like `bench_dask.py` d
 - `cluster_2`: the same on a LocalCluster of 2 worker processes.
 
 `speedup_2_vs_1_process` answers "does a second process help" for the same code path. The
-results are checked equal to the serial ones (bootstrap intervals; discovery's decisions and
+part that splits (the maps: refits, candidate fits) is also timed on its own (`split_*`): what
+stays in the driver (the base fit, the measured checks, choosing) bounds the whole's speed-up on
+any number of workers (Amdahl), and the two figures say how much. The results are checked equal to the serial ones (bootstrap intervals; discovery's decisions and
 fitted values), since a piece's result may depend only on its arguments.
 
 JSON goes to stdout and benchmarks/results/dask_fits.json.
@@ -26,7 +28,7 @@ import os
 import sys
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -74,16 +76,33 @@ def _candidates(batch: Any) -> Callable[[Any], Any]:
     return run
 
 
+class _Timed:
+    """A mapper that adds up the wall time spent inside its maps (the part of the work that splits)."""
+
+    def __init__(self, mapper: Any) -> None:
+        self.mapper = mapper
+        self.wall_s = 0.0
+
+    def __call__(self, fn: Callable[[Any], Any], items: Any) -> Iterator[Any]:
+        start = time.perf_counter()
+        try:
+            yield from self.mapper(fn, items)
+        finally:
+            self.wall_s += time.perf_counter() - start
+
+
 def _time(work: Callable[[Any], Any], executor: Any | None) -> dict[str, Any]:
     from pianobot.analysis.greybox.pieces import serial_map
 
     client = getattr(executor, "_client", None)
     before = _workers_cpu_s(client) if client is not None else 0.0
+    timed = _Timed(serial_map if executor is None else executor.imap)
     wall, cpu = time.perf_counter(), time.process_time()
-    value = work(serial_map if executor is None else executor.imap)
+    value = work(timed)
     wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
     workers = (_workers_cpu_s(client) - before) if client is not None else 0.0
-    return {"wall_s": wall, "driver_cpu_s": cpu, "workers_cpu_s": workers, "value": value}
+    return {"wall_s": wall, "split_wall_s": timed.wall_s, "driver_cpu_s": cpu, "workers_cpu_s": workers,
+            "value": value}
 
 
 def _workload(name: str, work: Callable[[Any], Any], configs: dict[str, Any], repeat: int) -> dict[str, Any]:
@@ -107,6 +126,10 @@ def _workload(name: str, work: Callable[[Any], Any], configs: dict[str, Any], re
                   for c, r in best.items()},
         "speedup_2_vs_1_process": round(one["wall_s"] / two["wall_s"], 2),
         "speedup_2_vs_serial": round(best["serial"]["wall_s"] / two["wall_s"], 2),
+        "split_wall_s": {c: round(r["split_wall_s"], 2) for c, r in best.items()},
+        "split_share_of_serial": round(best["serial"]["split_wall_s"] / best["serial"]["wall_s"], 2),
+        "split_speedup_2_vs_1_process": round(one["split_wall_s"] / two["split_wall_s"], 2),
+        "split_speedup_2_vs_serial": round(best["serial"]["split_wall_s"] / two["split_wall_s"], 2),
         "identical_to_serial": same,
     }
 
