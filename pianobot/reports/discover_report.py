@@ -16,6 +16,8 @@ import pandas as pd
 
 from pianobot.analysis.discover.gap import Gap
 from pianobot.analysis.discover.result import DiscoveryResult, params_text
+from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
+from pianobot.analysis.greybox.prediction import Prediction
 from pianobot.reports.html import Section, figure_html, paragraph, table_html, write_page
 
 
@@ -65,11 +67,32 @@ def _overlay(result: DiscoveryResult, count: int = 3) -> str:
     held, before, after = result.held_out, result.predictions_before, result.predictions_after
     if not held.has_motion:
         return _outcome_overlay(result)
+    final_name = "final model (" + (", ".join(v.label for v in result.accepted) or "= base") + ")"
+    return _trajectory_overlay(held, before, after, ("base model", final_name), count,
+                               "Worst held-out keystrokes of the base model: dots measured, dashed base model, "
+                               "solid final model (each trace relative to its own rest level)")
+
+
+def _release_overlay(result: DiscoveryResult, count: int = 2) -> str:
+    """The held-out keystrokes through their release: the model entering the release rounds (the
+    study's bilateral coupling) against the one leaving them."""
+    assert result.release is not None
+    effects = [f.effect for f in result.findings if f.effect == "contact" and f.accepted]
+    effects += [it.accepted.label for it in result.iterations if it.window == "release" and it.accepted]
+    final_name = "with " + (", ".join(effects) or "nothing added")
+    return _trajectory_overlay(result.held_out, result.release.before, result.release.after,
+                               ("model before the release rounds", final_name), count,
+                               "The release, past lift-off (held-out keystrokes the earlier model fits worst): "
+                               "dots measured, dashed the model before the release rounds, solid after them")
+
+
+def _trajectory_overlay(held: KeystrokeBatch, before: Prediction, after: Prediction, names: tuple[str, str],
+                        count: int, caption: str) -> str:
+    """Measured fingertip and key against two models, on the `count` keystrokes `before` fits worst."""
     err = np.nanmean((before.x2_m - held.x2_m) ** 2, axis=1)
     order = [int(i) for i in np.argsort(np.where(np.isfinite(err), err, -1.0))[::-1][:count] if np.isfinite(err[i])]
     if not order:
         return paragraph("No modelled frames to overlay.", note=True)
-    final_name = "final model (" + (", ".join(v.label for v in result.accepted) or "= base") + ")"
     fig, axes = plt.subplots(len(order), 1, figsize=(9, 2.8 * len(order)), squeeze=False)
     for ax, i in zip(axes[:, 0], order, strict=True):
         t = held.row_times_s(i)
@@ -83,15 +106,14 @@ def _overlay(result: DiscoveryResult, count: int = 3) -> str:
             off_b = float(np.mean(base_pred[ok] - measured[ok]))
             off_f = float(np.nanmean(final_pred[ok] - measured[ok]))
             ax.plot(t, 1e3 * measured, ".", ms=2, color=colour, label=f"measured {signal}")
-            ax.plot(t, 1e3 * (base_pred - off_b), "--", lw=1, color=colour, label=f"base model {signal}")
-            ax.plot(t, 1e3 * (final_pred - off_f), "-", lw=1, color=colour, label=f"{final_name} {signal}")
+            ax.plot(t, 1e3 * (base_pred - off_b), "--", lw=1, color=colour, label=f"{names[0]} {signal}")
+            ax.plot(t, 1e3 * (final_pred - off_f), "-", lw=1, color=colour, label=f"{names[1]} {signal}")
         ax.set_title(f"{held.trial_id[i]}: {held.vacuum_kpa[i]:g} kPa, {1e3 * held.down_velocity_mps[i]:.0f} mm/s")
         ax.set_ylabel("displacement, mm (down +)")
     axes[-1, 0].set_xlabel("time since motion start (s)")
     axes[0, 0].legend(loc="upper right", fontsize=7, ncol=2)
     fig.tight_layout()
-    return figure_html(fig, "Worst held-out keystrokes of the base model: dots measured, dashed base model, "
-                            "solid final model (each trace relative to its own rest level)")
+    return figure_html(fig, caption)
 
 
 def _outcome_overlay(result: DiscoveryResult) -> str:
@@ -113,19 +135,32 @@ def _outcome_overlay(result: DiscoveryResult) -> str:
 
 
 def _gap_figure(result: DiscoveryResult) -> str:
-    labels = ["base"] + [v.label for v in result.accepted]
-    gaps = [result.gap_before] + [v.gap_after for v in result.accepted]
+    """Held-out gap of the base model and after each accepted effect; the release rounds (a longer
+    window, so not comparable with the rest) in a panel of their own."""
+    press = [v for it in result.press_iterations if (v := it.accepted) is not None]
+    labels = ["base"] + [v.label for v in press]
+    gaps = [result.gap_before] + [v.gap_after for v in press]
+    release = [it for it in result.iterations if it.window == "release"]
     position = math.isfinite(result.gap_before.position_m)
-    values = [1e3 * g.position_m if position else g.on_velocity for g in gaps]
-    fig, ax = plt.subplots(figsize=(6, 3))
-    ax.bar(range(len(values)), values, color="tab:blue", label="held-out systematic error")
-    if position:
-        ax.axhline(1e3 * result.gap_before.sigma_m, color="tab:grey", ls=":", label="noise σ")
-    ax.set_xticks(range(len(values)), labels, rotation=20)
-    ax.set_ylabel("held-out systematic error (" + ("mm" if position else "MIDI velocity") + ")")
-    ax.legend(fontsize=7)
+    unit = "mm" if position else "MIDI velocity"
+    fig, axes = plt.subplots(1, 2 if release else 1, figsize=(9 if release else 6, 3), squeeze=False)
+    panels = [(axes[0, 0], labels, gaps, "until lift-off")]
+    if release:
+        rel_labels = ["with contact"] + [it.accepted.label for it in release if it.accepted]
+        rel_gaps = [release[0].gap_before] + [it.accepted.gap_after for it in release if it.accepted]
+        panels.append((axes[0, 1], rel_labels, rel_gaps, "through the release"))
+    for ax, names, values_gap, title in panels:
+        values = [1e3 * g.position_m if position else g.on_velocity for g in values_gap]
+        ax.bar(range(len(values)), values, color="tab:blue", label="held-out systematic error")
+        if position:
+            ax.axhline(1e3 * values_gap[0].sigma_m, color="tab:grey", ls=":", label="noise σ")
+        ax.set_xticks(range(len(values)), names, rotation=20)
+        ax.set_ylabel(f"held-out systematic error ({unit})")
+        ax.set_title(title, fontsize=9)
+        ax.legend(fontsize=7)
     fig.tight_layout()
-    return figure_html(fig, "Held-out gap of the base model and after each accepted effect")
+    return figure_html(fig, "Held-out gap of the base model and after each accepted effect"
+                       + ("; right: the release, modelled past lift-off (a longer window)" if release else ""))
 
 
 def build_discover_report(result: DiscoveryResult, path: Path, *, model_path: Path | None = None) -> Path:
@@ -177,4 +212,6 @@ def build_discover_report(result: DiscoveryResult, path: Path, *, model_path: Pa
         sections.append(Section("MIDI outcomes (held-out, base model)").add(
             table_html(pd.DataFrame([{"measure": k, "value": v} for k, v in outcomes.items()]))))
     sections.append(Section("Held-out keystrokes").add(_overlay(result)))
+    if result.release is not None:
+        sections.append(Section("The release, past lift-off").add(_release_overlay(result)))
     return write_page(path, "pianobot discover", sections, subtitle=result.verdict)

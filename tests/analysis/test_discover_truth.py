@@ -95,9 +95,15 @@ def test_a_pad_that_sticks_is_named_from_the_release(
     snap. Discovery judges the release too and names adhesion there (the cohesive form, a pull
     that fades with the gap, is not one pianobot's candidates were written as)."""
     run_id, data, truth, files = _imported(name, tmp_path)
-    payload = _discover([run_id, "--data", str(data), "--presses", str(files["presses"])], (capsys, monkeypatch))
+    report = tmp_path / "discover.html"
+    payload = _discover([run_id, "--data", str(data), "--presses", str(files["presses"]), "--out", str(report)],
+                        (capsys, monkeypatch))
     named = [e for e in payload["accepted_effects"] if e not in truth["always_present"]]
     assert named == ["adhesion"], payload["verdict"]
+    # The report shows the release: its own gap panel and an overlay past lift-off.
+    html = report.read_text()
+    assert "right: the release, modelled past lift-off" in html  # the gap figure's second panel
+    assert "The release, past lift-off" in html and "dashed the model before the release rounds" in html
     release = [it for it in payload["iterations"] if it["window"] == "release"]
     adhesion = next(c for it in release for c in it["candidates"] if c["effect"] == "adhesion")
     assert adhesion["status"] == "accepted" and adhesion["ratio"] >= 1.5

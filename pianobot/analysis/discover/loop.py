@@ -41,7 +41,7 @@ from pianobot.analysis.discover.measured import (
     clock_check,
     readout_check,
 )
-from pianobot.analysis.discover.result import DiscoveryResult, Iteration, verdict_text
+from pianobot.analysis.discover.result import DiscoveryResult, Iteration, ReleaseView, verdict_text
 from pianobot.analysis.discover.search import Evaluated, Setting
 from pianobot.analysis.discover.sparse import Proposal, outcome_proposals, trajectory_proposals
 from pianobot.analysis.greybox.covariance import Z95
@@ -49,6 +49,7 @@ from pianobot.analysis.greybox.fitter import GreyBoxFit
 from pianobot.analysis.greybox.forward import lifts_off
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
 from pianobot.analysis.greybox.pieces import Mapper, serial_map
+from pianobot.analysis.greybox.prediction import Prediction
 from pianobot.analysis.greybox.split import holdout_indices
 from pianobot.analysis.identify.fit import rms_x2_m
 from pianobot.physics.model import KeystrokeModel
@@ -181,9 +182,10 @@ MIN_RELEASES = 3
 
 
 def _release(setting: Setting, current: GreyBoxFit, start: KeystrokeModel, settings: Settings, index: int,
-             progress: Progress, mapper: Mapper) -> tuple[MeasuredCheck | None, list[Iteration], GreyBoxFit]:
+             progress: Progress, mapper: Mapper) -> tuple[MeasuredCheck | None, list[Iteration], GreyBoxFit,
+                                                          ReleaseView | None]:
     """The release judged past lift-off (step 7 of the module docstring): the contact check, the
-    adhesion round, and the model after them.
+    adhesion round, the model after them, and the held-out release before and after.
 
     That the finger leaves the key is a property of every real finger and key (the study's
     bilateral coupling lacks it), so it is reported with the measured checks, not as a
@@ -191,25 +193,33 @@ def _release(setting: Setting, current: GreyBoxFit, start: KeystrokeModel, setti
     lift-off. Each round re-reads the current model's error levels on the longer window, so its
     candidates stand on one scale with it."""
     if setting.mode != "trajectories":
-        return None, [], current
+        return None, [], current, None
     off_train, off_held = lifts_off(setting.train), lifts_off(setting.held)
     if off_train.sum() < MIN_RELEASES or not off_held.any():
-        return None, [], current
+        return None, [], current, None
     release = Setting.of(setting.train, setting.held, "release")
+    before = _held_prediction(release, current)
     check = None
+    rounds: list[Iteration] = []
     if "contact" not in current.model_.effects:
         with progress.task("discover: the release, past lift-off: contact", total=None):
             check, fit = _contact(release, current, start, settings.rule, int(off_train.sum()))
-        if fit is None:
-            return check, [], current
-        current = fit
-    here = search.on(release, current)
-    iteration, chosen, _ = _iterate(release, here, start, settings, search.held_noise_m(release, here), index,
-                                    progress, mapper, {}, only=("adhesion",))
-    if chosen is not None:
-        with progress.task(f"discover, {iteration.heading}: adhesion fitted to its optimum", total=None):
-            current = search.converged(release, chosen)
-    return check, [iteration], current
+        current = fit or current
+    if "contact" in current.model_.effects:
+        here = search.on(release, current)
+        iteration, chosen, _ = _iterate(release, here, start, settings, search.held_noise_m(release, here), index,
+                                        progress, mapper, {}, only=("adhesion",))
+        rounds.append(iteration)
+        if chosen is not None:
+            with progress.task(f"discover, {iteration.heading}: adhesion fitted to its optimum", total=None):
+                current = search.converged(release, chosen)
+    return check, rounds, current, ReleaseView(before, _held_prediction(release, current))
+
+
+def _held_prediction(setting: Setting, fit: GreyBoxFit) -> Prediction:
+    """`fit`'s model on the setting's held-out keystrokes."""
+    return GreyBoxFit(setting.held_drive, fit.layout, channels=fit.channels, sigma=fit.sigma).evaluate(
+        fit.theta_).prediction_
 
 
 def _contact(release: Setting, current: GreyBoxFit, start: KeystrokeModel, rule: Rule,
@@ -311,7 +321,8 @@ def _discover(batch: KeystrokeBatch, start: KeystrokeModel | None, settings: Set
         with progress.task(f"discover, iteration {index + 1}: {label} fitted to its optimum", total=None):
             current = search.converged(setting, chosen)
     last = iterations[-1]
-    contact, release, current = _release(setting, current, start, settings, len(iterations), progress, mapper)
+    contact, release, current, release_view = _release(setting, current, start, settings, len(iterations),
+                                                       progress, mapper)
     if contact is not None:
         findings.append(contact)
     timings["candidates_s"] = time.perf_counter() - t0 - timings["base_fit_s"]
@@ -332,5 +343,5 @@ def _discover(batch: KeystrokeBatch, start: KeystrokeModel | None, settings: Set
         base_on_bounds=base.on_bounds_, verdict=text, explained=explained, rule=settings.rule,
         n_train=setting.train.n, n_held_out=setting.held.n, held_out=setting.held,
         predictions_before=held_base.prediction_, predictions_after=held_final.prediction_,
-        base_holdout_rms_x2_m=base_rms, unexplained=unexplained, notes=tuple(notes),
+        base_holdout_rms_x2_m=base_rms, unexplained=unexplained, notes=tuple(notes), release=release_view,
         seconds=time.perf_counter() - t0, timings=timings)

@@ -59,6 +59,15 @@ class Iteration:
 
 
 @dataclass(frozen=True)
+class ReleaseView:
+    """The held-out keystrokes modelled through the release (past lift-off): the model that
+    entered the release rounds and the one that left them."""
+
+    before: Prediction
+    after: Prediction
+
+
+@dataclass(frozen=True)
 class DiscoveryResult:
     """Everything discovery found, with the model it ends with."""
 
@@ -83,6 +92,7 @@ class DiscoveryResult:
     notes: tuple[str, ...] = ()
     seconds: float = math.nan
     timings: dict[str, float] = field(default_factory=dict)
+    release: ReleaseView | None = None  # when the release was judged (fingertips tracked off the key)
 
     @property
     def accepted(self) -> tuple[Verdict, ...]:
