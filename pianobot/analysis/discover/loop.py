@@ -49,7 +49,6 @@ from pianobot.analysis.greybox.fitter import GreyBoxFit
 from pianobot.analysis.greybox.forward import lifts_off
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
 from pianobot.analysis.greybox.pieces import Mapper, serial_map
-from pianobot.analysis.greybox.prediction import Prediction
 from pianobot.analysis.greybox.split import holdout_indices
 from pianobot.analysis.identify.fit import rms_x2_m
 from pianobot.physics.model import KeystrokeModel
@@ -116,9 +115,7 @@ def _iterate(setting: Setting, current: GreyBoxFit, start: KeystrokeModel, setti
     criterion = search.criterion_of(current)
     reference = search.evaluate(setting, current, criterion, sigma_m, "current", None)
     explainable = something_to_explain(reference.gap, rule)
-    held_fit = GreyBoxFit(setting.held_drive, current.layout, channels=current.channels,
-                          sigma=current.sigma).evaluate(current.theta_)
-    before = localise(held_fit, sigma_m)
+    before = localise(search.on_held(setting, current), sigma_m)
     if not explainable:
         # No candidate can pass (condition 2 of the rule fails for all alike): fitting them
         # would cost most of a clean take's discovery and decide nothing.
@@ -171,8 +168,7 @@ def _iterate(setting: Setting, current: GreyBoxFit, start: KeystrokeModel, setti
     chosen = next((e.fit for e in final if accepted is not None and e.label == accepted.label), None)
     after = None
     if chosen is not None:
-        after = localise(GreyBoxFit(setting.held_drive, chosen.layout, channels=chosen.channels,
-                                    sigma=chosen.sigma).evaluate(chosen.theta_), sigma_m)
+        after = localise(search.on_held(setting, chosen), sigma_m)
     return Iteration(index, reference.gap, before, tuple(judged), accepted, after, explainable,
                      window=setting.window), chosen, starts
 
@@ -198,7 +194,7 @@ def _release(setting: Setting, current: GreyBoxFit, start: KeystrokeModel, setti
     if off_train.sum() < MIN_RELEASES or not off_held.any():
         return None, [], current, None
     release = Setting.of(setting.train, setting.held, "release")
-    before = _held_prediction(release, current)
+    before = search.on_held(release, current).prediction_
     check = None
     rounds: list[Iteration] = []
     if "contact" not in current.model_.effects:
@@ -213,13 +209,7 @@ def _release(setting: Setting, current: GreyBoxFit, start: KeystrokeModel, setti
         if chosen is not None:
             with progress.task(f"discover, {iteration.heading}: adhesion fitted to its optimum", total=None):
                 current = search.converged(release, chosen)
-    return check, rounds, current, ReleaseView(before, _held_prediction(release, current))
-
-
-def _held_prediction(setting: Setting, fit: GreyBoxFit) -> Prediction:
-    """`fit`'s model on the setting's held-out keystrokes."""
-    return GreyBoxFit(setting.held_drive, fit.layout, channels=fit.channels, sigma=fit.sigma).evaluate(
-        fit.theta_).prediction_
+    return check, rounds, current, ReleaseView(before, search.on_held(release, current).prediction_)
 
 
 def _contact(release: Setting, current: GreyBoxFit, start: KeystrokeModel, rule: Rule,
@@ -301,7 +291,7 @@ def _discover(batch: KeystrokeBatch, start: KeystrokeModel | None, settings: Set
         base = search.base_fit(setting, start)
     timings["base_fit_s"] = time.perf_counter() - t0
     sigma_m = search.held_noise_m(setting, base)
-    held_base = GreyBoxFit(setting.held_drive, base.layout, channels=base.channels, sigma=base.sigma).evaluate(base.theta_)
+    held_base = search.on_held(setting, base)
     current = base
     iterations: list[Iteration] = []
     unexplained: Proposal | None = None
@@ -326,8 +316,7 @@ def _discover(batch: KeystrokeBatch, start: KeystrokeModel | None, settings: Set
     if contact is not None:
         findings.append(contact)
     timings["candidates_s"] = time.perf_counter() - t0 - timings["base_fit_s"]
-    held_final = GreyBoxFit(setting.held_drive, current.layout, channels=current.channels,
-                            sigma=current.sigma).evaluate(current.theta_)
+    held_final = search.on_held(setting, current)
     final_gap = last.accepted.gap_after if last.accepted else last.gap_before
     explainable = something_to_explain(final_gap, settings.rule)
     final_loc = last.after if last.accepted and last.after is not None else last.before

@@ -139,7 +139,7 @@ def criterion_of(fit: GreyBoxFit) -> Criterion:
 def evaluate(setting: Setting, fit: GreyBoxFit, criterion: Criterion, noise_m: float, label: str,
              spec: CandidateSpec | None, joint: bool = True) -> Evaluated:
     """The fit's criterion on the training keystrokes and its gap on the held-out ones."""
-    held = GreyBoxFit(setting.held_drive, fit.layout, channels=fit.channels, sigma=fit.sigma).evaluate(fit.theta_)
+    held = on_held(setting, fit)
     gap = held_out_gap(held.residuals_, setting.held.n, noise_m, setting.held.sounded, held.prediction_.sounded,
                        np.isfinite(held.prediction_.margin_m))
     return Evaluated(label, spec, fit, criterion.value(fit.channels_, fit.theta_.size), gap, joint)
@@ -150,11 +150,16 @@ def on(setting: Setting, fit: GreyBoxFit) -> GreyBoxFit:
     return GreyBoxFit(setting.train_drive, fit.layout, channels=fit.channels).evaluate(fit.theta_)
 
 
+def on_held(setting: Setting, fit: GreyBoxFit) -> GreyBoxFit:
+    """`fit`'s model evaluated on the setting's held-out keystrokes, on `fit`'s error levels."""
+    return GreyBoxFit(setting.held_drive, fit.layout, channels=fit.channels, sigma=fit.sigma).evaluate(fit.theta_)
+
+
 def held_noise_m(setting: Setting, fit: GreyBoxFit) -> float:
     """Position noise of the held-out residuals under `fit` (NaN with MIDI only)."""
     if setting.mode != "trajectories":
         return float("nan")
-    held = GreyBoxFit(setting.held_drive, fit.layout, channels=fit.channels, sigma=fit.sigma).evaluate(fit.theta_)
+    held = on_held(setting, fit)
     noise = held.noise(held.residuals_)
     values = [noise[c] for c in ("x1", "x2") if c in noise]
     return float(np.sqrt(np.mean(np.square(values)))) if values else float("nan")
