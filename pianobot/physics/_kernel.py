@@ -67,8 +67,9 @@ N_KP = 28
     E_LETOFF_W,
     E_LAG_FORM,
     E_LAG_S,
-) = range(19)
-N_EP = 19
+    E_STIFF_Q,
+) = range(20)
+N_EP = 20
 
 # Rows of the per-block work array: the constants above, then the state of each keystroke.
 # One array (keystroke index last) instead of many keeps the compiler free of aliasing doubts,
@@ -78,7 +79,7 @@ N_EP = 19
 )
 N_W = N_KP + 13
 
-STIFF_NONE, STIFF_CUBIC, STIFF_EXP = 0.0, 1.0, 2.0
+STIFF_NONE, STIFF_CUBIC, STIFF_EXP, STIFF_POWER = 0.0, 1.0, 2.0, 3.0
 LAG_NONE, LAG_FIRST_ORDER, LAG_DELAY = 0.0, 1.0, 2.0
 
 BLOCK = 16  # keystrokes advanced side by side
@@ -240,6 +241,8 @@ def _make_integrate(block: int, linear: bool) -> Any:
         beta = ep[E_STIFF_BETA] if ep[E_STIFF_FORM] != STIFF_NONE else 0.0
         exp_on = 1.0 if ep[E_STIFF_FORM] == STIFF_EXP and beta > 0.0 else 0.0
         cubic_on = 1.0 if ep[E_STIFF_FORM] == STIFF_CUBIC and beta > 0.0 else 0.0
+        power_on = ep[E_STIFF_FORM] == STIFF_POWER and beta > 0.0
+        q = ep[E_STIFF_Q]
         inv_beta = 1.0 / beta if exp_on > 0.0 else 0.0
         pull_off = ep[E_ADHESION]
         glued = 1.0 if pull_off > 0.0 else 0.0
@@ -285,11 +288,14 @@ def _make_integrate(block: int, linear: bool) -> Any:
                     else:
                         k1 = w[K1, jj]
                         pos = max(pen, 0.0)
-                        # Stiffening: cubic k1·δ·(1 + (βδ)²) or exponential k1·(e^{βδ} − 1)/β for
-                        # δ > 0 (same slope k1 at touch, then stiffer); both vanish for β = 0.
+                        # Stiffening: cubic k1·δ·(1 + (βδ)²), power k1·δ·(1 + (βδ)^q) or
+                        # exponential k1·(e^{βδ} − 1)/β for δ > 0 (slope k1 at touch, then
+                        # stiffer); all vanish for β = 0.
                         bp = beta * pos
                         spring = k1 * pen + k1 * pos * (cubic_on * bp * bp)
                         spring += exp_on * k1 * ((_exp(bp) - 1.0) * inv_beta - pos)
+                        if power_on:  # loop-invariant: the compiler unswitches it
+                            spring += k1 * pos * bp**q
                         raw = spring + w[C1, jj] * (v1e - v2e)
                         # Unilateral (pushes only; an adhesive skin pulls until the pull-off force)
                         # or the bilateral spring.

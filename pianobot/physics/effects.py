@@ -95,8 +95,12 @@ _SPECS: tuple[EffectSpec, ...] = (
     EffectSpec(
         "finger_stiffening",
         "Nonlinear finger spring: the contact force grows faster than the compression.",
-        (ParamSpec("stiffening_per_m", 60.0, 0.0, 300.0, 0.0, "1/m", "inverse compression scale of the stiffening"),),
-        ("cubic", "exponential"),
+        (
+            ParamSpec("stiffening_per_m", 60.0, 0.0, 1000.0, 0.0, "1/m", "inverse compression scale of the stiffening"),
+            ParamSpec("stiffening_exponent", 2.0, 1.0, 5.0, None, "1",
+                      "power of the scaled compression in the added stiffness", ("power",)),
+        ),
+        ("cubic", "exponential", "power"),
     ),
     EffectSpec(
         "adhesion",

@@ -105,8 +105,9 @@ def effect_vector(effects: Effects) -> FloatArray:
         ep[K.E_FRIC_ON] = 1.0 if max(ep[K.E_FRIC_C], ep[K.E_FRIC_S]) > 0.0 else 0.0
     if "finger_stiffening" in effects:
         form = effects.form("finger_stiffening")
-        ep[K.E_STIFF_FORM] = K.STIFF_CUBIC if form == "cubic" else K.STIFF_EXP
+        ep[K.E_STIFF_FORM] = {"cubic": K.STIFF_CUBIC, "exponential": K.STIFF_EXP, "power": K.STIFF_POWER}[form]
         ep[K.E_STIFF_BETA] = effects.params("finger_stiffening")["stiffening_per_m"]
+        ep[K.E_STIFF_Q] = effects.value("finger_stiffening", "stiffening_exponent", 2.0)
     if "contact" in effects:  # adhesion acts only where the contact can open at all
         ep[K.E_ADHESION] = effects.value("adhesion", "pull_off_force_n", 0.0)
     if "letoff" in effects:

@@ -4,9 +4,9 @@ A candidate is the base model plus one effect of `physics.effects` in one of its
 form the vocabulary has is a candidate of its own, so a family is tried in shapes that bracket
 what a real mechanism may be: an end stop as a linear spring-damper and as a Hunt–Crossley
 (force ∝ indentation^1.5) contact, friction as Coulomb and as Stribeck (breakaway above the
-sliding force), a stiffening finger as cubic and as exponential. A stop of another power, a
-LuGre friction or a power-law finger sits between or near these, and the family is named by the
-form that explains it best.
+sliding force), a stiffening finger as cubic, as exponential and as a power of the compression
+whose exponent is fitted. A stop of another power, a LuGre friction or a hysteretic finger sits
+between or near these, and the family is named by the form that explains it best.
 
 What the data can judge decides the list:
 

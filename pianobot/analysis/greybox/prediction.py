@@ -100,7 +100,10 @@ def integration_step_s(model: KeystrokeModel, vacuum_kpa: FloatArray, largest_s:
     grow = 1.0
     if beta > 0:
         bd = beta * _TYPICAL_COMPRESSION_M
-        grow = math.exp(min(bd, 30.0)) if fx.form("finger_stiffening") == "exponential" else 1.0 + 3.0 * bd * bd
+        form = fx.form("finger_stiffening")
+        q = fx.value("finger_stiffening", "stiffening_exponent", 2.0) if form == "power" else 2.0
+        # The spring's slope at that compression, over k1.
+        grow = math.exp(min(bd, 30.0)) if form == "exponential" else 1.0 + (q + 1.0) * min(bd, 30.0) ** q
     step = largest_s
     for p in np.unique(vacuum_kpa):
         lp = model.msd.at(float(p))
