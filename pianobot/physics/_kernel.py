@@ -187,7 +187,7 @@ def _record(w: FloatArray, b0: int, nb: int, k: int, outs: tuple[FloatArray, ...
             out_fc[b0 + jj, k] = w[S_FC, jj]
 
 
-def _make_integrate(block: int, linear: bool) -> Any:
+def _make_integrate(block: int, linear: bool, power: bool = False) -> Any:
     """The kernel compiled for blocks of `block` keystrokes and one model class.
 
     Both arguments are compile-time constants: numba freezes a closure's values into the
@@ -198,6 +198,8 @@ def _make_integrate(block: int, linear: bool) -> Any:
     linear=True is for models without finger- or key-side effects (the study's bilateral spring):
     the same scheme, arm input and outputs, but the key's step is a handful of multiply-adds and
     one select, several times faster than the full step with every effect switched off.
+    power=True adds the power-law finger's k1·δ·(βδ)^q: a power of a lane's own value does not
+    vectorise, so only models with that form pay for it (the other kernels have no trace of it).
     """
 
     @njit(cache=True, fastmath=True, error_model="numpy")
@@ -241,7 +243,6 @@ def _make_integrate(block: int, linear: bool) -> Any:
         beta = ep[E_STIFF_BETA] if ep[E_STIFF_FORM] != STIFF_NONE else 0.0
         exp_on = 1.0 if ep[E_STIFF_FORM] == STIFF_EXP and beta > 0.0 else 0.0
         cubic_on = 1.0 if ep[E_STIFF_FORM] == STIFF_CUBIC and beta > 0.0 else 0.0
-        power_on = ep[E_STIFF_FORM] == STIFF_POWER and beta > 0.0
         q = ep[E_STIFF_Q]
         inv_beta = 1.0 / beta if exp_on > 0.0 else 0.0
         pull_off = ep[E_ADHESION]
@@ -294,7 +295,7 @@ def _make_integrate(block: int, linear: bool) -> Any:
                         bp = beta * pos
                         spring = k1 * pen + k1 * pos * (cubic_on * bp * bp)
                         spring += exp_on * k1 * ((_exp(bp) - 1.0) * inv_beta - pos)
-                        if power_on:  # loop-invariant: the compiler unswitches it
+                        if power:  # a compile-time constant
                             spring += k1 * pos * bp**q
                         raw = spring + w[C1, jj] * (v1e - v2e)
                         # Unilateral (pushes only; an adhesive skin pulls until the pull-off force)
@@ -364,3 +365,4 @@ def arm_lag(form: float, lag_s: float, h: float) -> tuple[float, float]:
 # One compiled kernel per block size and model class (numba caches each on disk).
 integrate = {b: _make_integrate(b, linear=False) for b in (SMALL_BLOCK, BLOCK)}
 integrate_linear = {b: _make_integrate(b, linear=True) for b in (SMALL_BLOCK, BLOCK)}
+integrate_power = {b: _make_integrate(b, linear=False, power=True) for b in (SMALL_BLOCK, BLOCK)}

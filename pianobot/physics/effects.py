@@ -97,7 +97,7 @@ _SPECS: tuple[EffectSpec, ...] = (
         "Nonlinear finger spring: the contact force grows faster than the compression.",
         (
             ParamSpec("stiffening_per_m", 60.0, 0.0, 1000.0, 0.0, "1/m", "inverse compression scale of the stiffening"),
-            ParamSpec("stiffening_exponent", 2.0, 1.0, 5.0, None, "1",
+            ParamSpec("stiffening_exponent", 2.0, 1.0, 4.0, None, "1",
                       "power of the scaled compression in the added stiffness", ("power",)),
         ),
         ("cubic", "exponential", "power"),

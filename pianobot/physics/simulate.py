@@ -185,7 +185,8 @@ def _run(
     n_steps = (n_out - 1) * every
     n = kp.shape[0]
     outs = [np.empty((n, n_out)) for _ in range(5)]
-    kernels = K.integrate_linear if _is_linear(ep) else K.integrate
+    kernels = (K.integrate_linear if _is_linear(ep)
+               else K.integrate_power if ep[K.E_STIFF_FORM] == K.STIFF_POWER else K.integrate)
     # Two compiled block sizes: a few keystrokes should not pay for 16 SIMD lanes.
     kernel = kernels[K.SMALL_BLOCK if n <= K.SMALL_BLOCK else K.BLOCK]
     kernel(kp, ep, mode, trace_t, trace_x0, t_start, h, n_steps, every, *outs)

@@ -8,6 +8,8 @@ import numpy as np
 import pytest
 
 from pianobot.analysis.discover.candidates import (
+    STIFFENING_REACH,
+    CandidateSpec,
     candidate_params,
     candidates,
     family_of,
@@ -129,8 +131,33 @@ def test_arm_side_effects_are_not_key_candidates_when_the_arm_is_measured() -> N
     midi_only = {c.effect for c in candidates(KeystrokeModel.study(), midi)}
     assert {"arm_acceleration", "arm_lag"} <= midi_only
     forms = {c.label for c in candidates(KeystrokeModel.study(), traj)}
-    assert {"keybed/linear", "keybed/hunt_crossley", "key_friction/stribeck", "finger_stiffening/exponential"} <= forms
+    assert {"keybed/linear", "keybed/hunt_crossley", "key_friction/stribeck", "finger_stiffening/exponential",
+            "finger_stiffening/power"} <= forms
+    assert "finger_stiffening/cubic" not in forms  # the power form's exponent 2: not fitted twice
     assert family_of("keybed") == family_of("letoff") == "key_stop"
+
+
+def test_a_stiffening_finger_is_bounded_by_the_compression_the_data_show() -> None:
+    """β·δ ≤ STIFFENING_REACH at the largest measured compression δ: a take that presses the
+    finger 2 mm may fit a sharp stiffening, one that presses it 25 mm may not (there such a
+    finger would be an end stop); MIDI-only logs are judged at 5 mm."""
+    n, T = 3, 40
+    t = np.arange(T) / 120
+    arm = np.tile(np.minimum(t, 0.2) * 0.15, (n, 1))  # 30 mm of arm travel
+
+    def take(compression_m: float) -> KeystrokeBatch:
+        key = np.clip(arm - compression_m, 0.0, None)
+        return KeystrokeBatch(("a", "b", "c"), np.full(n, -40.0), t, arm, key + np.minimum(arm, compression_m), key,
+                              arm_source="mocap")
+
+    def upper(batch: KeystrokeBatch) -> float:
+        spec = CandidateSpec("finger_stiffening", "power")
+        return next(p.upper for p in candidate_params(spec, batch) if p.name.endswith("stiffening_per_m"))
+
+    assert upper(take(0.002)) == pytest.approx(STIFFENING_REACH / 0.002)
+    assert upper(take(0.025)) == pytest.approx(STIFFENING_REACH / 0.025)
+    assert upper(take(0.025).without_trajectories()) == pytest.approx(STIFFENING_REACH / 0.005)
+    assert upper(take(0.0001)) == EFFECTS["finger_stiffening"].param("stiffening_per_m").upper
 
 
 def test_stlsq_recovers_sparse_coefficients() -> None:

@@ -87,6 +87,24 @@ def test_an_effect_in_a_form_no_candidate_has_is_named_by_its_family(
     assert first["ratio"] is None or first["ratio"] >= 3.0, first  # null: the gap fell to the noise
 
 
+def test_a_power_law_finger_gets_its_exponent(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """A pad spring k1·s·(1 + (s/s0)^3) with s0 = 2.5 mm, finger resting on the key: a
+    stiffening finger in the truth lab's own form. Discovery fits the power form's exponent and
+    scale, and the held-out gap falls several-fold (the cubic form alone sat on its scale's old
+    bound and shrank it 2.5x)."""
+    run_id, data, truth, _ = _imported("mocap-finger_stiffening-power_law-strong", tmp_path)
+    payload = _discover([run_id, "--data", str(data)], (capsys, monkeypatch))
+    assert [e["effect"] for e in payload["accepted"]] == ["finger_stiffening"], payload["verdict"]
+    first = next(c for c in payload["iterations"][0]["candidates"] if c["status"] == "accepted")
+    assert first["ratio"] is None or first["ratio"] >= 3.0, first
+    assert payload["accepted"][0]["form"] == "power"
+    exponent = truth["effect_params"]["exponent"]
+    assert abs(first["params"]["finger_stiffening.stiffening_exponent"]["value"] - exponent) < 0.5
+    scale = 1.0 / truth["effect_params"]["reference_compression_m"]
+    assert abs(first["params"]["finger_stiffening.stiffening_per_m"]["value"] / scale - 1.0) < 0.25
+
+
 @pytest.mark.parametrize("name", ["mocap-adhesion-pull_off-strong", "mocap-adhesion-cohesive-weak"])
 def test_a_pad_that_sticks_is_named_from_the_release(
         name: str, tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:

@@ -135,24 +135,27 @@ from pianobot.physics.model import KeystrokeModel
 from pianobot.physics.simulate import simulate_presses
 from pianobot.physics.trajectory import Press
 presses = [Press(0.0, 0.008, 0.05, 0.05, 1.0, 0.0)]
-for model in (KeystrokeModel.study(), KeystrokeModel(effects=Effects.all())):
+power = Effects.all().with_effect("finger_stiffening", form="power")
+for model in (KeystrokeModel.study(), KeystrokeModel(effects=Effects.all()), KeystrokeModel(effects=power)):
     for n in (1, K.BLOCK + 1):  # both block sizes
         simulate_presses(presses * n, -40.0, model, duration_s=0.02)
 print(json.dumps({f"{name}-{b}": [sum(f.stats.cache_hits.values()), sum(f.stats.cache_misses.values())]
-                  for name, kernels in (("full", K.integrate), ("linear", K.integrate_linear))
+                  for name, kernels in (("full", K.integrate), ("linear", K.integrate_linear),
+                                        ("power", K.integrate_power))
                   for b, f in kernels.items()}))
 """
 
 
 def test_every_kernel_comes_from_numbas_disk_cache() -> None:
-    """The four kernels (two block sizes × linear/full) share one factory; each must be cached.
+    """The six kernels (two block sizes × linear/full/full with a power-law finger) share one
+    factory; each must be cached.
 
     numba keys a closure's cache entry on its frozen values, so a fresh process (the second
-    run; the first fills the cache if this source changed) loads all four from disk instead of
+    run; the first fills the cache if this source changed) loads all six from disk instead of
     compiling them, which is what keeps `pianobot` start-up and every test worker fast.
     """
     for _ in range(2):
         done = subprocess.run([sys.executable, "-c", _CACHE_PROBE], capture_output=True, text=True,
                               check=True, timeout=600)
     stats = json.loads(done.stdout.strip().splitlines()[-1])
-    assert stats == {f"{kind}-{b}": [1, 0] for kind in ("full", "linear") for b in (K.SMALL_BLOCK, K.BLOCK)}
+    assert stats == {f"{kind}-{b}": [1, 0] for kind in ("full", "linear", "power") for b in (K.SMALL_BLOCK, K.BLOCK)}

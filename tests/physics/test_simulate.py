@@ -100,6 +100,22 @@ def test_contact_lets_the_key_lag_a_fast_retracting_finger() -> None:
     assert np.max(free.x2_m[0] - glued.x2_m[0]) > 5e-4  # the key is left behind
 
 
+def test_power_stiffening_is_the_cubic_at_exponent_two_and_sharper_above() -> None:
+    """k1·δ·(1 + (βδ)^q): q = 2 is the cubic form exactly; a larger q adds less below δ = 1/β
+    and more above it, so a press that compresses the finger past 1/β stops the key deeper."""
+    press = [Press(0.0, 0.03, 0.08, 0.08, 1.0, 0.2)]
+    model = STUDY.with_effect("contact")
+    cubic = simulate_presses(press, -60, model.with_effect("finger_stiffening", form="cubic", stiffening_per_m=250.0))
+    power = model.with_effect("finger_stiffening", form="power", stiffening_per_m=250.0)
+    same = simulate_presses(press, -60, power.with_effect("finger_stiffening", stiffening_exponent=2.0))
+    np.testing.assert_allclose(same.x2_m, cubic.x2_m, rtol=0, atol=1e-12)
+    sharp = simulate_presses(press, -60, power.with_effect("finger_stiffening", stiffening_exponent=4.0))
+    linear = simulate_presses(press, -60, model)
+    compression = linear.x1_m[0] - linear.x2_m[0]
+    assert compression.max() > 1.0 / 250.0  # the press reaches past 1/β
+    assert linear.x2_m.max() < cubic.x2_m.max() < sharp.x2_m.max()
+
+
 def test_friction_shortens_ringing() -> None:
     press = [Press(0.0, 0.02, 0.05, 0.2, 2.0, 0.2)]
     model = STUDY.with_effect("arm_acceleration")

@@ -4,9 +4,10 @@ A candidate is the base model plus one effect of `physics.effects` in one of its
 form the vocabulary has is a candidate of its own, so a family is tried in shapes that bracket
 what a real mechanism may be: an end stop as a linear spring-damper and as a Hunt–Crossley
 (force ∝ indentation^1.5) contact, friction as Coulomb and as Stribeck (breakaway above the
-sliding force), a stiffening finger as cubic, as exponential and as a power of the compression
-whose exponent is fitted. A stop of another power, a LuGre friction or a hysteretic finger sits
-between or near these, and the family is named by the form that explains it best.
+sliding force), a stiffening finger as exponential and as a power of the compression whose
+exponent is fitted (the cubic form is its exponent 2). A stop of another power, a LuGre friction
+or a hysteretic finger sits between or near these, and the family is named by the form that
+explains it best.
 
 What the data can judge decides the list:
 
@@ -20,11 +21,13 @@ What the data can judge decides the list:
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
+from pianobot.analysis.greybox.forward import largest_compression_m
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
 from pianobot.analysis.greybox.layout import Layout, Param, effect_params
 from pianobot.physics.effects import EFFECT_NAMES, EFFECTS
@@ -44,6 +47,17 @@ FAMILIES: dict[str, str] = {
     "stiffness_drift": "finger", "arm_lag": "arm", "arm_acceleration": "arm", "velocity_curve": "piano",
     "mocap_delay": "mocap",
 }
+
+
+#: A stiffening finger's scale β is kept to β·δ ≤ this at the largest compression δ the data show
+#: (5 mm assumed with MIDI only): there an exponential finger is e² ≈ 7 times its linear
+#: stiffness, a cubic one 13 times. Stiffer still would be an end stop, and a model that stiff
+#: needs an integration step too small to fit in reasonable time.
+STIFFENING_REACH = 2.0
+
+#: Forms that another form of the same effect holds as a special case are not tried on their own:
+#: the power form at exponent 2 is the cubic (its fits start there).
+SUBSUMED: frozenset[tuple[str, str]] = frozenset({("finger_stiffening", "cubic")})
 
 
 def family_of(effect: str | None) -> str | None:
@@ -81,18 +95,21 @@ def candidates(model: KeystrokeModel, batch: KeystrokeBatch) -> list[CandidateSp
             continue
         if effect == "adhesion" and "contact" not in model.effects:
             continue  # a pull-off force needs a contact that can open; contact comes first
-        for form in EFFECTS[effect].forms:
-            out.append(CandidateSpec(effect, form))
+        out += [CandidateSpec(effect, form) for form in EFFECTS[effect].forms if (effect, form) not in SUBSUMED]
     return out
 
 
 def candidate_params(spec: CandidateSpec, batch: KeystrokeBatch) -> list[Param]:
-    """The effect's free parameters; depths start inside the key travel the data show."""
+    """The effect's free parameters; depths start inside the key travel the data show, and a
+    stiffening finger's scale stays within `STIFFENING_REACH` of the largest compression."""
     start: dict[str, float] = {}
     travel = _travel_m(batch)
     if travel is not None:
         start = {"bed_depth_m": 0.85 * travel, "letoff_depth_m": 0.7 * travel}
-    return effect_params(spec.effect, spec.form, start)
+    params = effect_params(spec.effect, spec.form, start)
+    reach = STIFFENING_REACH / largest_compression_m(batch)
+    return [dataclasses.replace(p, upper=min(p.upper, reach), start=min(p.start, reach))
+            if p.name == "finger_stiffening.stiffening_per_m" else p for p in params]
 
 
 def _travel_m(batch: KeystrokeBatch) -> float | None:

@@ -41,7 +41,13 @@ import numpy as np
 import numpy.typing as npt
 
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
-from pianobot.analysis.greybox.prediction import GROUP, SIM_STEP_S, Prediction, integration_step_s
+from pianobot.analysis.greybox.prediction import (
+    GROUP,
+    SIM_STEP_S,
+    TYPICAL_COMPRESSION_M,
+    Prediction,
+    integration_step_s,
+)
 from pianobot.analysis.greybox.stages import KEY_MOTION_THRESHOLD_M, fill_gaps
 from pianobot.physics.effects import Effects
 from pianobot.physics.model import KeystrokeModel
@@ -82,6 +88,7 @@ class MeasuredArm:
     last: npt.NDArray[np.intp]  # (n,) each row's last modelled sample (measured, before lift-off)
     rows: npt.NDArray[np.intp]  # (n_caller,) the distinct keystroke behind each caller's row
     observed: KeystrokeBatch  # the caller's batch (rows may repeat), which predictions are for
+    compression_m: float = TYPICAL_COMPRESSION_M  # the finger's largest measured compression
 
     @classmethod
     def of(cls, batch: KeystrokeBatch, window: Window = "press") -> MeasuredArm:
@@ -119,7 +126,8 @@ class MeasuredArm:
         last = np.where(measured.any(axis=1), batch.t_s.size - 1 - np.argmax(measured[:, ::-1], axis=1), 0)
         last = np.minimum(last, model_window(batch) if window == "press" else release_window(batch))
         return cls(batch, t_sim, int(lead), lo, frac, _resample(batch.input_x0_m, lo, frac),
-                   np.asarray(last, dtype=np.intp), np.asarray(rows, dtype=np.intp).ravel(), observed)
+                   np.asarray(last, dtype=np.intp), np.asarray(rows, dtype=np.intp).ravel(), observed,
+                   largest_compression_m(batch))
 
     def arm_m(self, input_x0_m: FloatArray | None = None) -> FloatArray:
         """The (shifted) arm input on the simulation grid; `input_x0_m` (the caller's rows)
@@ -140,7 +148,7 @@ class MeasuredArm:
         if isinstance(model, MSDParams):
             model = KeystrokeModel(msd=model, effects=Effects.none())
         batch = self.batch
-        step_s = integration_step_s(model, batch.vacuum_kpa, SIM_STEP_S)
+        step_s = integration_step_s(model, batch.vacuum_kpa, SIM_STEP_S, self.compression_m)
         arm = self.arm_m(input_x0_m)
         dt = batch.dt_s
         outs = [np.full(batch.x1_m.shape, np.nan) for _ in range(4 if states else 2)]
@@ -165,6 +173,21 @@ class MeasuredArm:
         """The model's trajectories (and key states) at the batch's frames."""
         x1, x2, v2, force = self.simulate(model, states=True)
         return Prediction.trajectories(x1, x2, v2, force)
+
+
+#: The least compression a stiffening finger is judged at (a finger barely pressed).
+MIN_COMPRESSION_M = 1e-3
+
+
+def largest_compression_m(batch: KeystrokeBatch) -> float:
+    """The finger's largest measured compression (fingertip below the key surface) before
+    lift-off, at least `MIN_COMPRESSION_M`; `TYPICAL_COMPRESSION_M` without a fingertip trace."""
+    if not batch.has_motion or batch.n == 0:
+        return TYPICAL_COMPRESSION_M
+    inside = np.arange(batch.t_s.size)[None, :] <= model_window(batch)[:, None]
+    pen = batch.x1_m - batch.x2_m - batch.distance_m[:, None]
+    pen = pen[inside & np.isfinite(pen)]
+    return max(float(pen.max()), MIN_COMPRESSION_M) if pen.size else TYPICAL_COMPRESSION_M
 
 
 def model_window(batch: KeystrokeBatch) -> npt.NDArray[np.intp]:

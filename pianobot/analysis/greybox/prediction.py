@@ -18,8 +18,9 @@ from pianobot.physics.model import KeystrokeModel
 
 FloatArray = npt.NDArray[np.float64]
 
-#: Typical finger compression at which a stiffening finger's stiffness is judged for the step.
-_TYPICAL_COMPRESSION_M = 5e-3
+#: Finger compression at which a stiffening finger's stiffness is judged for the step, when the
+#: data do not show it (MIDI only).
+TYPICAL_COMPRESSION_M = 5e-3
 
 
 def _nan(n: int) -> FloatArray:
@@ -80,14 +81,17 @@ def _largest_eigenvalue(a11: float, a12: float, a21: float, a22: float) -> float
     return half + math.sqrt(max(disc, 0.0))
 
 
-def integration_step_s(model: KeystrokeModel, vacuum_kpa: FloatArray, largest_s: float) -> float:
+def integration_step_s(model: KeystrokeModel, vacuum_kpa: FloatArray, largest_s: float,
+                       compression_m: float = TYPICAL_COMPRESSION_M) -> float:
     """The integration step for the model at these vacuum levels: `largest_s` or less, so that
     the explicit scheme stays stable and accurate (`STEP_PER_PERIOD`, `STEP_PER_DAMPING_TIME`).
+    A stiffening finger is judged at `compression_m`, the largest compression the keystrokes
+    reach (a sharp power of the compression is stiff only where it is reached).
 
     The time scales are those of the 2-DoF system with every spring and damper it may engage at
     once (the arm coupling k0, c0 on the fingertip, the finger k1, c1 between fingertip and key,
     the key's k2, c2 and the stiffest effect: an end stop, a let-off bump's slope, a stiffening
-    finger at a typical compression), from the exact eigenvalues of M⁻¹K and M⁻¹C. A fit may try
+    finger at `compression_m`), from the exact eigenvalues of M⁻¹K and M⁻¹C. A fit may try
     stiff, heavily damped or strongly stiffening parameters; a bound on the diagonal alone would
     either miss the coupled mode or (as before) take a step several times smaller than needed.
     """
@@ -99,7 +103,7 @@ def integration_step_s(model: KeystrokeModel, vacuum_kpa: FloatArray, largest_s:
     beta = fx.value("finger_stiffening", "stiffening_per_m", 0.0)
     grow = 1.0
     if beta > 0:
-        bd = beta * _TYPICAL_COMPRESSION_M
+        bd = beta * compression_m
         form = fx.form("finger_stiffening")
         q = fx.value("finger_stiffening", "stiffening_exponent", 2.0) if form == "power" else 2.0
         # The spring's slope at that compression, over k1.
