@@ -50,10 +50,11 @@ FAMILIES: dict[str, str] = {
 
 
 #: A stiffening finger's scale β is kept to β·δ ≤ this at the largest compression δ the data show
-#: (5 mm assumed with MIDI only): there an exponential finger is e² ≈ 7 times its linear
-#: stiffness, a cubic one 13 times. Stiffer still would be an end stop, and a model that stiff
-#: needs an integration step too small to fit in reasonable time.
-STIFFENING_REACH = 2.0
+#: (5 mm assumed with MIDI only, where this keeps the former bound of 300 /m): there an
+#: exponential finger is e^1.5 ≈ 4.5 times its linear stiffness, a cubic one 7.75 times. Stiffer
+#: still would be an end stop, and a model that stiff needs an integration step too small to fit
+#: in reasonable time. (At 2, a MIDI log with a velocity curve also accepted an exponential finger.)
+STIFFENING_REACH = 1.5
 
 #: Forms that another form of the same effect holds as a special case are not tried on their own:
 #: the power form at exponent 2 is the cubic (its fits start there).
