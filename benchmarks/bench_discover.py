@@ -76,7 +76,9 @@ def score(result: DiscoveryResult, expected_family: str | None, cpu_s: float, n:
     # The first accepted effect that is not one every file has is the answer.
     families = [v.family for v in result.accepted if v.effect not in present]
     measured = [f.effect for f in result.findings if f.accepted]
-    measured_families = [family_of(e) for e in measured]
+    # An effect every file has says nothing about the hidden one, even in the hidden one's family
+    # (the truth lab's arm always accelerates at a finite rate: that is no arm lag).
+    measured_families = [family_of(e) for e in measured if e not in present]
     extra_measured = [e for e in measured if e not in present and e not in expected_effects]
     first = next((v for v in result.accepted if v.effect not in present), None)
     measured_case = expected_family in MEASURED_FAMILIES or (expected_family == "piano" and result.mode == "trajectories")
@@ -137,45 +139,51 @@ def own_suite(only: list[str] | None, log: Callable[[str], None]) -> list[dict[s
     return rows
 
 
-def truth_batch(made: Any, data_dir: Path) -> tuple[KeystrokeBatch, str]:
+def truth_batch(made: Any, data_dir: Path, presses: bool = True) -> tuple[KeystrokeBatch, str]:
     """A truth scenario's files imported the way a lab imports them: `pianobot import mocap`
-    (with the vacuum the take does not record) plus the script's schedule, or `pianobot import
+    (with the vacuum the take does not record) plus the script's schedule (unless `presses` is
+    False: the take alone, as a lab without its script's schedule has it), or `pianobot import
     keystroke-log`; with the run id."""
     from pianobot.analysis.greybox.load import load_keystrokes, read_schedule
     from pianobot.io.importers import import_keystroke_log, import_mocap
 
     if "take" in made.files:
         run_id = import_mocap(made.files["take"], data_dir, vacuum_kpa=float(made.truth["vacuum_kpa"])).run_id
-        schedule = read_schedule(made.files["presses"]) if "presses" in made.files else None
+        schedule = read_schedule(made.files["presses"]) if presses and "presses" in made.files else None
         return load_keystrokes([run_id], data_dir, schedule=schedule).batch, run_id
     run_id = import_keystroke_log(made.files["log"], data_dir).run_id
     return load_keystrokes([run_id], data_dir).batch, run_id
 
 
 def truth_suite(only: list[str] | None, log: Callable[[str], None], subset: str = "full",
-                sink: Callable[[dict[str, Any]], None] | None = None) -> list[dict[str, Any]]:
+                sink: Callable[[dict[str, Any]], None] | None = None, takes_only: bool = False) -> list[dict[str, Any]]:
     """The independent suite (tests/truth): each scenario written to disk, imported, discovered;
-    on clean takes also identified as `pianobot identify` does."""
+    on clean takes also identified as `pianobot identify` does. `takes_only`: the mocap
+    scenarios from their Motive take alone, without the commanded presses."""
     from tests.truth import full_suite, materialise, small_suite
 
     scenarios = full_suite() if subset == "full" else small_suite()
+    if takes_only:
+        scenarios = [sc for sc in scenarios if sc.kind == "mocap"]
     if only:
         scenarios = [sc for sc in scenarios if any(o in sc.name for o in only)]
     rows = []
     with tempfile.TemporaryDirectory() as scratch:
         for scenario in scenarios:
             made = materialise(scenario, Path(scratch) / "files")
-            batch, run_id = truth_batch(made, Path(scratch) / "data")
+            batch, run_id = truth_batch(made, Path(scratch) / "data", presses=not takes_only)
             result, cpu = run_one(batch)
             truth = made.truth
             family = None if truth.get("family") in (None, "none") else str(truth["family"])
             row = {"scenario": scenario.name, "kind": truth.get("kind"), "strength": truth["strength"],
                    "form_equals_candidate": truth.get("form_equals_candidate"),
                    "truth_effect": truth.get("effect"), "truth_form": truth.get("form"),
+                   "presses": not takes_only and "presses" in made.files,
                    **score(result, family, cpu, batch.n, tuple(truth.get("accepted_effects") or ()),
                            tuple(truth.get("always_present") or ()))}
             if family is None and result.mode == "trajectories":
-                row.update(identify_holdout(run_id, Path(scratch) / "data", made.files.get("presses")))
+                row.update(identify_holdout(run_id, Path(scratch) / "data",
+                                            None if takes_only else made.files.get("presses")))
                 row["base_vs_identify"] = row["base_holdout_rms_x2_mm"] / row["identify_holdout_rms_x2_mm"]
             rows.append(row)
             if sink is not None:
@@ -390,6 +398,8 @@ def main() -> None:
     parser.add_argument("--suite", nargs="*", default=["truth", "own", "real"], choices=["truth", "own", "real"])
     parser.add_argument("--only", nargs="*", default=None, help="scenario names (or parts of names) to run")
     parser.add_argument("--truth-subset", default="full", choices=["full", "small"])
+    parser.add_argument("--takes-only", action="store_true",
+                        help="the truth suite's mocap takes alone, without the commanded presses file")
     parser.add_argument("--out", type=Path, default=RESULTS)
     parser.add_argument("--collect", nargs="*", type=Path, default=None,
                         help="assemble finished runs instead of running: truth rows (*.rows.jsonl of runs split "
@@ -422,7 +432,7 @@ def main() -> None:
         with partial.open("a", encoding="utf-8") as f:
             f.write(json.dumps(_finite(row), default=str) + "\n")
 
-    truth = truth_suite(args.only, log, args.truth_subset, sink) if "truth" in args.suite else []
+    truth = truth_suite(args.only, log, args.truth_subset, sink, args.takes_only) if "truth" in args.suite else []
     own = own_suite(args.only, log) if "own" in args.suite else []
     real = real_suite(log) if "real" in args.suite and not args.only else []
     payload = {"benchmark": "discover", "summary": summary(own, truth), "truth": truth, "own_world": own, "real": real}

@@ -9,7 +9,9 @@ instead the arm trace itself is compared with the commanded press:
 - `arm_lag`: when the commanded timing is known (an arm log on the run clock, t = 0 at the
   commanded motion start, or a lab script's schedule matched to the keystrokes), how late the
   measured arm follows it; an imported Motive take alone defines t = 0 from the arm marker
-  itself, so there a lag cannot be seen.
+  itself, so there a lag cannot be seen. A servo that feeds the commanded speed forward tracks
+  a ramp without lag and misses the command only where its acceleration changes: when the start
+  shows no lag, the trace is fitted as the command through a second-order servo (`_servo`).
 - `mocap_delay`: the motion-capture clock offset against the arm log, estimated when the batch
   was built from the arm marker seen by both (`trajectories._clock_offset_s`); with the arm
   timed only by its marker and the commands known, a clock *rate* error: the marker's lag
@@ -30,6 +32,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 from scipy.optimize import least_squares
+from scipy.signal import bilinear, lfilter
 
 from pianobot.analysis.greybox.keystrokes import COMMAND_FIELDS, KeystrokeBatch
 from pianobot.analysis.greybox.noise import (
@@ -117,6 +120,12 @@ def _fit_move(t: FloatArray, x: FloatArray, a: float, t0_free: bool) -> tuple[Fl
     return np.asarray(res.fun, dtype=np.float64), float(res.x[2]) if t0_free else 0.0
 
 
+def _ic(rss: float, n: int, n_eff: float, noise: float, k: int) -> float:
+    """Information criterion of a fit with residual sum of squares `rss` over `n` samples
+    (`n_eff` independent ones: the residual is autocorrelated), never below the noise."""
+    return n_eff * math.log(max(rss / n, noise**2, 1e-300)) + k * math.log(n_eff)
+
+
 def _refine(ics: list[float], k: int) -> tuple[float, tuple[float, float]]:
     """Best acceleration and 95 % interval from the scanned criterion: a parabola in log a
     through the best grid point and its neighbours (−2 log L: the interval is where it rises by
@@ -157,7 +166,7 @@ def arm_checks(batch: KeystrokeBatch) -> list[MeasuredCheck]:
     n_eff = n / tau
 
     def ic(value: float, k: int) -> float:
-        return n_eff * math.log(max(value / n, noise**2, 1e-300)) + k * math.log(n_eff)
+        return _ic(value, n, n_eff, noise, k)
 
     a_best, ci = _refine([ic(r, 1) for r in rss[1:]], best - 1)
     delta = ic(rss[0], 0) - min(ic(r, 1) for r in rss[1:])
@@ -191,9 +200,107 @@ def arm_checks(batch: KeystrokeBatch) -> list[MeasuredCheck]:
                      "the marker the two look the same; an arm log tells them apart)")
         elif not lagging:
             text += " (no lag worth modelling)"
+        servo = None if lagging else _servo(moves, command[rows], a_cmd, noise)
+        if servo is not None and servo.delta_ic > MARGIN:
+            lagging = True
+            text = (f"the measured arm follows its command through a servo of {servo.freq_hz:.3g} Hz, damping ratio "
+                    f"{servo.zeta:.2g} (ΔIC {servo.delta_ic:.0f} against following it exactly): it starts "
+                    f"{_ms(lag)} ms after the commanded start and misses the command by up to "
+                    f"{1e3 * servo.peak_error_m:.2f} mm where the command changes its acceleration")
         out.append(MeasuredCheck("arm_lag", lag, (lag - 1.96 * se, lag + 1.96 * se), z * z, lagging, text,
                                  {"arm_lag_s": lag}))
     return out
+
+
+@dataclass(frozen=True)
+class _Servo:
+    freq_hz: float
+    zeta: float
+    delta_ic: float  # evidence for the servo against exact tracking
+    peak_error_m: float  # the largest gap between the command and the servo's response
+
+
+#: The finer time step the command is filtered on (the arm trace is interpolated from it).
+_SERVO_DT_S = 1e-3
+#: Natural frequencies of the coarse grid the servo fit starts from (its bounds are the ends), Hz.
+_SERVO_HZ = (0.5, 2.0, 5.0, 12.0, 30.0, 60.0)
+#: An arm that follows its command this close (mean square, in units of the noise's) has no servo
+#: worth fitting.
+_SERVO_SKIP = 2.0
+
+
+def _servo_response(tc: FloatArray, xc: FloatArray, wn: float, zeta: float, feed: float) -> FloatArray:
+    """The command `xc` (on the uniform grid `tc`, from rest) through the servo
+    ẍ = ωn²·(xc − x) + 2ζωn·(κ·ẋc − ẋ): κ = 1 feeds the commanded speed forward (a ramp is
+    tracked without lag), κ = 0 is a plain second-order lag. Tustin-discretised."""
+    num, den = bilinear([2.0 * zeta * wn * feed, wn * wn], [1.0, 2.0 * zeta * wn, wn * wn], fs=1.0 / _SERVO_DT_S)
+    return np.asarray(lfilter(num, den, xc), dtype=np.float64)
+
+
+def _servo(moves: list[tuple[FloatArray, FloatArray]], starts: FloatArray, a: float, noise: float) -> _Servo | None:
+    """Does the measured arm follow its command (each move a trapezoid at the commanded
+    acceleration from the commanded start, its travel and speed free) exactly, or through a
+    second-order servo (natural frequency, damping ratio and speed feed-forward shared by all
+    moves)? None when the moves are too few or the fit fails."""
+    if len(moves) < 3 or not (math.isfinite(a) and a > 0):
+        return None
+    grids = []
+    for (t, x), c in zip(moves, starts, strict=True):
+        tc = np.arange(0.0, float(t[-1] - c) + _SERVO_DT_S, _SERVO_DT_S)
+        grids.append((tc, t - c, x))
+
+    # Each move's residual is taken less its straight line in time: the whole capture volume
+    # drifts slowly (tens of µm over a long move), a servo shows at the command's corners.
+    trends = [np.column_stack([np.ones_like(tt), tt]) for _, tt, _ in grids]
+    trends_pinv = [np.linalg.pinv(b) for b in trends]
+
+    def residual(p: FloatArray, filtered: bool) -> FloatArray:
+        out = []
+        for k, (tc, tt, x) in enumerate(grids):
+            xc = _move_m(tc, p[2 * k], p[2 * k + 1], a)
+            if filtered:
+                xc = _servo_response(tc, xc, 2.0 * math.pi * math.exp(p[-3]), math.exp(p[-2]), p[-1])
+            r = np.interp(tt, tc, xc, left=0.0) - x
+            out.append(r - trends[k] @ (trends_pinv[k] @ r))  # the capture volume's slow drift
+        return np.concatenate(out)
+
+    d0 = np.array([float(np.max(x)) for _, _, x in grids])
+    p0 = np.column_stack([d0, np.full(d0.size, 0.05)]).ravel()
+    lo = np.column_stack([0.5 * d0, np.full(d0.size, 1e-3)]).ravel()
+    hi = np.column_stack([1.5 * d0, np.full(d0.size, 5.0)]).ravel()
+    for k, (_, tt, x) in enumerate(grids):  # the speed from the move's middle
+        mid = np.flatnonzero((x > 0.2 * d0[k]) & (x < 0.8 * d0[k]))
+        if mid.size > 1 and tt[mid[-1]] > tt[mid[0]]:
+            p0[2 * k + 1] = float(np.clip((x[mid[-1]] - x[mid[0]]) / (tt[mid[-1]] - tt[mid[0]]), 2e-3, 4.0))
+    n_moves = d0.size
+    sparsity = np.zeros((sum(g[1].size for g in grids), 2 * n_moves + 3), dtype=np.int8)
+    row = 0
+    for k, (_, tt, _) in enumerate(grids):
+        sparsity[row : row + tt.size, 2 * k : 2 * k + 2] = 1
+        row += tt.size
+    sparsity[:, -3:] = 1
+    try:
+        exact = least_squares(lambda p: residual(p, False), p0, bounds=(lo, hi), x_scale="jac",
+                              jac_sparsity=sparsity[:, :-3], max_nfev=100)
+        if 2.0 * exact.cost / exact.fun.size < _SERVO_SKIP * noise**2:
+            return None  # the command is followed to the noise: nothing for a servo to explain
+        # One refinement from the best of a coarse grid, the moves held at their exact fit.
+        q_lo = np.concatenate([lo, [math.log(_SERVO_HZ[0]), math.log(0.1), 0.0]])
+        q_hi = np.concatenate([hi, [math.log(_SERVO_HZ[-1]), math.log(3.0), 1.0]])
+        starts_grid = [np.concatenate([exact.x, [math.log(f), math.log(z), k]])
+                       for f in _SERVO_HZ for z in (0.3, 0.7, 1.5) for k in (0.0, 1.0)]
+        q0 = min(starts_grid, key=lambda q: float(np.sum(residual(q, True) ** 2)))
+        best = least_squares(lambda q: residual(q, True), np.clip(q0, q_lo + 1e-9, q_hi - 1e-9),
+                             bounds=(q_lo, q_hi), x_scale="jac", jac_sparsity=sparsity, max_nfev=60)
+    except (ValueError, np.linalg.LinAlgError):
+        return None
+    n = int(exact.fun.size)
+    n_eff = float(n / autocorrelation_time(exact.fun[None, :]))
+    k_moves = 2 * n_moves
+    delta = (_ic(2.0 * float(exact.cost), n, n_eff, noise, k_moves)
+             - _ic(2.0 * float(best.cost), n, n_eff, noise, k_moves + 3))
+    gap = residual(best.x, True) - residual(best.x, False)
+    return _Servo(math.exp(best.x[-3]), math.exp(best.x[-2]), delta, float(np.max(np.abs(gap))))
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,9 @@
 - max key travel; contact time (fingertip on the key); time from motion start to the trigger
   (the lead `play` must schedule ahead of a note);
 - how far the fingertip travelled before the key moved (`approach_distance_m`: the hover
-  distance of a take whose commanded presses were not recorded).
+  distance of a take whose commanded presses were not recorded), and how far the arm travelled
+  before the finger was loaded at all (`unloaded_travel_m`: a finger resting on a key that is
+  held by friction or a preload also travels before the key moves, but compressed).
 """
 
 from __future__ import annotations
@@ -162,10 +164,55 @@ def approach_distance_m(batch: KeystrokeBatch) -> FloatArray:
         t = batch.row_times_s(i)
         x2 = fill_gaps(t, batch.x2_m[i])
         x1 = fill_gaps(t, batch.x1_m[i])
-        above = np.flatnonzero(x2 > KEY_ONSET_M)
-        if above.size == 0 or above[0] == 0 or not np.isfinite(x1).any():
+        j = _onset_index(x2)
+        if j is None or not np.isfinite(x1).any():
             continue
-        j = int(above[0])
         f = (KEY_ONSET_M - x2[j - 1]) / (x2[j] - x2[j - 1])
         out[i] = float(x1[j - 1] + f * (x1[j] - x1[j - 1]))
+    return out
+
+
+def _onset_index(x2: FloatArray) -> int | None:
+    """First sample where the key is past `KEY_ONSET_M` (None if never, or from the start)."""
+    above = np.flatnonzero(x2 > KEY_ONSET_M)
+    return None if above.size == 0 or above[0] == 0 else int(above[0])
+
+
+#: Hinge positions tried per keystroke by `unloaded_travel_m`.
+_HINGES = 41
+
+
+def unloaded_travel_m(batch: KeystrokeBatch) -> FloatArray:
+    """Per keystroke, how far the arm travelled before the finger started to be compressed,
+    up to where the key started to move (NaN without the arm, fingertip and key tracked).
+
+    A finger in the air moves with the arm; once it touches the key, the arm–fingertip distance
+    grows with the arm's travel (the finger's body spring is loaded). The distance is fitted as a
+    hinge over the arm's travel: flat up to the contact, then a straight line. A finger resting
+    on a key that friction or a preload holds still is loaded from the first millimetre (a hinge
+    near 0), although its fingertip travels millimetres before the key moves. The finger's sway
+    after the arm's acceleration blurs the hinge of a hovering finger (it reads 1-3 mm short
+    over a 5 mm hover): this separates hovering from resting, it does not measure the hover.
+    """
+    out = np.full(batch.n, np.nan)
+    for i in range(batch.n):
+        t = batch.row_times_s(i)
+        x0, x1, x2 = (fill_gaps(t, x[i]) for x in (batch.x0_m, batch.x1_m, batch.x2_m))
+        j = _onset_index(x2)
+        if j is None:
+            continue
+        u = x0[:j] - x0[0]
+        d = (x0[:j] - x1[:j]) - (x0[0] - x1[0])  # how much the arm-fingertip distance grew
+        ok = np.isfinite(u) & np.isfinite(d)
+        u, d = u[ok], d[ok]
+        if u.size < 4 or not np.max(u) > 0:
+            continue
+        best, hinge = np.inf, 0.0
+        for h in np.linspace(0.0, float(np.max(u)), _HINGES):
+            x = np.column_stack([np.ones_like(u), np.maximum(0.0, u - h)])
+            coef, *_ = np.linalg.lstsq(x, d, rcond=None)
+            r = d - x @ coef
+            if float(r @ r) < best:
+                best, hinge = float(r @ r), float(h)
+        out[i] = hinge
     return out

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from pianobot.analysis.greybox.features import approach_distance_m
+from pianobot.analysis.greybox.features import approach_distance_m, unloaded_travel_m
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
 from pianobot.analysis.greybox.trajectories import OUTPUT_SOURCES, keystroke_batch
 from pianobot.errors import InputError
@@ -178,8 +178,16 @@ def load_keystrokes(run_ids: Sequence[str], data_dir: Path, *, x0_source: str = 
     return Loaded(batch, all_trials.reset_index(drop=True), hashes, tuple(sorted(notes)))
 
 
-#: A take whose fingertips travel this far (median) before the key moves started above the key.
+#: A take whose fingertips travel this far (median) before the key moves started above the key,
 HOVER_M = 1e-3
+#: ... if the arm also moved them this far (median) before the finger was loaded at all.
+UNLOADED_M = 5e-4
+
+
+def _median(values: np.ndarray) -> float:
+    """Median of the finite values (0 when there are none)."""
+    finite = values[np.isfinite(values)]
+    return float(np.median(finite)) if finite.size else 0.0
 
 
 def _measured_distance(batch: KeystrokeBatch, rows: pd.DataFrame, notes: set[str]) -> KeystrokeBatch:
@@ -189,7 +197,11 @@ def _measured_distance(batch: KeystrokeBatch, rows: pd.DataFrame, notes: set[str
     recorded = _column(rows, "distance_m")
     travel = approach_distance_m(batch) if batch.has_motion else np.full(batch.n, np.nan)
     unknown = ~np.isfinite(recorded)
-    typical = float(np.nanmedian(travel[unknown])) if np.isfinite(travel[unknown]).any() else 0.0
+    typical = _median(travel[unknown])
+    # A finger resting on a key held by friction or a preload travels before the key moves too,
+    # but compressed from the start: it hovered only if the arm first moved it unloaded.
+    if typical > HOVER_M and batch.arm_measured:
+        typical = typical if _median(unloaded_travel_m(batch)[unknown]) > UNLOADED_M else 0.0
     if not typical > HOVER_M:
         notes.add("distance 0 assumed where not recorded (the finger starts on the key)")
         return batch
