@@ -91,7 +91,8 @@ def register(app: typer.Typer) -> None:
             int, typer.Option("--seed", help="Seed of the held-out split.")
         ] = 0,
         vacuum_kpa: Annotated[
-            float | None, typer.Option("--vacuum-kpa", help="Vacuum of runs that do not record it.")
+            float | None, typer.Option("--vacuum-kpa", help="Vacuum of runs that do not record it (else -40 kPa is assumed, "
+                                                   "and said: only where the fit starts depends on it).")
         ] = None,
         presses: PressesOption = None,
         workers: Annotated[int | None, typer.Option(

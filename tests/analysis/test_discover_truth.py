@@ -22,6 +22,7 @@ from pianobot.analysis.discover.measured import arm_checks
 from pianobot.analysis.greybox.load import load_keystrokes, read_schedule
 from pianobot.analysis.greybox.split import split_holdout
 from pianobot.analysis.identify.fit import identify_trajectories, rms_x2_m
+from pianobot.errors import InputError
 from pianobot.io.importers import import_keystroke_log, import_mocap
 from pianobot.physics.msd import MSDParams
 from tests.truth import materialise, scenario
@@ -163,12 +164,18 @@ def test_a_finger_resting_on_a_key_held_by_friction_is_not_read_as_hovering(
     """A Motive take whose finger rests on a key that Stribeck friction holds still, without the
     lab's presses: the fingertip travels about 4 mm before the key moves, as a 4 mm hover would,
     but compressed from the start (the arm-fingertip distance grows at once). Read as a hover,
-    the base model pressed millimetres late and the friction went unnamed."""
-    run_id, data, truth, files = _imported("mocap-key_friction-stribeck-strong", tmp_path)
-    loaded = load_keystrokes([run_id], data)
+    the base model pressed millimetres late and the friction went unnamed. The take is imported
+    bare, as Motive wrote it: the vacuum it does not record is assumed and said so."""
+    made = materialise(scenario("mocap-key_friction-stribeck-strong"), tmp_path / "files")
+    data = tmp_path / "data"
+    run_id, truth = import_mocap(made.files["take"], data).run_id, made.truth
+    with pytest.raises(InputError, match="no vacuum"):
+        load_keystrokes([run_id], data)  # identify's loader states the level or refuses
+    loaded = load_keystrokes([run_id], data, assumed_vacuum_kpa=-40.0)
     assert any("distance 0 assumed" in note for note in loaded.notes), loaded.notes
     assert np.all(loaded.batch.distance_m == 0.0)
     payload = _discover([run_id, "--data", str(data)], (capsys, monkeypatch))
+    assert any("vacuum not recorded" in note for note in payload["notes"]), payload["notes"]
     assert [family_of(e) for e in payload["accepted_effects"] if e not in truth["always_present"]][:1] == \
         [truth["family"]], payload["verdict"]
 

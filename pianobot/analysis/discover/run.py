@@ -19,6 +19,9 @@ MIN_KEYSTROKES = 6
 #: Serial CPU per keystroke of a discovery (measured in benchmarks/bench_discover.py: 4-60 s per
 #: 24-keystroke take, about 45 s per 135-keystroke log): whether a local cluster pays for itself.
 WORK_PER_KEYSTROKE_S = 0.5
+#: The vacuum assumed for a run that records none (a Motive take): the middle of the study's
+#: 0 to -80 kPa. The base fit finds the finger's own stiffness; the level only sets where it starts.
+ASSUMED_VACUUM_KPA = -40.0
 
 
 def resolve_model(spec: str) -> KeystrokeModel:
@@ -47,7 +50,7 @@ def discover_runs(run_ids: Sequence[str], data_dir: Path, model: str = "study", 
         InputError: unknown runs, runs without mocap or MIDI, too few keystrokes, a bad model file.
     """
     start = resolve_model(model)
-    loaded = load_keystrokes(run_ids, data_dir, vacuum_kpa=vacuum_kpa,
+    loaded = load_keystrokes(run_ids, data_dir, vacuum_kpa=vacuum_kpa, assumed_vacuum_kpa=ASSUMED_VACUUM_KPA,
                              schedule=None if schedule is None else read_schedule(schedule))
     batch = loaded.batch
     if batch.n < MIN_KEYSTROKES:

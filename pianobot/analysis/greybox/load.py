@@ -111,12 +111,15 @@ def _midi(rows: pd.DataFrame, recorded: bool) -> dict[str, np.ndarray]:
 
 def load_keystrokes(run_ids: Sequence[str], data_dir: Path, *, x0_source: str = "auto",
                     vacuum_kpa: float | None = None, need_motion: bool = False,
-                    schedule: pd.DataFrame | None = None) -> Loaded:
+                    schedule: pd.DataFrame | None = None, assumed_vacuum_kpa: float | None = None) -> Loaded:
     """Load runs as one batch (see the module docstring).
 
     Args:
         x0_source: the arm trace that drives the model: "arm", "mocap", "sim-truth" or "auto".
         vacuum_kpa: the vacuum of runs that do not record one (an imported Motive take).
+        assumed_vacuum_kpa: without `vacuum_kpa`, the vacuum assumed (and noted) for a run that
+            records none, instead of refusing it: for callers whose result does not hang on the
+            level (discovery fits the finger's stiffness; it starts from the level's value).
         need_motion: raise when the runs hold no key trajectories (trajectory identification).
         schedule: the commanded presses (`read_schedule`) of runs that do not record them (an
             imported Motive take): matched to keystrokes by motion start.
@@ -128,13 +131,18 @@ def load_keystrokes(run_ids: Sequence[str], data_dir: Path, *, x0_source: str = 
     if not run_ids:
         raise InputError("give at least one run id", "RUN_ID")
     samples, trials, hashes, midi_recorded = [], [], {}, False
+    assumed: list[str] = []
     for run_id in run_ids:
         run = load_run(run_id, data_dir)
         t, s = run.trials, run.samples
         if t.empty:
             raise InputError("the run has no trials", run.run_id)
-        if vacuum_kpa is not None:
-            t = t.assign(vacuum_kpa=vacuum_kpa if "vacuum_kpa" not in t else t["vacuum_kpa"].fillna(vacuum_kpa))
+        fill = vacuum_kpa
+        if fill is None and ("vacuum_kpa" not in t or t["vacuum_kpa"].isna().all()) and assumed_vacuum_kpa is not None:
+            fill = assumed_vacuum_kpa
+            assumed.append(run.run_id)
+        if fill is not None:
+            t = t.assign(vacuum_kpa=fill if "vacuum_kpa" not in t else t["vacuum_kpa"].fillna(fill))
         if "vacuum_kpa" not in t or t["vacuum_kpa"].isna().all():
             raise InputError("the run records no vacuum level; give --vacuum-kpa", run.run_id)
         midi_recorded |= bool(not run.midi.empty or ("on_velocity" in t and t["on_velocity"].notna().any()))
@@ -166,6 +174,9 @@ def load_keystrokes(run_ids: Sequence[str], data_dir: Path, *, x0_source: str = 
                              "the runs have neither key trajectories nor MIDI outcomes", ",".join(run_ids))
     rows = all_trials.set_index("trial_id").loc[list(batch.trial_id)]
     notes: set[str] = set()
+    if assumed:
+        notes.add(f"vacuum not recorded ({', '.join(assumed)}): {assumed_vacuum_kpa:g} kPa assumed; only the finger "
+                  "stiffness's starting value depends on it (the fit finds the take's own): give --vacuum-kpa to state it")
     if "distance_m" not in rows or rows["distance_m"].isna().any():
         batch = _measured_distance(batch, rows, notes)
     columns: dict[str, Any] = {**_commands(rows, batch.distance_m, notes), **_midi(rows, midi_recorded)}
