@@ -37,6 +37,7 @@ import own_world as ow  # noqa: E402
 from pianobot.analysis.discover.candidates import family_of  # noqa: E402
 from pianobot.analysis.discover.loop import discover  # noqa: E402
 from pianobot.analysis.discover.result import DiscoveryResult  # noqa: E402
+from pianobot.analysis.discover.run import ASSUMED_VACUUM_KPA  # noqa: E402
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch  # noqa: E402
 
 RESULTS = ROOT / "benchmarks" / "results" / "discover.json"
@@ -111,7 +112,8 @@ def identify_holdout(run_id: str, data_dir: Path, presses: Path | None) -> dict[
     from pianobot.physics.msd import MSDParams
 
     schedule = None if presses is None else read_schedule(presses)
-    batch = load_keystrokes([run_id], data_dir, need_motion=True, schedule=schedule).batch
+    batch = load_keystrokes([run_id], data_dir, need_motion=True, schedule=schedule,
+                            assumed_vacuum_kpa=ASSUMED_VACUUM_KPA).batch  # a bare take: as discovery loads it
     train, test = split_holdout(batch)
     start = time.process_time()
     fit = identify_trajectories(train, prior=MSDParams(), coupling="auto")
@@ -142,14 +144,17 @@ def own_suite(only: list[str] | None, log: Callable[[str], None]) -> list[dict[s
 def truth_batch(made: Any, data_dir: Path, presses: bool = True) -> tuple[KeystrokeBatch, str]:
     """A truth scenario's files imported the way a lab imports them: `pianobot import mocap`
     (with the vacuum the take does not record) plus the script's schedule (unless `presses` is
-    False: the take alone, as a lab without its script's schedule has it), or `pianobot import
-    keystroke-log`; with the run id."""
+    False: the take alone, as Motive wrote it, without the script's schedule or the vacuum, which
+    `pianobot discover` then assumes), or `pianobot import keystroke-log`; with the run id."""
     from pianobot.analysis.greybox.load import load_keystrokes, read_schedule
     from pianobot.io.importers import import_keystroke_log, import_mocap
 
     if "take" in made.files:
+        if not presses:
+            run_id = import_mocap(made.files["take"], data_dir).run_id
+            return load_keystrokes([run_id], data_dir, assumed_vacuum_kpa=ASSUMED_VACUUM_KPA).batch, run_id
         run_id = import_mocap(made.files["take"], data_dir, vacuum_kpa=float(made.truth["vacuum_kpa"])).run_id
-        schedule = read_schedule(made.files["presses"]) if presses and "presses" in made.files else None
+        schedule = read_schedule(made.files["presses"]) if "presses" in made.files else None
         return load_keystrokes([run_id], data_dir, schedule=schedule).batch, run_id
     run_id = import_keystroke_log(made.files["log"], data_dir).run_id
     return load_keystrokes([run_id], data_dir).batch, run_id
@@ -159,7 +164,7 @@ def truth_suite(only: list[str] | None, log: Callable[[str], None], subset: str 
                 sink: Callable[[dict[str, Any]], None] | None = None, takes_only: bool = False) -> list[dict[str, Any]]:
     """The independent suite (tests/truth): each scenario written to disk, imported, discovered;
     on clean takes also identified as `pianobot identify` does. `takes_only`: the mocap
-    scenarios from their Motive take alone, without the commanded presses."""
+    scenarios from their Motive take alone, without the commanded presses or the vacuum."""
     from tests.truth import full_suite, materialise, small_suite
 
     scenarios = full_suite() if subset == "full" else small_suite()
@@ -399,7 +404,7 @@ def main() -> None:
     parser.add_argument("--only", nargs="*", default=None, help="scenario names (or parts of names) to run")
     parser.add_argument("--truth-subset", default="full", choices=["full", "small"])
     parser.add_argument("--takes-only", action="store_true",
-                        help="the truth suite's mocap takes alone, without the commanded presses file")
+                        help="the truth suite's mocap takes alone, as Motive wrote them: no commanded presses file, no vacuum")
     parser.add_argument("--out", type=Path, default=RESULTS)
     parser.add_argument("--collect", nargs="*", type=Path, default=None,
                         help="assemble finished runs instead of running: truth rows (*.rows.jsonl of runs split "
