@@ -37,10 +37,12 @@ def test_zzz40_names_no_arm_or_clock_effect_from_the_key(zhang2022: Path, tmp_pa
     assert report.is_file() and "Verdict" in report.read_text()
 
 
-def test_missing_vacuum_is_a_one_line_input_error(zhang2022: Path, tmp_path: Path, cli: Run) -> None:
+def test_missing_vacuum_is_a_one_line_input_error_for_identify(zhang2022: Path, tmp_path: Path, cli: Run) -> None:
+    """identify reports the finger's stiffness per vacuum level, so it asks for the level of a take
+    that records none (discover assumes one and says so: tests/analysis/test_discover_truth.py)."""
     data = tmp_path / "data"
     run_id = import_mocap(zhang2022 / "zzz" / "zzz40.csv", data).run_id
-    code, out, err = invoke_cli(["discover", run_id, "--data", str(data), "--json"], *cli)
+    code, out, err = invoke_cli(["identify", run_id, "--data", str(data), "--json"], *cli)
     assert code == 2 and len(err.strip().splitlines()) == 1
     assert "--vacuum-kpa" in err
 
