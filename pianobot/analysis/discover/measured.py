@@ -181,10 +181,12 @@ def arm_checks(batch: KeystrokeBatch) -> list[MeasuredCheck]:
         # Against the command's own profile: its acceleration where recorded (a lag would read
         # as a gentler acceleration if that were free), started where the command started.
         a_cmd = float(np.median(recorded)) if recorded.size else a_best
-        starts = np.array([_fit_move(t, x, a_cmd, True)[1] for t, x in moves]) - command[rows]
+        commanded = command[rows]
+        starts = np.array([_fit_move(t, x, a_cmd, True)[1] for t, x in moves]) - commanded
         drift = _clock_drift(batch, rows, starts) if batch.arm_source == "mocap" else None
         if drift is not None and drift.accepted:
             out.append(drift.check)
+            commanded = commanded + (starts - drift.starts)  # the commands on the drifting clock
             starts = drift.starts  # the lag at each run's start, the clock's drift taken out
         lag = float(np.median(starts))
         se = float(1.2533 * np.std(starts, ddof=1) / math.sqrt(starts.size)) if starts.size > 1 else math.inf
@@ -193,20 +195,22 @@ def arm_checks(batch: KeystrokeBatch) -> list[MeasuredCheck]:
         text = f"the measured arm starts {_ms(lag)} ± {_ms(1.96 * se)} ms after the commanded start"
         if drift is not None and drift.accepted:
             text += " at the start of the run (the clock's drift taken out)"
-        if lagging and batch.arm_source == "mocap":
-            # The marker is timed by the mocap clock, the command by the arm's: a constant offset
-            # between the two clocks reads exactly like an arm that starts late.
-            text += (" (or the motion-capture clock runs that much behind the arm's: with the arm timed only by "
-                     "the marker the two look the same; an arm log tells them apart)")
-        elif not lagging:
+        # The marker is timed by the mocap clock, the command by the arm's: a constant offset
+        # between the two clocks reads exactly like an arm that is late.
+        either = (" (or the motion-capture clock runs that much behind the arm's: with the arm timed only by the "
+                  "marker the two look the same; an arm log tells them apart)") if batch.arm_source == "mocap" else ""
+        if lagging:
+            text += either
+        else:
             text += " (no lag worth modelling)"
-        servo = None if lagging else _servo(moves, command[rows], a_cmd, noise)
+        servo = None if lagging else _servo(moves, commanded, a_cmd, noise)
         if servo is not None and servo.delta_ic > MARGIN:
             lagging = True
             text = (f"the measured arm follows its command through a servo of {servo.freq_hz:.3g} Hz, damping ratio "
                     f"{servo.zeta:.2g} (ΔIC {servo.delta_ic:.0f} against following it exactly): it starts "
-                    f"{_ms(lag)} ms after the commanded start and misses the command by up to "
-                    f"{1e3 * servo.peak_error_m:.2f} mm where the command changes its acceleration")
+                    f"{_ms(lag)} ms after the commanded start, follows a ramp {_ms(servo.ramp_lag_s)} ms late and "
+                    f"misses the command by up to {1e3 * servo.peak_error_m:.2f} mm where the command changes its "
+                    "acceleration" + (either if servo.ramp_lag_s > _MIN_DELAY_S else ""))
         out.append(MeasuredCheck("arm_lag", lag, (lag - 1.96 * se, lag + 1.96 * se), z * z, lagging, text,
                                  {"arm_lag_s": lag}))
     return out
@@ -218,6 +222,7 @@ class _Servo:
     zeta: float
     delta_ic: float  # evidence for the servo against exact tracking
     peak_error_m: float  # the largest gap between the command and the servo's response
+    ramp_lag_s: float  # how late it follows a constant-speed ramp: 2ζ(1 − κ)/ωn
 
 
 #: The finer time step the command is filtered on (the arm trace is interpolated from it).
@@ -300,7 +305,8 @@ def _servo(moves: list[tuple[FloatArray, FloatArray]], starts: FloatArray, a: fl
     delta = (_ic(2.0 * float(exact.cost), n, n_eff, noise, k_moves)
              - _ic(2.0 * float(best.cost), n, n_eff, noise, k_moves + 3))
     gap = residual(best.x, True) - residual(best.x, False)
-    return _Servo(math.exp(best.x[-3]), math.exp(best.x[-2]), delta, float(np.max(np.abs(gap))))
+    freq, zeta, feed = math.exp(best.x[-3]), math.exp(best.x[-2]), float(best.x[-1])
+    return _Servo(freq, zeta, delta, float(np.max(np.abs(gap))), 2.0 * zeta * (1.0 - feed) / (2.0 * math.pi * freq))
 
 
 @dataclass(frozen=True)
