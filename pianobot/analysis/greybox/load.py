@@ -212,7 +212,9 @@ def _measured_distance(batch: KeystrokeBatch, rows: pd.DataFrame, notes: set[str
     # A finger resting on a key held by friction or a preload travels before the key moves too,
     # but compressed from the start: it hovered only if the arm first moved it unloaded.
     if typical > HOVER_M and batch.arm_measured:
-        typical = typical if _median(unloaded_travel_m(batch)[unknown]) > UNLOADED_M else 0.0
+        unloaded = unloaded_travel_m(batch)[unknown]
+        if np.isfinite(unloaded).any() and _median(unloaded) <= UNLOADED_M:
+            typical = 0.0
     if not typical > HOVER_M:
         notes.add("distance 0 assumed where not recorded (the finger starts on the key)")
         return batch
