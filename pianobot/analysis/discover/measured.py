@@ -242,15 +242,15 @@ def _servo_response(tc: FloatArray, xc: FloatArray, wn: float, zeta: float, feed
     return np.asarray(lfilter(num, den, xc), dtype=np.float64)
 
 
-def _servo(moves: list[tuple[FloatArray, FloatArray]], starts: FloatArray, a: float, noise: float) -> _Servo | None:
+def _servo(moves: list[tuple[FloatArray, FloatArray]], commanded: FloatArray, a: float, noise: float) -> _Servo | None:
     """Does the measured arm follow its command (each move a trapezoid at the commanded
-    acceleration from the commanded start, its travel and speed free) exactly, or through a
-    second-order servo (natural frequency, damping ratio and speed feed-forward shared by all
-    moves)? None when the moves are too few or the fit fails."""
+    acceleration from its commanded start, `commanded`, its travel and speed free) exactly, or
+    through a second-order servo (natural frequency, damping ratio and speed feed-forward shared
+    by all moves)? None when the moves are too few or the fit fails."""
     if len(moves) < 3 or not (math.isfinite(a) and a > 0):
         return None
     grids = []
-    for (t, x), c in zip(moves, starts, strict=True):
+    for (t, x), c in zip(moves, commanded, strict=True):
         tc = np.arange(0.0, float(t[-1] - c) + _SERVO_DT_S, _SERVO_DT_S)
         grids.append((tc, t - c, x))
 
@@ -292,9 +292,9 @@ def _servo(moves: list[tuple[FloatArray, FloatArray]], starts: FloatArray, a: fl
         # One refinement from the best of a coarse grid, the moves held at their exact fit.
         q_lo = np.concatenate([lo, [math.log(_SERVO_HZ[0]), math.log(0.1), 0.0]])
         q_hi = np.concatenate([hi, [math.log(_SERVO_HZ[-1]), math.log(3.0), 1.0]])
-        starts_grid = [np.concatenate([exact.x, [math.log(f), math.log(z), k]])
-                       for f in _SERVO_HZ for z in (0.3, 0.7, 1.5) for k in (0.0, 1.0)]
-        q0 = min(starts_grid, key=lambda q: float(np.sum(residual(q, True) ** 2)))
+        coarse = [np.concatenate([exact.x, [math.log(f), math.log(z), k]])
+                  for f in _SERVO_HZ for z in (0.3, 0.7, 1.5) for k in (0.0, 1.0)]
+        q0 = min(coarse, key=lambda q: float(np.sum(residual(q, True) ** 2)))
         best = least_squares(lambda q: residual(q, True), np.clip(q0, q_lo + 1e-9, q_hi - 1e-9),
                              bounds=(q_lo, q_hi), x_scale="jac", jac_sparsity=sparsity, max_nfev=60)
     except (ValueError, np.linalg.LinAlgError):
