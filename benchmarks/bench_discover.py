@@ -141,19 +141,28 @@ def own_suite(only: list[str] | None, log: Callable[[str], None]) -> list[dict[s
     return rows
 
 
-def truth_batch(made: Any, data_dir: Path, presses: bool = True) -> tuple[KeystrokeBatch, str]:
+#: What of a take's files the truth suite imports (`--files`): the take alone as Motive wrote it
+#: (no presses, no vacuum); with the lab script's commanded presses; and with the UR arm log the
+#: lab recorded beside it too.
+FILE_SETS = ("take", "presses", "lab")
+
+
+def truth_batch(made: Any, data_dir: Path, files: str = "presses") -> tuple[KeystrokeBatch, str]:
     """A truth scenario's files imported the way a lab imports them: `pianobot import mocap`
-    (with the vacuum the take does not record) plus the script's schedule (unless `presses` is
-    False: the take alone, as Motive wrote it, without the script's schedule or the vacuum, which
-    `pianobot discover` then assumes), or `pianobot import keystroke-log`; with the run id."""
+    (with the vacuum the take does not record; with `files="lab"` also `--arm-log arm.csv`) plus
+    the script's schedule; with `files="take"` the take alone, as Motive wrote it, without the
+    script's schedule or the vacuum, which `pianobot discover` then assumes. A keystroke log:
+    `pianobot import keystroke-log`. Returns the batch and the run id."""
     from pianobot.analysis.greybox.load import load_keystrokes, read_schedule
     from pianobot.io.importers import import_keystroke_log, import_mocap
 
     if "take" in made.files:
-        if not presses:
+        if files == "take":
             run_id = import_mocap(made.files["take"], data_dir).run_id
             return load_keystrokes([run_id], data_dir, assumed_vacuum_kpa=ASSUMED_VACUUM_KPA).batch, run_id
-        run_id = import_mocap(made.files["take"], data_dir, vacuum_kpa=float(made.truth["vacuum_kpa"])).run_id
+        arm_log = made.files.get("arm_log") if files == "lab" else None
+        run_id = import_mocap(made.files["take"], data_dir, vacuum_kpa=float(made.truth["vacuum_kpa"]),
+                              arm_log=arm_log).run_id
         schedule = read_schedule(made.files["presses"]) if "presses" in made.files else None
         return load_keystrokes([run_id], data_dir, schedule=schedule).batch, run_id
     run_id = import_keystroke_log(made.files["log"], data_dir).run_id
@@ -161,13 +170,14 @@ def truth_batch(made: Any, data_dir: Path, presses: bool = True) -> tuple[Keystr
 
 
 def truth_suite(only: list[str] | None, log: Callable[[str], None], subset: str = "full",
-                sink: Callable[[dict[str, Any]], None] | None = None, takes_only: bool = False) -> list[dict[str, Any]]:
-    """The independent suite (tests/truth): each scenario written to disk, imported, discovered;
-    on clean takes also identified as `pianobot identify` does. `takes_only`: the mocap
-    scenarios from their Motive take alone, without the commanded presses or the vacuum."""
+                sink: Callable[[dict[str, Any]], None] | None = None, files: str = "presses") -> list[dict[str, Any]]:
+    """The independent suite (tests/truth): each scenario written to disk, imported with `files`
+    (FILE_SETS), discovered; on clean takes also identified as `pianobot identify` does. With
+    `files="take"` only the mocap scenarios run (a keystroke log has no take)."""
     from tests.truth import full_suite, materialise, small_suite
 
     scenarios = full_suite() if subset == "full" else small_suite()
+    takes_only = files == "take"
     if takes_only:
         scenarios = [sc for sc in scenarios if sc.kind == "mocap"]
     if only:
@@ -176,7 +186,7 @@ def truth_suite(only: list[str] | None, log: Callable[[str], None], subset: str 
     with tempfile.TemporaryDirectory() as scratch:
         for scenario in scenarios:
             made = materialise(scenario, Path(scratch) / "files")
-            batch, run_id = truth_batch(made, Path(scratch) / "data", presses=not takes_only)
+            batch, run_id = truth_batch(made, Path(scratch) / "data", files)
             result, cpu = run_one(batch)
             truth = made.truth
             family = None if truth.get("family") in (None, "none") else str(truth["family"])
@@ -184,6 +194,7 @@ def truth_suite(only: list[str] | None, log: Callable[[str], None], subset: str 
                    "form_equals_candidate": truth.get("form_equals_candidate"),
                    "truth_effect": truth.get("effect"), "truth_form": truth.get("form"),
                    "presses": not takes_only and "presses" in made.files,
+                   "arm_log": files == "lab" and "arm_log" in made.files,
                    **score(result, family, cpu, batch.n, tuple(truth.get("accepted_effects") or ()),
                            tuple(truth.get("always_present") or ()))}
             if family is None and result.mode == "trajectories":
@@ -403,8 +414,10 @@ def main() -> None:
     parser.add_argument("--suite", nargs="*", default=["truth", "own", "real"], choices=["truth", "own", "real"])
     parser.add_argument("--only", nargs="*", default=None, help="scenario names (or parts of names) to run")
     parser.add_argument("--truth-subset", default="full", choices=["full", "small"])
-    parser.add_argument("--takes-only", action="store_true",
-                        help="the truth suite's mocap takes alone, as Motive wrote them: no commanded presses file, no vacuum")
+    parser.add_argument("--files", default="presses", choices=FILE_SETS,
+                        help="what of a truth take is imported: the take alone as Motive wrote it (no commanded presses, "
+                             "no vacuum), with the lab's commanded presses, or with its UR arm log as well")
+    parser.add_argument("--takes-only", action="store_true", help="the same as --files take")
     parser.add_argument("--out", type=Path, default=RESULTS)
     parser.add_argument("--collect", nargs="*", type=Path, default=None,
                         help="assemble finished runs instead of running: truth rows (*.rows.jsonl of runs split "
@@ -437,7 +450,7 @@ def main() -> None:
         with partial.open("a", encoding="utf-8") as f:
             f.write(json.dumps(_finite(row), default=str) + "\n")
 
-    truth = truth_suite(args.only, log, args.truth_subset, sink, args.takes_only) if "truth" in args.suite else []
+    truth = truth_suite(args.only, log, args.truth_subset, sink, "take" if args.takes_only else args.files) if "truth" in args.suite else []
     own = own_suite(args.only, log) if "own" in args.suite else []
     real = real_suite(log) if "real" in args.suite and not args.only else []
     payload = {"benchmark": "discover", "summary": summary(own, truth), "truth": truth, "own_world": own, "real": real}

@@ -132,6 +132,16 @@ def mocap(
     plot: Annotated[
         Path | None, typer.Option("--plot", help="Also write a figure of the take (PNG).")
     ] = None,
+    arm_log: Annotated[
+        Path | None,
+        typer.Option("--arm-log", help="The UR arm log recorded with the take (ur_rtde's file recording, "
+                     "CSV with timestamp and actual_TCP_pose_0..5): drives the model and times the mocap clock."),
+    ] = None,
+    arm_log_start: Annotated[
+        float | None,
+        typer.Option("--arm-log-start", help="The arm log's timestamp (s) at the take's first frame "
+                     "[default: its first row: the recordings started together]."),
+    ] = None,
     data: DataDir = DEFAULT_DATA,
     json: JsonFlag = False,
     no_progress: NoProgressFlag = False,
@@ -154,6 +164,8 @@ def mocap(
         up_axis=up_axis,
         vacuum_kpa=vacuum_kpa,
         progress=command_progress(json, no_progress),
+        arm_log=arm_log,
+        arm_log_start_s=arm_log_start,
     )
     if plot is not None:
         from pianobot.reports.command_figures import plot_mocap_run

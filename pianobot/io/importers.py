@@ -17,6 +17,7 @@ import numpy as np
 import pandas as pd
 
 from pianobot.errors import InputError
+from pianobot.io.arm_log import arm_samples, read_arm_log
 from pianobot.io.force_log import BurstRule, ForceCalibration, align_to_note_ons, read_force_log
 from pianobot.io.keystroke_import import import_keystroke_log
 from pianobot.io.mocap import MocapTake, read_mocap
@@ -125,6 +126,8 @@ def import_mocap(
     up_axis: str = "y",
     vacuum_kpa: float | None = None,
     progress: Progress = NO_PROGRESS,
+    arm_log: Path | str | None = None,
+    arm_log_start_s: float | None = None,
 ) -> ImportResult:
     """Import a Motive take: a new run with one trial per keystroke, or aligned to `run_id`.
 
@@ -133,8 +136,15 @@ def import_mocap(
     With `run_id`: a derived run = that run's tables + mocap samples re-timed to its trials.
     `vacuum_kpa` (gauge, ≤ 0): the finger's vacuum during the take, stored on every trial (a
     Motive take does not record it); with `run_id` it fills only trials that lack one.
+    `arm_log`: the UR arm log recorded with the take (`arm_log.read_arm_log`), stored as the
+    trials' arm samples; `arm_log_start_s` is its controller timestamp at the take's first frame
+    (default: its first row, i.e. the two recordings started together). Not with `run_id`, whose
+    run has its own arm trace.
     """
     path, data_dir = Path(path), Path(data_dir)
+    if arm_log is not None and run_id is not None:
+        raise InputError("a take aligned to a run uses the run's arm trace; give --arm-log or --run, not both",
+                         "--arm-log")
     if vacuum_kpa is not None and not (math.isfinite(vacuum_kpa) and -100.0 <= vacuum_kpa <= 0.0):
         raise InputError(f"vacuum is a gauge pressure in [-100, 0] kPa, got {vacuum_kpa:g}", "--vacuum-kpa")
     # Stages without a count: each shows its elapsed time (a long take reads for tens of seconds).
@@ -164,6 +174,10 @@ def import_mocap(
         samples = _stroke_samples(
             take, strokes, trials["trial_id"].tolist(), strokes["t_start_s"].to_numpy(), 0.0
         )
+        if arm_log is not None:
+            with progress.task("reading the arm log"):
+                arm = _arm_log_samples(Path(arm_log), arm_log_start_s, take, strokes, trials, meta, extra)
+            samples = pd.concat([samples, arm], ignore_index=True)
         new_id = write_run(data_dir, f"import-{path.stem}", meta, trials, samples, None, progress=progress)
         return ImportResult(new_id, "mocap", len(trials), 0, (), extra, run_dir(data_dir, new_id))
     run = load_run(run_id, data_dir)
@@ -200,6 +214,38 @@ def import_mocap(
     return ImportResult(
         new_id, "mocap", len(base), int((base["status"] == "silent").sum()), (), extra, run_dir(data_dir, new_id)
     )
+
+
+#: Recordings "started together" that the arm marker shows this far apart did not: refused.
+MAX_START_SKEW_S = 0.25
+
+
+def _arm_log_samples(path: Path, start_s: float | None, take: MocapTake, strokes: pd.DataFrame,
+                     trials: pd.DataFrame, meta: dict[str, Any], extra: dict[str, Any]) -> pd.DataFrame:
+    """The arm log's samples per keystroke, on the take's clock (meta and summary filled in)."""
+    log = read_arm_log(path)
+    shift = 0.0 if start_s is None else start_s - log.first_timestamp_s
+    if not math.isfinite(shift):
+        raise InputError(f"expected a controller timestamp in seconds, got {start_s}", "--arm-log-start")
+    marker = take.down_m("arm")
+    if marker is not None:
+        dt = max(1.0 / take.frame_rate_hz, 1.0 / log.rate_hz)
+        found = xcorr_offset(log.t_s - shift, log.down_m, take.t_s, marker, dt)
+        if found is not None and abs(found.clock_offset_s) > MAX_START_SKEW_S:
+            # x_log(t) ≈ x_marker(t − offset): the log's rows sit `offset` late on the take's clock.
+            start = log.first_timestamp_s + shift + found.clock_offset_s
+            raise InputError(f"the arm log and the take's arm marker are {abs(found.clock_offset_s):.3f} s apart, so the "
+                             f"two recordings did not start together; give --arm-log-start {start:.3f} (the log's "
+                             "timestamp at the take's first frame, as the marker suggests)", str(path))
+    samples = arm_samples(log, shift, trials["trial_id"].tolist(), strokes["t_start_s"].to_numpy(),
+                          strokes["t_end_s"].to_numpy(), SAMPLE_PRE_S, SAMPLE_POST_S)
+    covered = int(samples["trial_id"].nunique()) if not samples.empty else 0
+    if covered == 0:
+        raise InputError(f"the arm log ({log.t_s[-1]:.1f} s from its first row) covers none of the take's "
+                         f"{len(trials)} keystrokes; give --arm-log-start", str(path))
+    meta["arm_log"] = {**log.meta(), "sha256": file_sha256(path), "start_timestamp_s": log.first_timestamp_s + shift}
+    extra.update(arm_log_keystrokes=covered, arm_log_rate_hz=round(log.rate_hz, 1))
+    return samples
 
 
 def _align(

@@ -2,7 +2,8 @@
 
 Folder of a mocap scenario: `take.csv` (Motive export), `presses.csv` (what the lab's script
 commanded: motion starts on the arm's clock — the take's, unless the hidden effect is a mocap
-clock error — speeds, acceleration, depth, hover distance, hold), `truth.json`.
+clock error — speeds, acceleration, depth, hover distance, hold), `arm.csv` (the UR arm log,
+ur_rtde's file recording at 125 Hz on the arm's clock, started with the take), `truth.json`.
 Folder of a MIDI-only scenario: `soft_<|p|>_angle_<deg>.txt` (ctrl_midi log), `truth.json`.
 """
 
@@ -20,6 +21,8 @@ import numpy.typing as npt
 
 from . import kernel as K
 from .arm import PressCommand
+from .arm_log import RATE_HZ as ARM_LOG_RATE_HZ
+from .arm_log import write_arm_log
 from .base import BASE_SETS
 from .ctrl_log import Stroke, assemble, simulate_stroke, write_log
 from .forms import FAMILY_OF
@@ -54,8 +57,8 @@ def _plant(scenario: Scenario, distance_m: float) -> Plant:
                  scenario.plant_effects(), scenario.servo())  # fmt: skip
 
 
-def simulate_take(scenario: Scenario) -> tuple[list[PressCommand], Trajectory]:
-    """The commanded presses and the true trajectories at the 120 Hz frame times."""
+def _commanded(scenario: Scenario) -> tuple[list[PressCommand], list[Any], float]:
+    """The take's commanded presses, their moves and the take's end (s)."""
     rng_schedule = _streams(scenario.seed)[0]
     take = scenario.take
     base = BASE_SETS[scenario.base]
@@ -69,8 +72,13 @@ def simulate_take(scenario: Scenario) -> tuple[list[PressCommand], Trajectory]:
         )
     presses = take.presses(acc, depth, rng_schedule)
     moves = [m for press in presses for m in press.moves()]
-    t_end = presses[-1].t_end_s + take.tail_s
-    plant = _plant(scenario, take.distance_m)
+    return presses, moves, presses[-1].t_end_s + take.tail_s
+
+
+def simulate_take(scenario: Scenario) -> tuple[list[PressCommand], Trajectory]:
+    """The commanded presses and the true trajectories at the 120 Hz frame times."""
+    presses, moves, t_end = _commanded(scenario)
+    plant = _plant(scenario, scenario.take.distance_m)
     delay_s, rate_ppm = scenario.mocap_clock()
     if delay_s == 0.0 and rate_ppm == 0.0:
         return presses, plant.simulate(moves, t_end, record_every=400)
@@ -83,6 +91,13 @@ def simulate_take(scenario: Scenario) -> tuple[list[PressCommand], Trajectory]:
     frames = resample(fine, np.clip(t_true, 0.0, None))
     frames.data[:, K.OUT_T] = t_mocap  # the record is labelled by the mocap clock
     return presses, frames
+
+
+def simulate_arm_log(scenario: Scenario) -> Trajectory:
+    """The true trajectories on the arm's clock at the controller's 125 Hz (the arm log's rows)."""
+    _, moves, t_end = _commanded(scenario)
+    every = int(round(1.0 / (ARM_LOG_RATE_HZ * STEP_S)))  # 384 steps = 8 ms
+    return _plant(scenario, scenario.take.distance_m).simulate(moves, t_end, record_every=every)
 
 
 def resample(traj: Trajectory, t_s: npt.NDArray[np.float64]) -> Trajectory:
@@ -168,6 +183,10 @@ def _write_mocap(scenario: Scenario, folder: Path) -> tuple[dict[str, Path], dic
         writer = csv.DictWriter(handle, fieldnames=list(presses[0].to_dict()))
         writer.writeheader()
         writer.writerows(p.to_dict() for p in presses)
+    arm = simulate_arm_log(scenario)
+    arm_path = folder / "arm.csv"
+    boot_s = 1800.0 + float(_streams(scenario.seed)[3].uniform(0.0, 3600.0))
+    write_arm_log(arm_path, arm.t_s, arm["x0_m"], arm["x_cmd_m"], _streams(scenario.seed)[3], boot_s)
     x2 = traj["x2_m"]
     extra: dict[str, Any] = {
         "presses": [p.to_dict() for p in presses],
@@ -190,14 +209,17 @@ def _write_mocap(scenario: Scenario, folder: Path) -> tuple[dict[str, Path], dic
             "events_located": traj.events,
             "unresolved_steps": traj.unresolved,
         },
+        "arm_log": {"rate_hz": ARM_LOG_RATE_HZ, "first_timestamp_s": boot_s,
+                    "clock": "the arm's; its first row is at the take's first frame on the arm's clock"},
         "import": {
-            "command": f"pianobot import mocap take.csv --vacuum-kpa {scenario.vacuum_kpa:g}"
+            "command": f"pianobot import mocap take.csv --vacuum-kpa {scenario.vacuum_kpa:g}",
+            "with_arm_log": f"pianobot import mocap take.csv --arm-log arm.csv --vacuum-kpa {scenario.vacuum_kpa:g}",
         },
     }
     if scenario.effect is not None:
         _, off = simulate_take(scenario.without_effect())
         extra["effect_size"] = _trajectory_change(traj, off)
-    return {"take": take_path, "presses": presses_path}, extra
+    return {"take": take_path, "presses": presses_path, "arm_log": arm_path}, extra
 
 
 def _trajectory_change(on: Trajectory, off: Trajectory) -> dict[str, float]:

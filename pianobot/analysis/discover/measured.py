@@ -382,6 +382,13 @@ def _ms(seconds: float) -> str:
     return f"{value + 0.0:.2f}"
 
 
+def _half_width_ms(se_s: float) -> str:
+    """A 95 % half-width in ms, to two decimals, or to one significant digit when smaller (an arm
+    log times the marker to microseconds: "± 0.00" would read as no uncertainty at all)."""
+    half = 1.96e3 * se_s
+    return f"{half:.2f}" if half >= 0.005 or half == 0.0 or not math.isfinite(half) else f"{half:.1g}"
+
+
 def clock_check(batch: KeystrokeBatch) -> MeasuredCheck | None:
     """`mocap_delay` from the clock offset between the arm log and the arm marker (None when the
     batch's arm trace is the marker itself: then one clock serves both)."""
@@ -391,7 +398,7 @@ def clock_check(batch: KeystrokeBatch) -> MeasuredCheck | None:
     z = abs(tau) / se if se > 0 else (math.inf if tau else 0.0)
     accepted = abs(tau) > _MIN_DELAY_S and z > 3.0
     return MeasuredCheck("mocap_delay", tau, (tau - 1.96 * se, tau + 1.96 * se), z * z, accepted,
-                   f"motion capture runs {1e3 * tau:.2f} ± {1.96e3 * se:.2f} ms behind the arm log "
+                   f"motion capture runs {1e3 * tau:.2f} ± {_half_width_ms(se)} ms behind the arm log "
                    f"(measured on the arm marker{'' if accepted else '; too small to model'})",
                    {"mocap_delay_s": tau})
 

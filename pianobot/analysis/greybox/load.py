@@ -132,6 +132,7 @@ def load_keystrokes(run_ids: Sequence[str], data_dir: Path, *, x0_source: str = 
         raise InputError("give at least one run id", "RUN_ID")
     samples, trials, hashes, midi_recorded = [], [], {}, False
     assumed: list[str] = []
+    imported_arm: set[str] = set()  # runs whose arm log came with an imported take
     for run_id in run_ids:
         run = load_run(run_id, data_dir)
         t, s = run.trials, run.samples
@@ -147,6 +148,8 @@ def load_keystrokes(run_ids: Sequence[str], data_dir: Path, *, x0_source: str = 
             raise InputError("the run records no vacuum level; give --vacuum-kpa", run.run_id)
         midi_recorded |= bool(not run.midi.empty or ("on_velocity" in t and t["on_velocity"].notna().any()))
         prefix = f"{run.run_id}/"
+        if "arm_log" in run.meta:
+            imported_arm.add(prefix)
         trials.append(t.assign(trial_id=prefix + t["trial_id"].astype(str)))
         if s is not None and not s.empty:
             samples.append(s.assign(trial_id=prefix + s["trial_id"].astype(str)))
@@ -180,8 +183,10 @@ def load_keystrokes(run_ids: Sequence[str], data_dir: Path, *, x0_source: str = 
     if "distance_m" not in rows or rows["distance_m"].isna().any():
         batch = _measured_distance(batch, rows, notes)
     columns: dict[str, Any] = {**_commands(rows, batch.distance_m, notes), **_midi(rows, midi_recorded)}
-    # A run's own arm log starts at the commanded motion start; an imported take does not know it.
-    columns["command_start_s"] = np.full(batch.n, 0.0 if batch.arm_source == "arm" else np.nan)
+    # A run's own arm log starts at the commanded motion start; an imported take (and an arm log
+    # imported with it, cut at the marker's motion starts) does not know it.
+    own_arm = [batch.arm_source == "arm" and not any(t.startswith(p) for p in imported_arm) for t in batch.trial_id]
+    columns["command_start_s"] = np.where(own_arm, 0.0, np.nan)
     columns["motion_start_s"] = _column(rows, "t_start_s")
     batch = replace(batch, **columns)
     if schedule is not None:
