@@ -132,16 +132,19 @@ def _iterate(setting: Setting, current: GreyBoxFit, start: KeystrokeModel, setti
         for e in mapper(screen_one, specs):  # progress advances here, as results come back
             evaluated.append(e)
             task.advance(note=e.label)
-        ranked = sorted(evaluated, key=lambda e: e.ic)[: settings.joint_refits]
+        ranked = {e.label: e for e in sorted(evaluated, key=lambda e: e.ic)[: settings.joint_refits]}
 
-        def refit(e: Evaluated) -> Evaluated:
+        # The screened fits travel inside the function (sent to each worker once), the tasks
+        # carry only their labels: a fit holds the keystrokes (tens of MB).
+        def refit(label: str) -> Evaluated:
+            e = ranked[label]
             assert e.spec is not None
             fit = search.joint(setting, current, e.spec, e.fit, start)
             joint = search.evaluate(setting, fit, criterion, sigma_m, e.label, e.spec)
             return joint if joint.ic <= e.ic else e
 
         refitted = {}
-        for e in mapper(refit, ranked):
+        for e in mapper(refit, list(ranked)):
             refitted[e.label] = e
             task.advance(note=f"{e.label} (joint)")
     final = [refitted.get(e.label, e) for e in evaluated]
