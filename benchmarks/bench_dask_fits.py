@@ -1,10 +1,12 @@
-"""Dask benchmark of the fits that split: identify's bootstrap refits and discovery's candidates.
+"""Dask benchmark of the fits that split: identify's bootstrap refits, discovery's candidates and
+`fit`'s cross-validation folds.
 
     python benchmarks/bench_dask_fits.py            # both, best of 2, ~3-6 min on 2 idle cores
     python benchmarks/bench_dask_fits.py --quick    # small sizes, to check the script
 
 The keystrokes are an independent truth-lab take (tests/truth: a simulator sharing no code with
-pianobot, written as Motive CSV and imported as a lab imports it). Each workload runs in three
+pianobot, written as Motive CSV and imported as a lab imports it); the CV folds learn the study's
+2,025-keystroke soft grid swept on the simulated rig (`pianobot fit RUN --model gp --model poly`). Each workload runs in three
 ways, interleaved `--repeat` times (best wall time kept), like `bench_dask.py` does for sweeps:
 
 - `serial`: every piece in this process (`serial_map`, what one worker does);
@@ -76,6 +78,36 @@ def _candidates(batch: Any) -> Callable[[Any], Any]:
     return run
 
 
+def _cv_trials(folder: Path) -> Any:
+    from pianobot.executor import ExecutorSettings
+    from pianobot.run import run_sweep
+    from pianobot.store import load_run
+
+    outcome = run_sweep(ROOT / "experiments" / "soft_finger_grid.yaml", data_dir=folder, progress=False,
+                        rig_path=ROOT / "experiments" / "rigs" / "sim-extended.yaml",
+                        executor=ExecutorSettings(workers=1))
+    return load_run(outcome.run_id, folder).trials
+
+
+def _cv_folds(trials: Any) -> Callable[[Any], Any]:
+    from contextlib import nullcontext
+
+    from pianobot.analysis.learn.training import cross_validate_models, training_set
+
+    data = training_set(trials)
+
+    class _Adapter:  # the executor interface cross-validation asks for, over a bare mapper
+        def __init__(self, mapper: Any) -> None:
+            self.imap = mapper
+
+    def run(mapper: Any) -> Any:
+        table, _ = cross_validate_models(data, ["gp", "poly"], folds=5,
+                                         executor=lambda work_s: nullcontext(_Adapter(mapper)))
+        return table.drop(columns=["latency_ms", "fit_s"]).to_json()
+
+    return run
+
+
 class _Timed:
     """A mapper that adds up the wall time spent inside its maps (the part of the work that splits)."""
 
@@ -138,7 +170,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=2, help="interleaved repetitions (best kept)")
     parser.add_argument("--replicates", type=int, default=32, help="bootstrap refits")
-    parser.add_argument("--only", choices=("bootstrap", "candidates"), default=None)
+    parser.add_argument("--only", choices=("bootstrap", "candidates", "cv_folds"), default=None)
     parser.add_argument("--quick", action="store_true", help="8 refits, once")
     args = parser.parse_args()
     repeat, replicates = (1, 8) if args.quick else (max(1, args.repeat), args.replicates)
@@ -157,6 +189,11 @@ def main() -> None:
         if args.only in (None, "candidates"):
             work = _candidates(_batch(DISCOVERY_TAKE, root / "disc"))
             workloads.append({**_workload("candidates", work, configs, repeat), "take": DISCOVERY_TAKE})
+        if args.only in (None, "cv_folds"):
+            trials = _cv_trials(root / "cv")
+            work = _cv_folds(trials)
+            workloads.append({**_workload("cv_folds", work, configs, repeat), "trials": len(trials),
+                              "models": ["gp", "poly"], "folds": 5})
     result = {
         "benchmark": "dask_fits", "quick": args.quick, "repeat": repeat,
         "machine": machine(load_start),

@@ -24,6 +24,7 @@ from pianobot.executor import (
     IN_PROCESS,
     MALLOC_TRIM,
     MIN_PARALLEL_WORK_S,
+    Executor,
     ExecutorSettings,
     open_executor,
     usable_cores,
@@ -101,6 +102,28 @@ def test_a_local_cluster_of_two_processes_gives_the_serial_results() -> None:
     assert cluster.kind == "local-cluster" and cluster.workers == 2
     assert cluster.map(_bootstrap_mean, tasks) == serial
     assert list(cluster.imap(_bootstrap_mean, tasks, ahead=3)) == serial
+
+
+def test_cross_validation_folds_on_two_worker_processes_equal_the_serial_table() -> None:
+    """`pianobot fit`'s folds as Dask tasks: the same CV table as in this process (each fold is
+    seeded alike and warm-started from the same full fit), whatever ran where."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent / "analysis"))
+    from _synthetic_runs import sounded_trials
+
+    from pianobot.analysis.learn.training import cross_validate_models, training_set
+
+    data = training_set(sounded_trials(3))
+    serial, _ = cross_validate_models(data, ["poly", "gp"], folds=4)
+    seen: list[float] = []
+
+    def on_cluster(work_s: float) -> Executor:
+        seen.append(work_s)
+        return open_executor(TWO)
+
+    parallel, fitted = cross_validate_models(data, ["poly", "gp"], folds=4, executor=on_cluster)
+    assert seen and seen[0] > 0.0 and set(fitted) == {"mean", "poly", "gp"}
+    columns = ["model", "rmse", "mae", "r2", "hold_rmse_s", "silent_accuracy", "n_trials", "folds"]
+    pd.testing.assert_frame_equal(parallel[columns], serial[columns])
 
 
 # What the user exported, read at collection, before any cluster starts (Dask's nanny writes its

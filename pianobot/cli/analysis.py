@@ -157,6 +157,11 @@ def register(app: typer.Typer) -> None:
         plot: PlotOption = None,
         no_progress: NoProgressFlag = False,
         context: Annotated[str, typer.Option("--context", help="With --model sequence: previous strokes k to compare, e.g. 0,1,2,3.")] = "0,1,2,3",
+        workers: Annotated[int | None, typer.Option(
+            "--workers", min=1, help="Processes for the cross-validation folds (default: the machine's cores; "
+                                     "small work stays in this process).")] = None,
+        scheduler: Annotated[str | None, typer.Option(
+            "--scheduler", help="Dask scheduler address (tcp://HOST:PORT) for the cross-validation folds.")] = None,
     ) -> None:
         """Cross-validate learned maps to on-velocity, hold and silence; save each as a predictor."""
         kinds = model or ["gp"]
@@ -177,7 +182,8 @@ def register(app: typer.Typer) -> None:
             from pianobot.analysis.plausibility import as_dicts
             from pianobot.reports.command_figures import learned_maps, save_png
         result = fit_runs(runs, data, kinds=kinds, out_dir=out_dir, folds=folds,
-                          physics_model=physics_model, progress=progress)
+                          physics_model=physics_model, progress=progress,
+                          executor=ExecutorSettings.resolve(workers=workers, scheduler=scheduler))
         table, saved = result.cv, result.saved
         if plot is not None:
             predictors = {kind: load_predictor(path) for kind, path in saved.items()}

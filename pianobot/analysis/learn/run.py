@@ -14,6 +14,7 @@ from pianobot.analysis.learn.physical import PhysicsPredictor
 from pianobot.analysis.learn.training import cross_validate_models, training_set
 from pianobot.analysis.plausibility import Finding, as_dicts, fit_findings
 from pianobot.errors import InputError
+from pianobot.executor import ExecutorSettings, open_executor
 from pianobot.progress import NO_PROGRESS, Progress
 from pianobot.store import load_run
 
@@ -43,8 +44,12 @@ class FitResult:
 def fit_runs(
     run_ids: Sequence[str], data_dir: Path, *, kinds: Sequence[str], out_dir: Path | None,
     folds: int = 5, seed: int = 0, physics_model: Path | None = None, progress: Progress = NO_PROGRESS,
+    executor: ExecutorSettings | None = None,
 ) -> FitResult:
-    """Cross-validate `kinds` and save one predictor per learned kind under `out_dir`."""
+    """Cross-validate `kinds` and save one predictor per learned kind under `out_dir`.
+
+    The CV folds run through the executor `executor` asks for (None: in this process) when
+    their estimated time pays for it; the table does not depend on where they ran."""
     bad = [k for k in kinds if k not in MODEL_KINDS]
     if bad:
         raise InputError(f"unknown model {bad[0]!r}; valid: {', '.join(MODEL_KINDS)}", "--model")
@@ -53,8 +58,10 @@ def fit_runs(
     physics = None
     if "physics" in kinds:
         physics = load_predictor(physics_model) if physics_model else PhysicsPredictor.published()
+    settings = executor if executor is not None else ExecutorSettings(workers=1)
     table, fitted = cross_validate_models(data, kinds, folds=folds, seed=seed, physics=physics,
-                                          progress=progress)
+                                          progress=progress,
+                                          executor=lambda work_s: open_executor(settings, work_s=work_s))
     findings = fit_findings(trials, table)
     saved: dict[str, Path] = {}
     if out_dir is not None:

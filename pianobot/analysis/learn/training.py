@@ -14,7 +14,8 @@ saved and loaded by `learn.files` (`save_predictor`, `load_predictor`).
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass
 from typing import Any
 
@@ -31,6 +32,7 @@ from pianobot.analysis.learn.predictors import (
     complete_inputs,
 )
 from pianobot.errors import InputError
+from pianobot.executor import IN_PROCESS, Executor
 from pianobot.progress import NO_PROGRESS, Progress
 
 REGRESSION_TARGETS = {"on_velocity": "on_velocity", "midi_hold_s": "midi_hold_s", "lead_s": "t_on_s"}
@@ -169,49 +171,67 @@ def cross_validate(data: TrainingSet, kinds: Sequence[str], *, folds: int = 5, s
     return cross_validate_models(data, kinds, folds=folds, seed=seed, physics=physics)[0]
 
 
+#: The folds run through an executor only when their estimated serial time (the full fits' time
+#: times the number of folds) pays for starting worker processes (`executor.MIN_PARALLEL_WORK_S`).
+FoldExecutor = Callable[[float], AbstractContextManager[Executor]]
+
+
+def _in_process(work_s: float) -> AbstractContextManager[Executor]:
+    return nullcontext(IN_PROCESS)
+
+
 def cross_validate_models(data: TrainingSet, kinds: Sequence[str], *, folds: int = 5, seed: int = 0,
                           physics: Any | None = None, progress: Progress = NO_PROGRESS,
+                          executor: FoldExecutor = _in_process,
                           ) -> tuple[pd.DataFrame, dict[str, LearnedPredictor]]:
     """`cross_validate` plus each learned kind fitted on all the data (ready to save).
 
-    The full-data model is fitted first; its hyperparameters warm-start every fold. Progress
-    counts fits: per model kind one on all the data plus one per fold.
+    Each kind is first fitted on all the data, here; its hyperparameters warm-start every fold.
+    The folds of every kind are independent pieces: they run through `executor(work_s)` (given
+    the estimated serial seconds, it opens the executor to use: `pianobot.executor`'s local
+    cluster or scheduler, or this process), each seeded alike, so the table is the same wherever
+    they ran. Progress counts fits: per model kind one on all the data plus one per fold.
     """
     n_groups = int(np.unique(data.groups).size)
     k = max(2, min(folds, n_groups))
     splits = list(GroupKFold(n_splits=k).split(data.X, groups=data.groups))
     frame = pd.DataFrame(data.X, columns=list(data.inputs))
-    rows = []
-    fitted: dict[str, LearnedPredictor] = {}
     learned = ["mean", *[kk for kk in kinds if kk not in ("physics", "mean")]]
+    full: dict[str, LearnedPredictor] = {}
+    fit_s: dict[str, float] = {}
     with progress.task("cross-validation", total=len(learned) * (k + 1)) as task:
         for kind in learned:
             task.update(note=f"{kind}: fit on all {data.n} keystrokes")
             t0 = time.perf_counter()
-            full = LearnedPredictor(kind, seed).fit(data)
-            fit_s = time.perf_counter() - t0
+            full[kind] = LearnedPredictor(kind, seed).fit(data)
+            fit_s[kind] = time.perf_counter() - t0
             task.advance()
-            pred_v = np.full(data.n, np.nan)
-            pred_h = np.full(data.n, np.nan)
-            pred_s = np.full(data.n, np.nan)
-            for fold, (train, test) in enumerate(splits):
-                task.update(note=f"{kind}: fold {fold + 1} of {k}")
-                try:
-                    model = LearnedPredictor(kind, seed).fit(_subset(data, train), warm=full)
-                except InputError:
-                    task.advance()
-                    continue
-                out = model.predict(frame.iloc[test])
-                pred_v[test], pred_h[test], pred_s[test] = out["on_velocity"], out["midi_hold_s"], out["p_silent"]
-                task.advance()
-            rows.append(_row(kind, data, pred_v, pred_h, pred_s, _latency(full, frame), k) | {"fit_s": fit_s})
-            fitted[kind] = full
+
+        def fold(piece: tuple[str, int]) -> pd.DataFrame | None:
+            kind, number = piece
+            train, test = splits[number]
+            try:
+                model = LearnedPredictor(kind, seed).fit(_subset(data, train), warm=full[kind])
+            except InputError:
+                return None  # a fold without enough sounded keystrokes predicts nothing
+            return model.predict(frame.iloc[test])
+
+        pieces = [(kind, number) for kind in learned for number in range(k)]
+        predicted = {kind: np.full((3, data.n), np.nan) for kind in learned}
+        with executor(k * sum(fit_s.values())) as ex:
+            for (kind, number), out in zip(pieces, ex.imap(fold, pieces), strict=True):
+                task.advance(note=f"{kind}: fold {number + 1} of {k}")
+                if out is not None:
+                    test = splits[number][1]
+                    predicted[kind][:, test] = out[["on_velocity", "midi_hold_s", "p_silent"]].to_numpy(float).T
+    rows = [_row(kind, data, predicted[kind][0], predicted[kind][1], predicted[kind][2], _latency(full[kind], frame),
+                 k) | {"fit_s": fit_s[kind]} for kind in learned]
     if "physics" in kinds and physics is not None:
         inputs = frame.assign(**data.defaults)
         out = physics.predict(inputs)
         rows.append(_row("physics", data, out["on_velocity"].to_numpy(float), out["midi_hold_s"].to_numpy(float),
                          out["p_silent"].to_numpy(float), _latency(physics, inputs), 0) | {"fit_s": 0.0})
-    return pd.DataFrame(rows), fitted
+    return pd.DataFrame(rows), full
 
 
 def _subset(data: TrainingSet, rows: npt.NDArray[np.intp]) -> TrainingSet:
