@@ -14,6 +14,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -124,6 +125,31 @@ def test_cross_validation_folds_on_two_worker_processes_equal_the_serial_table()
     assert seen and seen[0] > 0.0 and set(fitted) == {"mean", "poly", "gp"}
     columns = ["model", "rmse", "mae", "r2", "hold_rmse_s", "silent_accuracy", "n_trials", "folds"]
     pd.testing.assert_frame_equal(parallel[columns], serial[columns])
+
+
+def test_identify_and_discover_on_two_worker_processes_equal_the_serial_results(tmp_path: Path) -> None:
+    """Identify's free-coupling fits and bootstrap refits, and discovery's candidate fits, as
+    Dask tasks: the same estimates, intervals, decisions and fitted values as in this process."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent / "analysis"))
+    import own_world as ow
+
+    from pianobot.analysis.discover.loop import discover
+    from pianobot.analysis.identify.fit import identify_trajectories
+
+    batch = ow.generate(ow.reduced(ow.hidden_effect("keybed", "strong", seed=5), n_speeds=3), tmp_path)
+    cluster = open_executor(TWO)
+
+    def identified(mapper: Any) -> list[tuple[str, float, Any]]:
+        fit = identify_trajectories(batch, bootstrap=4, seed=2, mapper=mapper)
+        return [(e.name, e.value, e.ci_bootstrap) for e in fit.estimates]
+
+    assert identified(cluster.imap) == identified(IN_PROCESS.imap)
+
+    def discovered(mapper: Any) -> tuple[Any, ...]:
+        result = discover(batch, mapper=mapper)
+        return (result.accepted_effects, result.final_model.effects.to_dict(), result.verdict)
+
+    assert discovered(cluster.imap) == discovered(IN_PROCESS.imap)
 
 
 # What the user exported, read at collection, before any cluster starts (Dask's nanny writes its

@@ -291,7 +291,7 @@ def _discover(batch: KeystrokeBatch, start: KeystrokeModel | None, settings: Set
         findings += [f for f in (clock_check(batch), readout_check(batch)) if f is not None]
     timings: dict[str, float] = {}
     with progress.task("discover: base fit", total=None):
-        base = search.base_fit(setting, start)
+        base = search.base_fit(setting, start, mapper)
     timings["base_fit_s"] = time.perf_counter() - t0
     sigma_m = search.held_noise_m(setting, base)
     held_base = search.on_held(setting, base)

@@ -31,6 +31,7 @@ from pianobot.analysis.greybox.fitter import Drive, GreyBoxFit
 from pianobot.analysis.greybox.forward import MeasuredArm, Window
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
 from pianobot.analysis.greybox.layout import Layout, base_layout, model_values
+from pianobot.analysis.greybox.pieces import Mapper, serial_map
 from pianobot.analysis.identify.fit import fit_base
 from pianobot.physics.model import KeystrokeModel
 
@@ -85,11 +86,12 @@ class Evaluated:
         return int(self.fit.theta_.size)
 
 
-def base_fit(setting: Setting, start: KeystrokeModel) -> GreyBoxFit:
-    """The base model fitted on the training keystrokes (see the module docstring)."""
+def base_fit(setting: Setting, start: KeystrokeModel, mapper: Mapper = serial_map) -> GreyBoxFit:
+    """The base model fitted on the training keystrokes (see the module docstring); `mapper`
+    runs identify's independent free-coupling fits."""
     train = setting.train
     if setting.mode == "trajectories":
-        return fit_base(train, start, "auto")
+        return fit_base(train, start, "auto", mapper)
     commanded = setting.train_drive
     needs = isinstance(commanded, Commanded) and commanded.needs_acceleration
     layout = base_layout(start, train.levels_kpa, trajectories=False, readout=True, fit_acceleration=needs)

@@ -147,7 +147,8 @@ def _criterion(fit: GreyBoxFit) -> Criterion:
     return Criterion.of(res.values, res.keystroke, res.frame, fit.noise(res))
 
 
-def fit_base(batch: KeystrokeBatch, prior: KeystrokeModel, coupling: Coupling = "auto") -> GreyBoxFit:
+def fit_base(batch: KeystrokeBatch, prior: KeystrokeModel, coupling: Coupling = "auto",
+             mapper: Mapper = serial_map) -> GreyBoxFit:
     """Identification's base fit: tied coupling, or free (k0, c0, m1) when asked or when the
     information criterion, on the tied fit's effective sample size, prefers it by > 10.
 
@@ -156,7 +157,8 @@ def fit_base(batch: KeystrokeBatch, prior: KeystrokeModel, coupling: Coupling = 
     the take also holds an effect the model lacks (a let-off, a stop) its fit can end far from
     any physical finger (seen: a 4 N/m pad, a 12 N/m key). A free fit started there may follow it
     into a quasi-static corner (a massless, heavily damped finger that tracks the arm) whose
-    error is close to, but above, that of the physical optimum the prior's start reaches."""
+    error is close to, but above, that of the physical optimum the prior's start reaches. The two
+    free fits are independent pieces (`mapper`)."""
     drive = MeasuredArm.of(batch)
     fit = _fit_layout(batch, prior, coupling == "free", drive=drive)
     if coupling == "auto":
@@ -166,8 +168,10 @@ def fit_base(batch: KeystrokeBatch, prior: KeystrokeModel, coupling: Coupling = 
         def ic(candidate: GreyBoxFit) -> float:
             return criterion.value(candidate.channels_, len(candidate.theta_))
 
-        free = min((GreyBoxFit(drive, free_layout).fit(start) for start in (free_layout.internal(fit.params_), None)),
-                   key=ic)
+        def free_fit(start: FloatArray | None) -> GreyBoxFit:
+            return GreyBoxFit(drive, free_layout).fit(start)
+
+        free = min(mapper(free_fit, [free_layout.internal(fit.params_), None]), key=ic)
         if ic(free) < ic(fit) - COUPLING_MARGIN:
             fit = free
     return fit
@@ -195,7 +199,7 @@ def identify_trajectories(
         mapper: how the independent bootstrap refits are run (default: one after another).
     """
     prior_model = KeystrokeModel(msd=prior or MSDParams())
-    fit = fit_base(batch, prior_model, coupling)
+    fit = fit_base(batch, prior_model, coupling, mapper)
     layout = fit.layout
     theta = fit.theta_
     cov = fit.covariance(seed)
