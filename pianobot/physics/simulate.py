@@ -21,6 +21,7 @@ import hashlib
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -115,6 +116,10 @@ def effect_vector(effects: Effects) -> FloatArray:
         ep[K.E_LETOFF_F] = p["letoff_force_n"]
         ep[K.E_LETOFF_X] = p["letoff_depth_m"]
         ep[K.E_LETOFF_W] = p["letoff_width_m"]
+    if "finger_hysteresis" in effects:
+        p = effects.params("finger_hysteresis")
+        ep[K.E_HYST_SHARE] = p["yield_share"]
+        ep[K.E_HYST_YIELD] = p["yield_m"]
     if "arm_lag" in effects:
         form = effects.form("arm_lag")
         ep[K.E_LAG_FORM] = K.LAG_FIRST_ORDER if form == "first_order" else K.LAG_DELAY
@@ -160,12 +165,25 @@ def _grid(out_dt_s: float, step_s: float) -> tuple[float, int]:
 
 _KEY_SIDE = (
     K.E_CONTACT, K.E_BED_ON, K.E_PRELOAD, K.E_FRIC_ON, K.E_STIFF_BETA, K.E_ADHESION, K.E_LETOFF_F,
+    K.E_HYST_SHARE,  # the finger's body, not the key: but only the full step has it
 )
 
 
 def _is_linear(ep: FloatArray) -> bool:
     """True when no effect acts on the finger or key: the fast linear kernel applies."""
     return not any(ep[i] != 0.0 for i in _KEY_SIDE)
+
+
+def _kernels(ep: FloatArray) -> dict[int, Any]:
+    """The compiled kernel family for these effects: a model pays only for what it has (a
+    power-law finger, a yielding body), and a model without them runs exactly the code it ran
+    before they existed."""
+    if _is_linear(ep):
+        return K.integrate_linear
+    power = ep[K.E_STIFF_FORM] == K.STIFF_POWER
+    if ep[K.E_HYST_SHARE] > 0.0:
+        return K.integrate_hysteresis_power if power else K.integrate_hysteresis
+    return K.integrate_power if power else K.integrate
 
 
 def output_count(duration_s: float, out_dt_s: float) -> int:
@@ -185,8 +203,7 @@ def _run(
     n_steps = (n_out - 1) * every
     n = kp.shape[0]
     outs = [np.empty((n, n_out)) for _ in range(5)]
-    kernels = (K.integrate_linear if _is_linear(ep)
-               else K.integrate_power if ep[K.E_STIFF_FORM] == K.STIFF_POWER else K.integrate)
+    kernels = _kernels(ep)
     # Two compiled block sizes: a few keystrokes should not pay for 16 SIMD lanes.
     kernel = kernels[K.SMALL_BLOCK if n <= K.SMALL_BLOCK else K.BLOCK]
     kernel(kp, ep, mode, trace_t, trace_x0, t_start, h, n_steps, every, *outs)
