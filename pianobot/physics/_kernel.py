@@ -70,8 +70,9 @@ N_KP = 28
     E_STIFF_Q,
     E_HYST_SHARE,
     E_HYST_YIELD,
-) = range(22)
-N_EP = 22
+    E_HYST_SET,
+) = range(23)
+N_EP = 23
 
 # Rows of the per-block work array: the constants above, then the state of each keystroke.
 # One array (keystroke index last) instead of many keeps the compiler free of aliasing doubts,
@@ -205,11 +206,15 @@ def _make_integrate(block: int, linear: bool, power: bool = False, hysteresis: b
     vectorise, so only models with that form pay for it (the other kernels have no trace of it).
     hysteresis=True adds a yielding finger body (`finger_hysteresis`): the share σ of k0 acts
     through a slider whose spring stretch z follows the body deflection u = x0 − x1 until
-    |z| reaches the yield deflection u_y, so the body force is k0·((1 − σ)·u + σ·z). z is one
-    more state per keystroke (row S_ZH), advanced by the exact return mapping of the step's
-    change of u (elastic trial, then clamped to ±u_y): branch-free, so the step still
-    vectorises, and exact for a deflection that changes linearly over the step. Only models with
-    the effect on pay for it; the other kernels are the same code as without the flag.
+    |z| reaches the yield deflection u_y, so the body force is k0·((1 − σ)·u + σ·z). A body
+    that earlier presses yielded starts with the slider sprung back to z0 = −f·u_y (f =
+    E_HYST_SET) and, at zero force, a set σ·f·u_y/(1 − σ) (`simulate` adds it to the fingertip's
+    distance from the key). u and z are kept relative to that start, so the force is
+    k0·((1 − σ)·u + σ·z) with z in [−u_y·(1 − f), u_y·(1 + f)]. z is one more state per
+    keystroke (row S_ZH), advanced by the exact return mapping of the step's change of u
+    (elastic trial, then clamped): branch-free, so the step still vectorises, and exact for a
+    deflection that changes linearly over the step. Only models with the effect on pay for it;
+    the other kernels are the same code as without the flag.
     """
 
     @njit(cache=True, fastmath=True, error_model="numpy")
@@ -260,7 +265,9 @@ def _make_integrate(block: int, linear: bool, power: bool = False, hysteresis: b
         f_let, x_let = ep[E_LETOFF_F], ep[E_LETOFF_X]
         inv_w_let = 1.0 / ep[E_LETOFF_W] if f_let > 0.0 else 0.0
         delay, alpha = arm_lag(ep[E_LAG_FORM], ep[E_LAG_S], h)
-        share, u_yield = ep[E_HYST_SHARE], ep[E_HYST_YIELD]
+        share = ep[E_HYST_SHARE]
+        # The slider's range, relative to its stretch at the start (see `integrate` above).
+        z_lo, z_hi = -ep[E_HYST_YIELD] * (1.0 - ep[E_HYST_SET]), ep[E_HYST_YIELD] * (1.0 + ep[E_HYST_SET])
         half_h = 0.5 * h
         inv_h = 1.0 / h
         inv_2h = 0.5 / h
@@ -362,7 +369,7 @@ def _make_integrate(block: int, linear: bool, power: bool = False, hysteresis: b
                     if hysteresis:
                         # The slider sticks while its spring is within the yield, else slips.
                         z_n = z_j + ((x0_n - x1_n) - u_j)
-                        w[S_ZH, jj] = min(max(z_n, -u_yield), u_yield)
+                        w[S_ZH, jj] = min(max(z_n, z_lo), z_hi)
                     w[S_X1, jj] = x1_n
                     w[S_X2, jj] = x2_new
                     w[S_X0P, jj] = x0_j

@@ -152,7 +152,11 @@ _SPECS: tuple[EffectSpec, ...] = (
     # elastoplastic one: a share of the body spring k0 acts through a slider that slips once its
     # spring is stretched past the yield deflection, the rest stays elastic (so the body never
     # loses all its stiffness, as a jammed bag does not). Rate-independent, like dry friction
-    # between grains; one internal state (the slider's spring stretch) per keystroke.
+    # between grains; one internal state (the slider's spring stretch) per keystroke. A body
+    # that yields keeps a permanent set: on the way back up its slider slips the other way, and
+    # the next keystroke starts from there, its fingertip hanging higher above the key and with
+    # twice the elastic range before it yields again (`yield_set`; keystrokes are simulated
+    # apart, so this is the state repeated presses leave, not the one the last press left).
     EffectSpec(
         "finger_hysteresis",
         "The finger body (arm to fingertip, k0) yields past a deflection and springs back elastically "
@@ -160,6 +164,9 @@ _SPECS: tuple[EffectSpec, ...] = (
         (
             ParamSpec("yield_share", 0.3, 0.0, 0.95, 0.0, "1", "share of the body spring k0 that yields"),
             ParamSpec("yield_m", 0.008, 2e-4, 0.05, None, "m", "body deflection at which that share starts to slip"),
+            ParamSpec("yield_set", 1.0, 0.0, 1.0, None, "1",
+                      "state a keystroke starts in: 1 a body the presses before yielded (its slider sprung "
+                      "back by yield_m, so it keeps a set), 0 a fresh one"),
         ),
         ("elastoplastic",),
     ),

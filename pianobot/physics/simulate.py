@@ -120,6 +120,7 @@ def effect_vector(effects: Effects) -> FloatArray:
         p = effects.params("finger_hysteresis")
         ep[K.E_HYST_SHARE] = p["yield_share"]
         ep[K.E_HYST_YIELD] = p["yield_m"]
+        ep[K.E_HYST_SET] = p["yield_set"]
     if "arm_lag" in effects:
         form = effects.form("arm_lag")
         ep[K.E_LAG_FORM] = K.LAG_FIRST_ORDER if form == "first_order" else K.LAG_DELAY
@@ -174,6 +175,14 @@ def _is_linear(ep: FloatArray) -> bool:
     return not any(ep[i] != 0.0 for i in _KEY_SIDE)
 
 
+def body_set_m(ep: FloatArray) -> float:
+    """The permanent set of a yielding finger body that earlier presses yielded (0 for a fresh
+    one): at zero force its slider has sprung back f·u_y, so the elastic share holds it at
+    σ·f·u_y/(1 − σ) of deflection and the fingertip hangs that much higher."""
+    share = float(ep[K.E_HYST_SHARE])
+    return share * float(ep[K.E_HYST_SET]) * float(ep[K.E_HYST_YIELD]) / (1.0 - share) if share < 1.0 else 0.0
+
+
 def _kernels(ep: FloatArray) -> dict[int, Any]:
     """The compiled kernel family for these effects: a model pays only for what it has (a
     power-law finger, a yielding body), and a model without them runs exactly the code it ran
@@ -204,6 +213,9 @@ def _run(
     n = kp.shape[0]
     outs = [np.empty((n, n_out)) for _ in range(5)]
     kernels = _kernels(ep)
+    if kernels is K.integrate_hysteresis or kernels is K.integrate_hysteresis_power:
+        kp = kp.copy()
+        kp[:, K.DIST] += body_set_m(ep)  # the fingertip hangs that much higher above the key
     # Two compiled block sizes: a few keystrokes should not pay for 16 SIMD lanes.
     kernel = kernels[K.SMALL_BLOCK if n <= K.SMALL_BLOCK else K.BLOCK]
     kernel(kp, ep, mode, trace_t, trace_x0, t_start, h, n_steps, every, *outs)

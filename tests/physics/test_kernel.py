@@ -172,6 +172,7 @@ def test_every_kernel_comes_from_numbas_disk_cache() -> None:
 # A yielding finger body (finger_hysteresis): its own kernel, the others untouched.
 
 SHARE, YIELD_M = 0.5, 0.005
+FRESH = Effects().with_effect("finger_hysteresis", yield_share=SHARE, yield_m=YIELD_M, yield_set=0.0)
 
 
 def _cycle(effects: Effects) -> tuple[np.ndarray, np.ndarray, np.ndarray, MSDParams]:
@@ -193,7 +194,7 @@ def test_a_yielding_body_follows_the_elastoplastic_law_through_a_loop() -> None:
     """Loading: slope k0 up to the yield deflection, (1 − σ)·k0 past it; unloading: k0 again
     until the slider has slipped back 2·u_y, so the body keeps a set of u_y (with σ = ½) when its
     force is back to zero. The body force is the law applied to the simulated deflection."""
-    u, spring, force, msd = _cycle(Effects().with_effect("finger_hysteresis", yield_share=SHARE, yield_m=YIELD_M))
+    u, spring, force, msd = _cycle(FRESH)
     k0 = msd.at(-40.0).k0_npm
     z = np.zeros_like(u)
     for i in range(1, u.size):  # the Jenkins element's return mapping, sample by sample
@@ -229,10 +230,34 @@ def test_a_body_that_never_yields_is_the_linear_body_spring() -> None:
     off = _cycle(Effects().with_effect("finger_hysteresis", yield_share=0.0))
     for a, b in zip(linear[:3], off[:3], strict=True):
         assert np.array_equal(a, b)
-    rigid = _cycle(Effects().with_effect("finger_hysteresis", yield_share=SHARE, yield_m=0.05))
+    rigid = _cycle(FRESH.with_effect("finger_hysteresis", yield_m=0.05))
     assert np.max(np.abs(rigid[1] - linear[1])) < 1e-9
-    yielding = _cycle(Effects().with_effect("finger_hysteresis", yield_share=SHARE, yield_m=YIELD_M))
-    assert np.max(np.abs(yielding[1] - linear[1])) > 0.1
+    assert np.max(np.abs(_cycle(FRESH)[1] - linear[1])) > 0.1
+
+
+def test_a_body_that_yielded_before_starts_where_the_press_before_left_it() -> None:
+    """`yield_set` is the state an earlier press leaves: a keystroke simulated with it is the
+    second of two presses of a fresh body. The finger leaves the key on the way up (unilateral
+    contact) and rests 2 s; at rest the body's force is zero, so its set u and its slider's
+    stretch z hold (1 − σ)·u + σ·z = 0, and yield_set = −z/u_y. The fingertip hangs u higher
+    above the key and has u_y·(1 + yield_set) of elastic range before the body yields again."""
+    t = np.arange(0.0, 2.0 + 1e-9, 1e-3)
+    press = 0.03 * (1.0 - np.abs(t - 1.0))
+    twice = np.concatenate([press, np.zeros(2000), press[1:]])
+    start = press.size + 2000 - 1  # the second press's first sample
+    model = KeystrokeModel(effects=FRESH.with_effect("contact"))
+    both = simulate_arm(np.arange(twice.size) * 1e-3, twice, -40.0, model)
+    lifted = -both.x1_m[0, start]  # the fingertip above where it started the take: the set
+    state = (1.0 - SHARE) * lifted / (SHARE * YIELD_M)
+    assert 0.5 < state < 1.0  # the slider sprang back most of the way
+    second = simulate_arm(t, press, -40.0, model.replace(
+        effects=model.effects.with_effect("finger_hysteresis", yield_set=state)))
+    assert np.max(np.abs(both.x1_m[0, start:] + lifted - second.x1_m[0])) < 2e-6
+    assert np.max(np.abs(both.x2_m[0, start:] - second.x2_m[0])) < 2e-6
+    assert np.max(np.abs(both.contact_force_n[0, start:] - second.contact_force_n[0])) < 1e-3
+    # Not the first press: the fingertip travels its set before the key moves.
+    moves = [int(np.argmax(x > 1e-5)) for x in (both.x2_m[0, : press.size], second.x2_m[0])]
+    assert (moves[1] - moves[0]) * 1e-3 == pytest.approx(lifted / 0.03, rel=0.1)
 
 
 def test_the_hysteresis_kernel_with_nothing_yielding_agrees_with_the_full_kernel() -> None:
