@@ -266,7 +266,7 @@ def _make_integrate(block: int, linear: bool, power: bool = False, hysteresis: b
         inv_w_let = 1.0 / ep[E_LETOFF_W] if f_let > 0.0 else 0.0
         delay, alpha = arm_lag(ep[E_LAG_FORM], ep[E_LAG_S], h)
         share = ep[E_HYST_SHARE]
-        # The slider's range, relative to its stretch at the start (see `integrate` above).
+        # The slider's range, relative to its stretch at the start (see `_make_integrate`).
         z_lo, z_hi = -ep[E_HYST_YIELD] * (1.0 - ep[E_HYST_SET]), ep[E_HYST_YIELD] * (1.0 + ep[E_HYST_SET])
         half_h = 0.5 * h
         inv_h = 1.0 / h

@@ -307,7 +307,8 @@ def simulate_arm(
     Args:
         t_s: shared sample times (T,), increasing; non-uniform grids are resampled.
         x0_m: arm traces (n, T) or (T,), finite.
-        distance_m: fingertip–key gap at the start, scalar or one per trace.
+        distance_m: fingertip–key gap at the start, scalar or one per trace (a finger body that
+            earlier presses yielded, `finger_hysteresis`, hangs its fingertip its set higher).
         duration_s: simulated time from t_s[0] (default: to the last sample).
     """
     t = np.asarray(t_s, dtype=np.float64)
