@@ -68,16 +68,20 @@ N_KP = 28
     E_LAG_FORM,
     E_LAG_S,
     E_STIFF_Q,
-) = range(20)
-N_EP = 20
+    E_HYST_SHARE,
+    E_HYST_YIELD,
+    E_HYST_SET,
+) = range(23)
+N_EP = 23
 
 # Rows of the per-block work array: the constants above, then the state of each keystroke.
 # One array (keystroke index last) instead of many keeps the compiler free of aliasing doubts,
 # which is what lets it vectorise the step across the block.
-(S_X0, S_X0P, S_X0N, S_X1, S_X2, S_V1, S_V2, S_A1, S_A2, S_ENG, S_ATT, S_FC, S_V2E) = range(
-    N_KP, N_KP + 13
+# S_ZH is the stretch of a yielding finger body's slider spring (hysteresis kernels only).
+(S_X0, S_X0P, S_X0N, S_X1, S_X2, S_V1, S_V2, S_A1, S_A2, S_ENG, S_ATT, S_FC, S_V2E, S_ZH) = range(
+    N_KP, N_KP + 14
 )
-N_W = N_KP + 13
+N_W = N_KP + 14
 
 STIFF_NONE, STIFF_CUBIC, STIFF_EXP, STIFF_POWER = 0.0, 1.0, 2.0, 3.0
 LAG_NONE, LAG_FIRST_ORDER, LAG_DELAY = 0.0, 1.0, 2.0
@@ -168,7 +172,7 @@ def _load_block(
     for jj in range(w.shape[1]):
         w[S_X0P, jj] = w[S_X0, jj]
         w[S_X1, jj] = w[S_X0, jj]  # the fingertip hangs at rest from the arm
-        for row in (S_X2, S_V1, S_V2, S_A1, S_A2, S_ATT, S_FC, S_V2E):
+        for row in (S_X2, S_V1, S_V2, S_A1, S_A2, S_ATT, S_FC, S_V2E, S_ZH):
             w[row, jj] = 0.0
         w[S_ENG, jj] = 1.0 if w[S_X1, jj] - w[DIST, jj] >= 0.0 else 0.0
 
@@ -187,7 +191,7 @@ def _record(w: FloatArray, b0: int, nb: int, k: int, outs: tuple[FloatArray, ...
             out_fc[b0 + jj, k] = w[S_FC, jj]
 
 
-def _make_integrate(block: int, linear: bool, power: bool = False) -> Any:
+def _make_integrate(block: int, linear: bool, power: bool = False, hysteresis: bool = False) -> Any:
     """The kernel compiled for blocks of `block` keystrokes and one model class.
 
     Both arguments are compile-time constants: numba freezes a closure's values into the
@@ -200,6 +204,17 @@ def _make_integrate(block: int, linear: bool, power: bool = False) -> Any:
     one select, several times faster than the full step with every effect switched off.
     power=True adds the power-law finger's k1·δ·(βδ)^q: a power of a lane's own value does not
     vectorise, so only models with that form pay for it (the other kernels have no trace of it).
+    hysteresis=True adds a yielding finger body (`finger_hysteresis`): the share σ of k0 acts
+    through a slider whose spring stretch z follows the body deflection u = x0 − x1 until
+    |z| reaches the yield deflection u_y, so the body force is k0·((1 − σ)·u + σ·z). A body
+    that earlier presses yielded starts with the slider sprung back to z0 = −f·u_y (f =
+    E_HYST_SET) and, at zero force, a set σ·f·u_y/(1 − σ) (`simulate` adds it to the fingertip's
+    distance from the key). u and z are kept relative to that start, so the force is
+    k0·((1 − σ)·u + σ·z) with z in [−u_y·(1 − f), u_y·(1 + f)]. z is one more state per
+    keystroke (row S_ZH), advanced by the exact return mapping of the step's change of u
+    (elastic trial, then clamped): branch-free, so the step still vectorises, and exact for a
+    deflection that changes linearly over the step. Only models with the effect on pay for it;
+    the other kernels are the same code as without the flag.
     """
 
     @njit(cache=True, fastmath=True, error_model="numpy")
@@ -250,6 +265,9 @@ def _make_integrate(block: int, linear: bool, power: bool = False) -> Any:
         f_let, x_let = ep[E_LETOFF_F], ep[E_LETOFF_X]
         inv_w_let = 1.0 / ep[E_LETOFF_W] if f_let > 0.0 else 0.0
         delay, alpha = arm_lag(ep[E_LAG_FORM], ep[E_LAG_S], h)
+        share = ep[E_HYST_SHARE]
+        # The slider's range, relative to its stretch at the start (see `_make_integrate`).
+        z_lo, z_hi = -ep[E_HYST_YIELD] * (1.0 - ep[E_HYST_SET]), ep[E_HYST_YIELD] * (1.0 + ep[E_HYST_SET])
         half_h = 0.5 * h
         inv_h = 1.0 / h
         inv_2h = 0.5 / h
@@ -333,7 +351,13 @@ def _make_integrate(block: int, linear: bool, power: bool = False) -> Any:
                         x2_new = 0.0 if at_stop else x2_new
                         a2_j = (v2_new - v2_j) * inv_h
 
-                    a1_j = (w[K0, jj] * (x0_j - x1_j) + w[C0, jj] * (v0 - v1e) - fc) * w[M1, jj]
+                    if hysteresis:  # a compile-time constant
+                        u_j = x0_j - x1_j
+                        z_j = w[S_ZH, jj]
+                        body = w[K0, jj] * (u_j - share * (u_j - z_j))
+                        a1_j = (body + w[C0, jj] * (v0 - v1e) - fc) * w[M1, jj]
+                    else:
+                        a1_j = (w[K0, jj] * (x0_j - x1_j) + w[C0, jj] * (v0 - v1e) - fc) * w[M1, jj]
                     v1_j = w[S_V1, jj] + h * a1_j
                     w[S_FC, jj] = fc
                     w[S_V2E, jj] = v2e
@@ -341,7 +365,12 @@ def _make_integrate(block: int, linear: bool, power: bool = False) -> Any:
                     w[S_A2, jj] = a2_j
                     w[S_V1, jj] = v1_j
                     w[S_V2, jj] = v2_new
-                    w[S_X1, jj] = x1_j + h * v1_j
+                    x1_n = x1_j + h * v1_j
+                    if hysteresis:
+                        # The slider sticks while its spring is within the yield, else slips.
+                        z_n = z_j + ((x0_n - x1_n) - u_j)
+                        w[S_ZH, jj] = min(max(z_n, z_lo), z_hi)
+                    w[S_X1, jj] = x1_n
                     w[S_X2, jj] = x2_new
                     w[S_X0P, jj] = x0_j
                     w[S_X0, jj] = x0_n
@@ -362,7 +391,11 @@ def arm_lag(form: float, lag_s: float, h: float) -> tuple[float, float]:
     return 0.0, 1.0
 
 
-# One compiled kernel per block size and model class (numba caches each on disk).
+# One compiled kernel per block size and model class (numba caches each on disk; a kernel is
+# compiled, or loaded from the cache, on its first call only).
 integrate = {b: _make_integrate(b, linear=False) for b in (SMALL_BLOCK, BLOCK)}
 integrate_linear = {b: _make_integrate(b, linear=True) for b in (SMALL_BLOCK, BLOCK)}
 integrate_power = {b: _make_integrate(b, linear=False, power=True) for b in (SMALL_BLOCK, BLOCK)}
+integrate_hysteresis = {b: _make_integrate(b, linear=False, hysteresis=True) for b in (SMALL_BLOCK, BLOCK)}
+integrate_hysteresis_power = {b: _make_integrate(b, linear=False, power=True, hysteresis=True)
+                              for b in (SMALL_BLOCK, BLOCK)}

@@ -144,6 +144,32 @@ _SPECS: tuple[EffectSpec, ...] = (
         "Finger stiffness at a given vacuum drifts between blocks (re-inflation, particle packing).",
         (ParamSpec("drift_fraction", 0.05, 0.0, 0.3, 0.0, "1", "largest relative change of k0 and k1 per block"),),
     ),
+    # The finger's body is a bag of granular medium stiffened by vacuum (jamming). A jammed
+    # packing is elastic under small strain, but once the shear stress reaches its frictional
+    # (Mohr–Coulomb) limit the grains slide past each other: the packing yields plastically and
+    # springs back elastically only from where it yielded, so loading and unloading follow
+    # different curves (hysteresis). The simplest element with that behaviour is Jenkins'
+    # elastoplastic one: a share of the body spring k0 acts through a slider that slips once its
+    # spring is stretched past the yield deflection, the rest stays elastic (so the body never
+    # loses all its stiffness, as a jammed bag does not). Rate-independent, like dry friction
+    # between grains; one internal state (the slider's spring stretch) per keystroke. A body
+    # that yields keeps a permanent set: on the way back up its slider slips the other way, and
+    # the next keystroke starts from there, its fingertip hanging higher above the key and with
+    # twice the elastic range before it yields again (`yield_set`; keystrokes are simulated
+    # apart, so this is the state repeated presses leave, not the one the last press left).
+    EffectSpec(
+        "finger_hysteresis",
+        "The finger body (arm to fingertip, k0) yields past a deflection and springs back elastically "
+        "(elastoplastic: a share of k0 in series with a slider): loading and unloading differ.",
+        (
+            ParamSpec("yield_share", 0.3, 0.0, 0.95, 0.0, "1", "share of the body spring k0 that yields"),
+            ParamSpec("yield_m", 0.008, 2e-4, 0.05, None, "m", "body deflection at which that share starts to slip"),
+            ParamSpec("yield_set", 1.0, 0.0, 1.0, None, "1",
+                      "state a keystroke starts in: 1 a body the presses before yielded (its slider sprung "
+                      "back by yield_m, so it keeps a set), 0 a fresh one"),
+        ),
+        ("elastoplastic",),
+    ),
 )
 
 EFFECTS: Mapping[str, EffectSpec] = MappingProxyType({s.name: s for s in _SPECS})
@@ -189,9 +215,13 @@ class Effects:
 
     @classmethod
     def default_world(cls) -> Effects:
-        """The simulated world's effects: all on, with the richer forms where there is a choice."""
+        """The simulated world's effects: all on, with the richer forms where there is a choice.
+
+        All but a yielding finger body (`finger_hysteresis`, a discovery candidate that the
+        world does not simulate: its sweeps stay what they were)."""
         return (
             cls.all()
+            .without("finger_hysteresis")
             .with_effect("keybed", form="hunt_crossley")
             .with_effect("key_friction", form="stribeck")
             .with_effect("finger_stiffening", form="exponential")

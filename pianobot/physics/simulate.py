@@ -21,6 +21,7 @@ import hashlib
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -115,6 +116,11 @@ def effect_vector(effects: Effects) -> FloatArray:
         ep[K.E_LETOFF_F] = p["letoff_force_n"]
         ep[K.E_LETOFF_X] = p["letoff_depth_m"]
         ep[K.E_LETOFF_W] = p["letoff_width_m"]
+    if "finger_hysteresis" in effects:
+        p = effects.params("finger_hysteresis")
+        ep[K.E_HYST_SHARE] = p["yield_share"]
+        ep[K.E_HYST_YIELD] = p["yield_m"]
+        ep[K.E_HYST_SET] = p["yield_set"]
     if "arm_lag" in effects:
         form = effects.form("arm_lag")
         ep[K.E_LAG_FORM] = K.LAG_FIRST_ORDER if form == "first_order" else K.LAG_DELAY
@@ -160,12 +166,33 @@ def _grid(out_dt_s: float, step_s: float) -> tuple[float, int]:
 
 _KEY_SIDE = (
     K.E_CONTACT, K.E_BED_ON, K.E_PRELOAD, K.E_FRIC_ON, K.E_STIFF_BETA, K.E_ADHESION, K.E_LETOFF_F,
+    K.E_HYST_SHARE,  # the finger's body, not the key: but only the full step has it
 )
 
 
 def _is_linear(ep: FloatArray) -> bool:
     """True when no effect acts on the finger or key: the fast linear kernel applies."""
     return not any(ep[i] != 0.0 for i in _KEY_SIDE)
+
+
+def body_set_m(ep: FloatArray) -> float:
+    """The permanent set of a yielding finger body that earlier presses yielded (0 for a fresh
+    one): at zero force its slider has sprung back f·u_y, so the elastic share holds it at
+    σ·f·u_y/(1 − σ) of deflection and the fingertip hangs that much higher."""
+    share = float(ep[K.E_HYST_SHARE])
+    return share * float(ep[K.E_HYST_SET]) * float(ep[K.E_HYST_YIELD]) / (1.0 - share) if share < 1.0 else 0.0
+
+
+def _kernels(ep: FloatArray) -> dict[int, Any]:
+    """The compiled kernel family for these effects: a model pays only for what it has (a
+    power-law finger, a yielding body), and a model without them runs exactly the code it ran
+    before they existed."""
+    if _is_linear(ep):
+        return K.integrate_linear
+    power = ep[K.E_STIFF_FORM] == K.STIFF_POWER
+    if ep[K.E_HYST_SHARE] > 0.0:
+        return K.integrate_hysteresis_power if power else K.integrate_hysteresis
+    return K.integrate_power if power else K.integrate
 
 
 def output_count(duration_s: float, out_dt_s: float) -> int:
@@ -185,8 +212,10 @@ def _run(
     n_steps = (n_out - 1) * every
     n = kp.shape[0]
     outs = [np.empty((n, n_out)) for _ in range(5)]
-    kernels = (K.integrate_linear if _is_linear(ep)
-               else K.integrate_power if ep[K.E_STIFF_FORM] == K.STIFF_POWER else K.integrate)
+    kernels = _kernels(ep)
+    if kernels is K.integrate_hysteresis or kernels is K.integrate_hysteresis_power:
+        kp = kp.copy()
+        kp[:, K.DIST] += body_set_m(ep)  # the fingertip hangs that much higher above the key
     # Two compiled block sizes: a few keystrokes should not pay for 16 SIMD lanes.
     kernel = kernels[K.SMALL_BLOCK if n <= K.SMALL_BLOCK else K.BLOCK]
     kernel(kp, ep, mode, trace_t, trace_x0, t_start, h, n_steps, every, *outs)
@@ -278,7 +307,8 @@ def simulate_arm(
     Args:
         t_s: shared sample times (T,), increasing; non-uniform grids are resampled.
         x0_m: arm traces (n, T) or (T,), finite.
-        distance_m: fingertip–key gap at the start, scalar or one per trace.
+        distance_m: fingertip–key gap at the start, scalar or one per trace (a finger body that
+            earlier presses yielded, `finger_hysteresis`, hangs its fingertip its set higher).
         duration_s: simulated time from t_s[0] (default: to the last sample).
     """
     t = np.asarray(t_s, dtype=np.float64)

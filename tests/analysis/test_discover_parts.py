@@ -9,6 +9,7 @@ import pytest
 
 from pianobot.analysis.discover.candidates import (
     STIFFENING_REACH,
+    YIELD_FRACTIONS,
     CandidateSpec,
     candidate_params,
     candidates,
@@ -135,6 +136,9 @@ def test_arm_side_effects_are_not_key_candidates_when_the_arm_is_measured() -> N
             "finger_stiffening/power"} <= forms
     assert "finger_stiffening/cubic" not in forms  # the power form's exponent 2: not fitted twice
     assert family_of("keybed") == family_of("letoff") == "key_stop"
+    # A yielding finger body: with the fingertip and arm tracked only (its deflection is what it acts on).
+    assert "finger_hysteresis" in tried and "finger_hysteresis" not in midi_only
+    assert family_of("finger_hysteresis") == family_of("finger_stiffening") == "finger"
 
 
 def test_a_stiffening_finger_is_bounded_by_the_compression_the_data_show() -> None:
@@ -158,6 +162,30 @@ def test_a_stiffening_finger_is_bounded_by_the_compression_the_data_show() -> No
     assert upper(take(0.025)) == pytest.approx(STIFFENING_REACH / 0.025)
     assert upper(take(0.025).without_trajectories()) == pytest.approx(STIFFENING_REACH / 0.005)
     assert upper(take(0.0001)) == EFFECTS["finger_stiffening"].param("stiffening_per_m").upper
+
+
+def test_a_yielding_body_is_bounded_by_the_deflection_the_data_show() -> None:
+    """A yield beyond every deflection the body shows would never act (its share has no
+    gradient there): the yield is bounded by the largest measured arm-fingertip deflection and
+    started at fractions of it; its share is started across its range."""
+    n, T = 3, 40
+    t = np.arange(T) / 120
+    arm = np.tile(np.minimum(t, 0.2) * 0.15, (n, 1))  # 30 mm of arm travel
+
+    def take(deflection_m: float) -> KeystrokeBatch:
+        tip = arm - np.minimum(arm, deflection_m)
+        return KeystrokeBatch(("a", "b", "c"), np.full(n, -40.0), t, arm, tip, 0.5 * tip, arm_source="mocap")
+
+    spec = CandidateSpec("finger_hysteresis", "elastoplastic")
+    for deflection in (0.004, 0.02):
+        params = {p.name: p for p in candidate_params(spec, take(deflection))}
+        assert params["finger_hysteresis.yield_m"].upper == pytest.approx(deflection)
+        assert params["finger_hysteresis.yield_share"].off == 0.0
+        layout = Layout(KeystrokeModel.study(), tuple(params.values()), (40.0,), {"finger_hysteresis": "elastoplastic"})
+        points = start_points(layout, spec, take(deflection))
+        assert {round(p["finger_hysteresis.yield_m"] / deflection, 6) for p in points} == set(YIELD_FRACTIONS)
+        assert len({p.get("finger_hysteresis.yield_share") for p in points}) == 5  # default + 4 across the range
+    assert size_params(layout, "finger_hysteresis") == [params["finger_hysteresis.yield_share"]]
 
 
 def test_stlsq_recovers_sparse_coefficients() -> None:

@@ -32,7 +32,11 @@ MODELS = {
     "study": KeystrokeModel.study(),
     "world": World.default().model,
     "world_ramp": World.default().model.without("arm_acceleration"),
-    "all_effects": KeystrokeModel(effects=Effects.all()),
+    "all_effects": KeystrokeModel(effects=Effects.all().without("finger_hysteresis")),
+    # Its own kernel, with one more state per lane; a stiffer body, so the press still reaches
+    # the lower sensor although the body yields (past 2 mm of its ~12 mm).
+    "all_effects_yielding_body": KeystrokeModel(
+        msd=MSDParams(k0_npm=250.0), effects=Effects.all().with_effect("finger_hysteresis", yield_m=0.002)),
 }
 SIGNALS = ("x0_m", "x1_m", "x2_m", "v2_mps", "contact_force_n")
 

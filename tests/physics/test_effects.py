@@ -9,6 +9,7 @@ from pianobot.physics.effects import EFFECT_NAMES, EFFECTS, Effects
 DESIGN_NAMES = (
     "contact", "keybed", "key_preload", "key_friction", "finger_stiffening", "adhesion",
     "letoff", "arm_lag", "arm_acceleration", "velocity_curve", "mocap_delay", "stiffness_drift",
+    "finger_hysteresis",
 )
 
 

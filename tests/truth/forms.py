@@ -19,7 +19,7 @@ Forms (downward positive, x2 key travel, s finger–key compression, v2 key spee
 | key_preload / felt_rail | W against a felt rail compressed by δ: smooth break-away | no |
 | finger_stiffening / exponential | pad spring k1·(exp(b·s) − 1)/b | yes |
 | finger_stiffening / power_law | pad spring k1·s·(1 + (s/s₀)^q), q ≠ 2 | yes (the power form, q fitted) |
-| finger_hysteresis / bouc_wen | body spring k0·(α·u + (1 − α)·z), Bouc–Wen z | no (family finger) |
+| finger_hysteresis / bouc_wen | body spring k0·(α·u + (1 − α)·z), Bouc–Wen z | no (pianobot's is elastoplastic) |
 | letoff / gaussian | F·exp(−((x2 − d)/w)²) while descending | yes |
 | letoff / trip | smooth rise over w_r to d, sharp fall over w_d, while descending | no |
 | adhesion / pull_off | pad holds the key until the pull exceeds F | yes |
@@ -50,6 +50,7 @@ FAMILY_OF: dict[str, str] = {
     "key_friction": "key_action",
     "finger_stiffening": "finger",
     "stiffness_drift": "finger",
+    "finger_hysteresis": "finger",
     "arm_lag": "arm",
     "arm_acceleration": "arm",
     "velocity_curve": "piano",
@@ -61,7 +62,7 @@ FAMILY_OF: dict[str, str] = {
 class FormInfo:
     """One functional form: which pianobot effect answers it, and its parameters (with units)."""
 
-    kind: str  # the truth lab's name of the effect (equals a pianobot name except hysteresis)
+    kind: str  # the truth lab's name of the effect (equals a pianobot name)
     form: str
     effect: str  # pianobot effect name that is the right answer
     equals_candidate: bool
@@ -84,7 +85,7 @@ _FORMS = (
     FormInfo("key_preload", "felt_rail", "key_preload", False, ("preload_n", "felt_compression_m", "felt_damping_spm"), "plant"),
     FormInfo("finger_stiffening", "exponential", "finger_stiffening", True, ("stiffening_per_m",), "plant"),
     FormInfo("finger_stiffening", "power_law", "finger_stiffening", True, ("reference_compression_m", "exponent"), "plant"),
-    FormInfo("finger_hysteresis", "bouc_wen", "finger_stiffening", False, ("yield_m", "post_yield_ratio", "exponent"), "plant"),
+    FormInfo("finger_hysteresis", "bouc_wen", "finger_hysteresis", False, ("yield_m", "post_yield_ratio", "exponent"), "plant"),
     FormInfo("letoff", "gaussian", "letoff", True, ("force_n", "depth_m", "width_m"), "plant"),
     FormInfo("letoff", "trip", "letoff", False, ("force_n", "depth_m", "rise_m", "drop_m"), "plant"),
     FormInfo("adhesion", "pull_off", "adhesion", True, ("pull_off_n",), "plant"),

@@ -5,9 +5,10 @@ form the vocabulary has is a candidate of its own, so a family is tried in shape
 what a real mechanism may be: an end stop as a linear spring-damper and as a Hunt–Crossley
 (force ∝ indentation^1.5) contact, friction as Coulomb and as Stribeck (breakaway above the
 sliding force), a stiffening finger as exponential and as a power of the compression whose
-exponent is fitted (the cubic form is its exponent 2). A stop of another power, a LuGre friction
-or a hysteretic finger sits between or near these, and the family is named by the form that
-explains it best.
+exponent is fitted (the cubic form is its exponent 2), a finger body that yields as an
+elastoplastic (Jenkins) element. A stop of another power, a LuGre friction or a smoothly yielding
+(Bouc–Wen) finger sits between or near these, and the family is named by the form that explains
+it best.
 
 What the data can judge decides the list:
 
@@ -16,7 +17,10 @@ What the data can judge decides the list:
   key; the mocap clock offset is measured against the arm log, and the piano's velocity map
   against the measured key speed;
 - with MIDI only, everything acts through the outcomes, arm-side and readout effects included;
-- `stiffness_drift` changes nothing a single model predicts (its drift is random per block).
+- `stiffness_drift` changes nothing a single model predicts (its drift is random per block);
+- a yielding finger body (`finger_hysteresis`) is tried only where the fingertip and the arm are
+  tracked: its deflection is what it acts on, and with MIDI only it is a softer finger on the
+  way down and a later release, which the stiffnesses and readout already trade against.
 """
 
 from __future__ import annotations
@@ -27,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pianobot.analysis.greybox.forward import largest_compression_m
+from pianobot.analysis.greybox.forward import largest_compression_m, largest_deflection_m
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
 from pianobot.analysis.greybox.layout import Layout, Param, effect_params
 from pianobot.physics.effects import EFFECT_NAMES, EFFECTS
@@ -35,7 +39,7 @@ from pianobot.physics.model import KeystrokeModel
 
 #: Effects that act on the finger or the key (judged through the trajectories or the outcomes).
 KEY_SIDE: tuple[str, ...] = ("contact", "keybed", "key_preload", "key_friction", "finger_stiffening",
-                             "adhesion", "letoff")
+                             "adhesion", "letoff", "finger_hysteresis")
 #: Effects on the arm's motion: judged against a measured arm trace when there is one.
 ARM_SIDE: tuple[str, ...] = ("arm_lag", "arm_acceleration")
 
@@ -44,7 +48,7 @@ ARM_SIDE: tuple[str, ...] = ("arm_lag", "arm_acceleration")
 FAMILIES: dict[str, str] = {
     "contact": "contact", "adhesion": "contact", "keybed": "key_stop", "letoff": "key_stop",
     "key_preload": "key_action", "key_friction": "key_action", "finger_stiffening": "finger",
-    "stiffness_drift": "finger", "arm_lag": "arm", "arm_acceleration": "arm", "velocity_curve": "piano",
+    "stiffness_drift": "finger", "finger_hysteresis": "finger", "arm_lag": "arm", "arm_acceleration": "arm", "velocity_curve": "piano",
     "mocap_delay": "mocap",
 }
 
@@ -55,6 +59,12 @@ FAMILIES: dict[str, str] = {
 #: still would be an end stop, and a model that stiff needs an integration step too small to fit
 #: in reasonable time. (At 2, a MIDI log with a velocity curve also accepted an exponential finger.)
 STIFFENING_REACH = 1.5
+
+#: A yielding finger body's yield deflection is bounded by the largest body deflection the data
+#: show (a body that never yields is the linear one: the size would have nothing to act on) and
+#: started at this fraction of it; `start_points` tries `YIELD_FRACTIONS` of it as well.
+YIELD_START = 0.5
+YIELD_FRACTIONS = (0.25, 0.5, 0.8)
 
 #: Forms that another form of the same effect holds as a special case are not tried on their own:
 #: the power form at exponent 2 is the cubic (its fits start there).
@@ -96,21 +106,30 @@ def candidates(model: KeystrokeModel, batch: KeystrokeBatch) -> list[CandidateSp
             continue
         if effect == "adhesion" and "contact" not in model.effects:
             continue  # a pull-off force needs a contact that can open; contact comes first
+        if effect == "finger_hysteresis" and not trajectories:
+            continue  # the body's deflection is not seen (module docstring)
         out += [CandidateSpec(effect, form) for form in EFFECTS[effect].forms if (effect, form) not in SUBSUMED]
     return out
 
 
 def candidate_params(spec: CandidateSpec, batch: KeystrokeBatch) -> list[Param]:
-    """The effect's free parameters; depths start inside the key travel the data show, and a
-    stiffening finger's scale stays within `STIFFENING_REACH` of the largest compression."""
+    """The effect's free parameters; depths start inside the key travel the data show, a
+    stiffening finger's scale stays within `STIFFENING_REACH` of the largest compression, and a
+    yielding body's yield within the largest deflection (`YIELD_START` of it to start)."""
     start: dict[str, float] = {}
     travel = _travel_m(batch)
     if travel is not None:
         start = {"bed_depth_m": 0.85 * travel, "letoff_depth_m": 0.7 * travel}
     params = effect_params(spec.effect, spec.form, start)
     reach = STIFFENING_REACH / largest_compression_m(batch)
-    return [dataclasses.replace(p, upper=min(p.upper, reach), start=min(p.start, reach))
-            if p.name == "finger_stiffening.stiffening_per_m" else p for p in params]
+    params = [dataclasses.replace(p, upper=min(p.upper, reach), start=min(p.start, reach))
+              if p.name == "finger_stiffening.stiffening_per_m" else p for p in params]
+    deflection = largest_deflection_m(batch)
+    if deflection is None:
+        return params
+    return [dataclasses.replace(p, upper=max(min(p.upper, deflection), p.lower),
+                                start=min(max(YIELD_START * deflection, p.lower), p.upper))
+            if p.name == "finger_hysteresis.yield_m" else p for p in params]
 
 
 def _travel_m(batch: KeystrokeBatch) -> float | None:
@@ -140,6 +159,12 @@ def start_points(layout: Layout, spec: CandidateSpec, batch: KeystrokeBatch) -> 
             value = size.from_internal(lo + fraction * (hi - lo))
             if value != size.off:
                 sizes.append({size.name: value, **_scaled_siblings(params, size, value)})
+    yield_m = next((p for p in params if p.name == "finger_hysteresis.yield_m"), None)
+    if yield_m is not None:
+        # Where the body yields decides whether a keystroke's deflection reaches it at all: a
+        # yield above every deflection has no gradient, like a stop the key never reaches.
+        return [{yield_m.name: min(max(f * yield_m.upper, yield_m.lower), yield_m.upper), **s}
+                for f in YIELD_FRACTIONS for s in sizes]
     depth = next((p for p in params if p.name.endswith(("bed_depth_m", "letoff_depth_m"))), None)
     if depth is None:
         return sizes

@@ -190,6 +190,21 @@ def largest_compression_m(batch: KeystrokeBatch) -> float:
     return max(float(pen.max()), MIN_COMPRESSION_M) if pen.size else TYPICAL_COMPRESSION_M
 
 
+#: The least body deflection a yielding finger is judged at (a body barely loaded).
+MIN_DEFLECTION_M = 1e-3
+
+
+def largest_deflection_m(batch: KeystrokeBatch) -> float | None:
+    """The finger body's largest measured deflection (arm minus fingertip) before lift-off, at
+    least `MIN_DEFLECTION_M`; None without a fingertip trace (MIDI only: never seen)."""
+    if not batch.has_motion or batch.n == 0:
+        return None
+    inside = np.arange(batch.t_s.size)[None, :] <= model_window(batch)[:, None]
+    body = np.abs(batch.x0_m - batch.x1_m)
+    body = body[inside & np.isfinite(body)]
+    return max(float(body.max()), MIN_DEFLECTION_M) if body.size else None
+
+
 def model_window(batch: KeystrokeBatch) -> npt.NDArray[np.intp]:
     """Per keystroke, the last output sample the model describes: before the fingertip lifts
     off the key (see the module docstring); the whole trace when the key never moved."""
