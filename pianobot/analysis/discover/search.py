@@ -216,9 +216,12 @@ def joint(setting: Setting, current: GreyBoxFit, spec: CandidateSpec, screened: 
         return best
     # The start model's base values, with the effect's best starting point for them.
     prior = model_values(start_model, layout.levels_kpa)
-    fresh = {**current.params_, **{k: v for k, v in prior.items() if k in current.params_ and "." not in k}}
+    base = {k: v for k, v in prior.items() if k in current.params_ and "." not in k}
+    fresh = {**current.params_, **base}
     probe = GreyBoxFit(setting.train_drive, layout, channels=current.channels, sigma=current.sigma)
-    options = [layout.internal({**fresh, **screened.params_})]
+    # The screened fit is expressed in the full layout (`as_full`): its base values are the
+    # current ones this start is meant to leave; the rest (the effect, a MIDI log's readout) it fitted.
+    options = [layout.internal({**fresh, **{k: v for k, v in screened.params_.items() if k not in base}})]
     options += [layout.internal({**fresh, **point}) for point in start_points(layout, spec, setting.train)]
     other = fit(min(options, key=lambda th: _cost(probe, th)), JOINT_PROBE_NFEV)
     best_cost = _cost(best, best.theta_)
