@@ -96,7 +96,10 @@ def base_fit(setting: Setting, start: KeystrokeModel, mapper: Mapper = serial_ma
     needs = isinstance(commanded, Commanded) and commanded.needs_acceleration
     layout = base_layout(start, train.levels_kpa, trajectories=False, readout=True, fit_acceleration=needs)
     starts = [_scaled_readout(commanded, layout, _with_trigger(layout, f)) for f in (0.2, 0.4, 0.6, 0.8)]
-    best = min(starts, key=lambda th: _cost(GreyBoxFit(commanded, layout), th))
+    # One probe for all starts: its error levels are set at the first, so every start is scored
+    # on the same scale (a start scored on its own levels looks better the worse it fits).
+    probe = GreyBoxFit(commanded, layout)
+    best = min(starts, key=lambda th: _cost(probe, th))
     return GreyBoxFit(commanded, layout).fit(best)
 
 
