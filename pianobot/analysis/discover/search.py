@@ -88,7 +88,7 @@ class Evaluated:
 
 def base_fit(setting: Setting, start: KeystrokeModel, mapper: Mapper = serial_map) -> GreyBoxFit:
     """The base model fitted on the training keystrokes (see the module docstring); `mapper`
-    runs identify's independent free-coupling fits."""
+    runs the independent fits (identify's free-coupling fits; a MIDI log's trigger starts)."""
     train = setting.train
     if setting.mode == "trajectories":
         return fit_base(train, start, "auto", mapper)
@@ -96,11 +96,16 @@ def base_fit(setting: Setting, start: KeystrokeModel, mapper: Mapper = serial_ma
     needs = isinstance(commanded, Commanded) and commanded.needs_acceleration
     layout = base_layout(start, train.levels_kpa, trajectories=False, readout=True, fit_acceleration=needs)
     starts = [_scaled_readout(commanded, layout, _with_trigger(layout, f)) for f in (0.2, 0.4, 0.6, 0.8)]
-    # One probe for all starts: its error levels are set at the first, so every start is scored
-    # on the same scale (a start scored on its own levels looks better the worse it fits).
-    probe = GreyBoxFit(commanded, layout)
-    best = min(starts, key=lambda th: _cost(probe, th))
-    return GreyBoxFit(commanded, layout).fit(best)
+
+    def fit(theta: np.ndarray) -> GreyBoxFit:
+        return GreyBoxFit(commanded, layout).fit(theta)
+
+    # Every start is fitted (a local fit does not cross the trigger's step, and the best start
+    # need not lead to the best optimum), and the fits are scored on one judge's error levels:
+    # a fit scored on its own levels looks better the worse it fits.
+    fits = list(mapper(fit, starts))
+    judge = GreyBoxFit(commanded, layout)
+    return min(fits, key=lambda f: _cost(judge, f.theta_))
 
 
 def _scaled_readout(drive: Drive, layout: Layout, theta: np.ndarray) -> np.ndarray:
