@@ -34,6 +34,7 @@ import pandas as pd
 from scipy.optimize import least_squares
 from scipy.signal import bilinear, lfilter
 
+from pianobot.analysis.discover.arm_moves import DownMoves, fit_moves
 from pianobot.analysis.greybox.keystrokes import COMMAND_FIELDS, KeystrokeBatch
 from pianobot.analysis.greybox.noise import (
     VELOCITY_QUANTUM_SIGMA,
@@ -102,24 +103,6 @@ def _down_moves(batch: KeystrokeBatch) -> list[tuple[int, FloatArray, FloatArray
     return out
 
 
-def _fit_move(t: FloatArray, x: FloatArray, a: float, t0_free: bool) -> tuple[FloatArray, float]:
-    """Residual and start time of one down move for a given acceleration (d, v, t0 free)."""
-    d0 = float(np.max(x))
-    moving = np.flatnonzero((x > 0.1 * d0) & (x < 0.9 * d0))
-    v0 = 0.8 * d0 / max(float(t[moving[-1]] - t[moving[0]]), 1e-3) if moving.size > 1 else 0.05
-    t0 = float(t[np.flatnonzero(x > 0.02 * d0)[0]]) - 0.5 * d0 * 0.02 / max(v0, 1e-3) if t0_free else 0.0
-
-    def residual(p: FloatArray) -> FloatArray:
-        start = p[2] if t0_free else 0.0
-        return _move_m(t - start, p[0], p[1], a) - x
-
-    p0 = np.array([d0, v0, t0] if t0_free else [d0, v0])
-    lo = np.array([0.5 * d0, 1e-3, t[0] - 0.5] if t0_free else [0.5 * d0, 1e-3])
-    hi = np.array([1.5 * d0, 5.0, t[-1]] if t0_free else [1.5 * d0, 5.0])
-    res = least_squares(residual, np.clip(p0, lo + 1e-9, hi - 1e-9), bounds=(lo, hi), x_scale="jac", max_nfev=200)
-    return np.asarray(res.fun, dtype=np.float64), float(res.x[2]) if t0_free else 0.0
-
-
 def _ic(rss: float, n: int, n_eff: float, noise: float, k: int) -> float:
     """Information criterion of a fit with residual sum of squares `rss` over `n` samples
     (`n_eff` independent ones: the residual is autocorrelated), never below the noise."""
@@ -155,13 +138,13 @@ def arm_checks(batch: KeystrokeBatch) -> list[MeasuredCheck]:
     # The commanded start is known for a run's own arm log (t = 0) or from a schedule.
     command = batch.command_start_s
     timed = bool(np.isfinite(command[rows]).all()) if rows.size else False
-    rss: list[float] = []
-    for a in [math.inf, *_ACCELERATIONS]:
-        rss.append(sum(float(np.sum(_fit_move(t, x, a, True)[0] ** 2)) for t, x in moves))
+    padded = DownMoves.of(moves)
+    fits = [fit_moves(padded, a) for a in [math.inf, *_ACCELERATIONS]]
+    rss = [fit.rss for fit in fits]
     n = sum(t.size for t, _ in moves)
     noise = noise_sigma_m(np.concatenate([x for _, x in moves]))
     best = int(np.argmin(rss[1:])) + 1
-    residual = np.concatenate([_fit_move(t, x, _ACCELERATIONS[best - 1], True)[0] for t, x in moves])
+    residual = np.concatenate(padded.residuals(fits[best].residual))
     tau = autocorrelation_time(residual[None, :])
     n_eff = n / tau
 
@@ -182,7 +165,7 @@ def arm_checks(batch: KeystrokeBatch) -> list[MeasuredCheck]:
         # as a gentler acceleration if that were free), started where the command started.
         a_cmd = float(np.median(recorded)) if recorded.size else a_best
         commanded = command[rows]
-        starts = np.array([_fit_move(t, x, a_cmd, True)[1] for t, x in moves]) - commanded
+        starts = fit_moves(padded, a_cmd).starts - commanded
         drift = _clock_drift(batch, rows, starts) if batch.arm_source == "mocap" else None
         if drift is not None and drift.accepted:
             out.append(drift.check)
@@ -234,12 +217,12 @@ _SERVO_HZ = (0.5, 2.0, 5.0, 12.0, 30.0, 60.0)
 _SERVO_SKIP = 2.0
 
 
-def _servo_response(tc: FloatArray, xc: FloatArray, wn: float, zeta: float, feed: float) -> FloatArray:
-    """The command `xc` (on the uniform grid `tc`, from rest) through the servo
-    ẍ = ωn²·(xc − x) + 2ζωn·(κ·ẋc − ẋ): κ = 1 feeds the commanded speed forward (a ramp is
-    tracked without lag), κ = 0 is a plain second-order lag. Tustin-discretised."""
+def _servo_filter(wn: float, zeta: float, feed: float) -> tuple[FloatArray, FloatArray]:
+    """The servo ẍ = ωn²·(xc − x) + 2ζωn·(κ·ẋc − ẋ) as a digital filter on the command's grid
+    (Tustin): κ = 1 feeds the commanded speed forward (a ramp is tracked without lag), κ = 0 is
+    a plain second-order lag. Worked out once per parameter set (it is the same for every move)."""
     num, den = bilinear([2.0 * zeta * wn * feed, wn * wn], [1.0, 2.0 * zeta * wn, wn * wn], fs=1.0 / _SERVO_DT_S)
-    return np.asarray(lfilter(num, den, xc), dtype=np.float64)
+    return np.asarray(num, dtype=np.float64), np.asarray(den, dtype=np.float64)
 
 
 def _servo(moves: list[tuple[FloatArray, FloatArray]], commanded: FloatArray, a: float, noise: float) -> _Servo | None:
@@ -261,10 +244,11 @@ def _servo(moves: list[tuple[FloatArray, FloatArray]], commanded: FloatArray, a:
 
     def residual(p: FloatArray, filtered: bool) -> FloatArray:
         out = []
+        servo = _servo_filter(2.0 * math.pi * math.exp(p[-3]), math.exp(p[-2]), p[-1]) if filtered else None
         for k, (tc, tt, x) in enumerate(grids):
             xc = _move_m(tc, p[2 * k], p[2 * k + 1], a)
-            if filtered:
-                xc = _servo_response(tc, xc, 2.0 * math.pi * math.exp(p[-3]), math.exp(p[-2]), p[-1])
+            if servo is not None:
+                xc = lfilter(*servo, xc)
             r = np.interp(tt, tc, xc, left=0.0) - x
             out.append(r - trends[k] @ (trends_pinv[k] @ r))  # the capture volume's slow drift
         return np.concatenate(out)
