@@ -84,30 +84,50 @@ class MoveFit:
         return self.params[:, 2]
 
 
-def trapezoid(t: FloatArray, params: FloatArray, a: float) -> tuple[FloatArray, FloatArray]:
-    """Distance moved at times `t` (m, L) by moves `params` (m, 3: travel, speed, start) at
-    acceleration `a` (∞: a ramp), and its derivatives (m, L, 3) with respect to the params."""
+def _phases(t: FloatArray, params: FloatArray, a: float) -> tuple[FloatArray, ...]:
+    """τ, travel and speed as columns, whether a triangle (1.0), the time spent accelerating
+    (= braking) and the move's duration (finite `a`)."""
     d, v, t0 = (params[:, j : j + 1] for j in range(3))
-    tau = t - t0
-    s, jac = np.zeros_like(t), np.zeros((*t.shape, 3))
-    if not math.isfinite(a):
-        moving = (tau > 0.0) & (v * tau < d)
-        s = np.where(moving, v * tau, np.where(tau > 0.0, d, 0.0))
-        jac[..., 0] = (tau > 0.0) & ~moving
-        jac[..., 1] = np.where(moving, tau, 0.0)
-        jac[..., 2] = np.where(moving, -v, 0.0)
-        return s, jac
     triangle = d < v * v / a
     ta = np.where(triangle, np.sqrt(d / a), v / a)
     total = np.where(triangle, 2.0 * ta, d / v + v / a)
-    brake = total - ta  # where braking starts
+    return tuple(np.asarray(z, dtype=np.float64) for z in (t - t0, d, v, triangle, ta, total))
+
+
+def trapezoid_m(t: FloatArray, params: FloatArray, a: float) -> FloatArray:
+    """Distance moved at times `t` (m, L) by moves `params` (m, 3: travel, speed, start) at
+    acceleration `a` (∞: a ramp)."""
+    if not math.isfinite(a):
+        d, v, t0 = (params[:, j : j + 1] for j in range(3))
+        return np.asarray(np.clip(v * (t - t0), 0.0, d), dtype=np.float64)
+    tau, d, v, triangle_f, ta, total = _phases(t, params, a)
+    triangle = triangle_f > 0.0
+    peak = np.where(triangle, a * ta, v)
+    up = np.clip(tau, 0.0, ta)
+    down = np.clip(tau - (total - ta), 0.0, ta)
+    # Accelerate, cruise (none for a triangle), brake: ½a·u² + peak·(τ − ta) − ½a·w² in effect.
+    cruise = np.clip(tau, ta, total) - ta
+    return np.asarray(0.5 * a * up * up + peak * cruise - 0.5 * a * down * down, dtype=np.float64)
+
+
+def trapezoid(t: FloatArray, params: FloatArray, a: float) -> tuple[FloatArray, FloatArray]:
+    """`trapezoid_m` and its derivatives (m, L, 3) with respect to the params."""
+    jac = np.zeros((*t.shape, 3))
+    if not math.isfinite(a):
+        d, v, t0 = (params[:, j : j + 1] for j in range(3))
+        tau = t - t0
+        moving = (tau > 0.0) & (v * tau < d)
+        jac[..., 0] = (tau > 0.0) & ~moving
+        jac[..., 1] = np.where(moving, tau, 0.0)
+        jac[..., 2] = np.where(moving, -v, 0.0)
+        return trapezoid_m(t, params, a), jac
+    tau, d, v, triangle_f, ta, total = _phases(t, params, a)
+    triangle = triangle_f > 0.0
     left = total - tau  # time to the end of the move
     up = (tau >= 0.0) & (tau < ta)
-    cruise = (tau >= ta) & (tau < brake)
-    down = (tau >= brake) & (tau < total)
+    cruise = (tau >= ta) & (tau < total - ta)
+    down = (tau >= total - ta) & (tau < total)
     done = tau >= total
-    s = np.select([up, cruise, down, done], [0.5 * a * tau**2, v * tau - v * v / (2.0 * a),
-                                             d - 0.5 * a * left**2, np.broadcast_to(d, t.shape)], 0.0)
     # d: only where braking (the end moves with it) and after; v: cruising and braking of a
     # trapezoid (a triangle's peak is set by d and a); t0: the speed, negated.
     dd_brake = np.where(triangle, 1.0 - left / ta, 1.0 - a * left / v)
@@ -115,7 +135,7 @@ def trapezoid(t: FloatArray, params: FloatArray, a: float) -> tuple[FloatArray, 
     dv_brake = np.where(triangle, 0.0, -a * left * (1.0 / a - d / (v * v)))
     jac[..., 1] = np.where(cruise, np.where(triangle, 0.0, tau - v / a), np.where(down, dv_brake, 0.0))
     jac[..., 2] = np.select([up, cruise, down], [-a * tau, np.broadcast_to(-v, t.shape), -a * left], 0.0)
-    return s, jac
+    return trapezoid_m(t, params, a), jac
 
 
 def fit_moves(moves: DownMoves, a: float, max_iterations: int = 200) -> MoveFit:

@@ -70,22 +70,6 @@ class MeasuredCheck:
                 "accepted": self.accepted, "text": self.text, "params": self.params}
 
 
-def _move_m(t: FloatArray, d: float, v: float, a: float) -> FloatArray:
-    """Distance of a moveL trapezoid (triangle when short; a = inf: ramp) `t` after its start."""
-    if not math.isfinite(a):
-        return np.clip(v * t, 0.0, d)
-    if d < v * v / a:
-        ta = math.sqrt(d / a)
-        v = a * ta
-        tc = 0.0
-    else:
-        ta, tc = v / a, d / v - v / a
-    u1 = np.clip(t, 0.0, ta)
-    u2 = np.clip(t - ta, 0.0, tc)
-    u3 = np.clip(t - ta - tc, 0.0, ta)
-    return 0.5 * a * u1**2 + v * (u2 + u3) - 0.5 * a * u3**2
-
-
 def _down_moves(batch: KeystrokeBatch) -> list[tuple[int, FloatArray, FloatArray]]:
     """Each keystroke's measured arm from rest to its deepest point (time on the arm's clock),
     with the keystroke's row."""
@@ -225,6 +209,67 @@ def _servo_filter(wn: float, zeta: float, feed: float) -> tuple[FloatArray, Floa
     return np.asarray(num, dtype=np.float64), np.asarray(den, dtype=np.float64)
 
 
+@dataclass(frozen=True)
+class _CommandResidual:
+    """The measured moves against their commands, every move at once, less each move's straight
+    line in time (the whole capture volume drifts slowly, tens of µm over a long move; a servo
+    shows at the command's corners).
+
+    A trapezoid from rest is four steps of acceleration (+a at 0, −a where cruising starts and
+    where braking starts, +a at the end), so the command, or the servo's response to it, is four
+    shifted copies of the response to x = ½t² (linear, time-invariant). That response is ½t²
+    exactly without a servo; through one, ½t² plus the servo's error, filtered once per
+    parameter set on a 1 ms grid and read at each sample's shifted times."""
+
+    a: float
+    t: FloatArray  # (m, Lt): sample times from the commanded start, padded
+    x: FloatArray  # (m, Lt): measured, padded
+    real: npt.NDArray[np.bool_]  # (m, Lt): a sample, not padding
+    trend: FloatArray  # (m, Lt, 2): [1, t] on the samples, 0 on padding
+    trend_pinv: FloatArray  # (m, 2, Lt)
+    grid: FloatArray  # (Lc,): where the servo's error is worked out (0 up to past the last sample)
+
+    @classmethod
+    def of(cls, moves: list[tuple[FloatArray, FloatArray]], a: float) -> _CommandResidual:
+        """`moves`: each move's sample times from its commanded start, and its positions."""
+        m, length = len(moves), max(tt.size for tt, _ in moves)
+        steps = int(math.ceil(max(float(tt[-1]) for tt, _ in moves) / _SERVO_DT_S)) + 2
+        tt_pad, x_pad = np.zeros((m, length)), np.zeros((m, length))
+        real = np.zeros((m, length), dtype=bool)
+        trend, trend_pinv = np.zeros((m, length, 2)), np.zeros((m, 2, length))
+        for k, (tt, x) in enumerate(moves):
+            n = tt.size
+            tt_pad[k, :n], x_pad[k, :n], real[k, :n] = tt, x, True
+            trend[k, :n] = np.column_stack([np.ones_like(tt), tt])
+            trend_pinv[k, :, :n] = np.linalg.pinv(trend[k, :n])
+        return cls(a, tt_pad, x_pad, real, trend, trend_pinv, np.arange(steps, dtype=np.float64) * _SERVO_DT_S)
+
+    def __call__(self, p: FloatArray, filtered: bool) -> FloatArray:
+        """The residual of moves (travel, speed) pairs `p[:2m]`, through the servo
+        (log ωn/2π, log ζ, κ = `p[-3:]`) when `filtered`, each move's samples in turn."""
+        m, a = self.x.shape[0], self.a
+        d, v = p[0 : 2 * m : 2, None], p[1 : 2 * m : 2, None]
+        triangle = d < v * v / a
+        ta = np.where(triangle, np.sqrt(d / a), v / a)
+        total = np.where(triangle, 2.0 * ta, d / v + v / a)
+        error = None
+        if filtered:
+            half_t2 = 0.5 * self.grid**2
+            servo = _servo_filter(2.0 * math.pi * math.exp(p[-3]), math.exp(p[-2]), p[-1])
+            error = lfilter(*servo, half_t2) - half_t2
+
+        def response(tau: FloatArray) -> FloatArray:
+            late = np.maximum(tau, 0.0)
+            out = 0.5 * late * late
+            return out if error is None else out + np.interp(tau, self.grid, error, left=0.0)
+
+        command = a * (response(self.t) - response(self.t - ta) - response(self.t - (total - ta))
+                       + response(self.t - total))
+        r = np.where(self.real, command - self.x, 0.0)
+        r = r - np.einsum("mlj,mj->ml", self.trend, np.einsum("mjl,ml->mj", self.trend_pinv, r))
+        return np.asarray(r[self.real], dtype=np.float64)
+
+
 def _servo(moves: list[tuple[FloatArray, FloatArray]], commanded: FloatArray, a: float, noise: float) -> _Servo | None:
     """Does the measured arm follow its command (each move a trapezoid at the commanded
     acceleration from its commanded start, `commanded`, its travel and speed free) exactly, or
@@ -236,22 +281,9 @@ def _servo(moves: list[tuple[FloatArray, FloatArray]], commanded: FloatArray, a:
     for (t, x), c in zip(moves, commanded, strict=True):
         tc = np.arange(0.0, float(t[-1] - c) + _SERVO_DT_S, _SERVO_DT_S)
         grids.append((tc, t - c, x))
-
-    # Each move's residual is taken less its straight line in time: the whole capture volume
-    # drifts slowly (tens of µm over a long move), a servo shows at the command's corners.
-    trends = [np.column_stack([np.ones_like(tt), tt]) for _, tt, _ in grids]
-    trends_pinv = [np.linalg.pinv(b) for b in trends]
-
-    def residual(p: FloatArray, filtered: bool) -> FloatArray:
-        out = []
-        servo = _servo_filter(2.0 * math.pi * math.exp(p[-3]), math.exp(p[-2]), p[-1]) if filtered else None
-        for k, (tc, tt, x) in enumerate(grids):
-            xc = _move_m(tc, p[2 * k], p[2 * k + 1], a)
-            if servo is not None:
-                xc = lfilter(*servo, xc)
-            r = np.interp(tt, tc, xc, left=0.0) - x
-            out.append(r - trends[k] @ (trends_pinv[k] @ r))  # the capture volume's slow drift
-        return np.concatenate(out)
+    if min(tc.size for tc, _, _ in grids) < 2:
+        return None  # a move that ended before its command: no command to follow
+    residual = _CommandResidual.of([(tt, x) for _, tt, x in grids], a)
 
     d0 = np.array([float(np.max(x)) for _, _, x in grids])
     p0 = np.column_stack([d0, np.full(d0.size, 0.05)]).ravel()
