@@ -263,7 +263,8 @@ from pianobot.analysis.greybox.load import load_keystrokes, read_schedule
 from pianobot.io.importers import import_keystroke_log, import_mocap
 files, truth, data = json.loads(sys.argv[2]), json.loads(sys.argv[3]), Path(sys.argv[4])
 if "take" in files:
-    run = import_mocap(Path(files["take"]), data, vacuum_kpa=float(truth["vacuum_kpa"])).run_id
+    arm_log = {"arm_log": Path(files["arm_log"])} if "arm_log" in files else {}
+    run = import_mocap(Path(files["take"]), data, vacuum_kpa=float(truth["vacuum_kpa"]), **arm_log).run_id
     schedule = read_schedule(Path(files["presses"])) if "presses" in files else None
     batch = load_keystrokes([run], data, schedule=schedule).batch
 else:
@@ -276,9 +277,11 @@ print(json.dumps({"cpu_s": time.process_time() - start, "found": [v.label for v 
 """
 
 
-def speed_suite(reference: Path, only: list[str] | None, log: Callable[[str], None]) -> list[dict[str, Any]]:
+def speed_suite(reference: Path, only: list[str] | None, log: Callable[[str], None],
+                files: str = "presses") -> list[dict[str, Any]]:
     """Process CPU of one discovery with this tree's code and with `reference` (a checkout of
-    another commit, e.g. the last release) on the same files, alternating, in the same run."""
+    another commit, e.g. the last release) on the same files, alternating, in the same run
+    (`files`: FILE_SETS; "lab" also imports each take's arm log)."""
     import subprocess
 
     from tests.truth import full_suite, materialise
@@ -289,11 +292,12 @@ def speed_suite(reference: Path, only: list[str] | None, log: Callable[[str], No
     with tempfile.TemporaryDirectory() as scratch:
         for scenario in scenarios:
             made = materialise(scenario, Path(scratch) / "files")
-            row: dict[str, Any] = {"scenario": scenario.name}
+            given = {k: str(v) for k, v in made.files.items() if k != "arm_log" or files == "lab"}
+            row: dict[str, Any] = {"scenario": scenario.name, "files": files}
             for label, tree in (("reference", reference), ("this", ROOT)):
                 data = Path(scratch) / f"data-{label}-{scenario.name}"
                 out = subprocess.run(
-                    [sys.executable, "-c", _CHILD, str(tree), json.dumps({k: str(v) for k, v in made.files.items()}),
+                    [sys.executable, "-c", _CHILD, str(tree), json.dumps(given),
                      json.dumps(made.truth, default=str), str(data)],
                     capture_output=True, text=True, check=True, cwd=tree)
                 got = json.loads(out.stdout.strip().splitlines()[-1])
@@ -428,7 +432,7 @@ def main() -> None:
                              "tree's on the same scenarios (SPEED_SCENARIOS, or --only), alternating in one run")
     args = parser.parse_args()
     if args.reference is not None:
-        rows = speed_suite(args.reference, args.only, lambda line: print(line, flush=True))
+        rows = speed_suite(args.reference, args.only, lambda line: print(line, flush=True), args.files)
         ratios = sorted(r["speed_up"] for r in rows)
         payload = {"benchmark": "discover-speed", "reference": args.reference.name, "rows": rows,
                    "median_speed_up": ratios[len(ratios) // 2] if ratios else None}
