@@ -84,13 +84,21 @@ class MoveFit:
         return self.params[:, 2]
 
 
+def ramp_and_duration_s(d: FloatArray, v: FloatArray, a: float) -> tuple[FloatArray, FloatArray]:
+    """Time spent accelerating (= braking) and the whole move's duration, for travels `d` and
+    cruise speeds `v` at acceleration `a` (finite): a triangle when d < v²/a."""
+    triangle = d < v * v / a
+    ta = np.where(triangle, np.sqrt(d / a), v / a)
+    total = np.where(triangle, 2.0 * ta, d / v + v / a)
+    return np.asarray(ta, dtype=np.float64), np.asarray(total, dtype=np.float64)
+
+
 def _phases(t: FloatArray, params: FloatArray, a: float) -> tuple[FloatArray, ...]:
     """τ, travel and speed as columns, whether a triangle (1.0), the time spent accelerating
     (= braking) and the move's duration (finite `a`)."""
     d, v, t0 = (params[:, j : j + 1] for j in range(3))
-    triangle = d < v * v / a
-    ta = np.where(triangle, np.sqrt(d / a), v / a)
-    total = np.where(triangle, 2.0 * ta, d / v + v / a)
+    ta, total = ramp_and_duration_s(d, v, a)
+    triangle = np.asarray(d < v * v / a, dtype=np.float64)
     return tuple(np.asarray(z, dtype=np.float64) for z in (t - t0, d, v, triangle, ta, total))
 
 

@@ -34,7 +34,7 @@ import pandas as pd
 from scipy.optimize import least_squares
 from scipy.signal import bilinear, lfilter
 
-from pianobot.analysis.discover.arm_moves import DownMoves, fit_moves
+from pianobot.analysis.discover.arm_moves import DownMoves, fit_moves, ramp_and_duration_s
 from pianobot.analysis.greybox.keystrokes import COMMAND_FIELDS, KeystrokeBatch
 from pianobot.analysis.greybox.noise import (
     VELOCITY_QUANTUM_SIGMA,
@@ -248,10 +248,7 @@ class _CommandResidual:
         """The residual of moves (travel, speed) pairs `p[:2m]`, through the servo
         (log ωn/2π, log ζ, κ = `p[-3:]`) when `filtered`, each move's samples in turn."""
         m, a = self.x.shape[0], self.a
-        d, v = p[0 : 2 * m : 2, None], p[1 : 2 * m : 2, None]
-        triangle = d < v * v / a
-        ta = np.where(triangle, np.sqrt(d / a), v / a)
-        total = np.where(triangle, 2.0 * ta, d / v + v / a)
+        ta, total = ramp_and_duration_s(p[0 : 2 * m : 2, None], p[1 : 2 * m : 2, None], a)
         error = None
         if filtered:
             half_t2 = 0.5 * self.grid**2
@@ -277,26 +274,23 @@ def _servo(moves: list[tuple[FloatArray, FloatArray]], commanded: FloatArray, a:
     by all moves)? None when the moves are too few or the fit fails."""
     if len(moves) < 3 or not (math.isfinite(a) and a > 0):
         return None
-    grids = []
-    for (t, x), c in zip(moves, commanded, strict=True):
-        tc = np.arange(0.0, float(t[-1] - c) + _SERVO_DT_S, _SERVO_DT_S)
-        grids.append((tc, t - c, x))
-    if min(tc.size for tc, _, _ in grids) < 2:
+    timed = [(np.asarray(t - c, dtype=np.float64), x) for (t, x), c in zip(moves, commanded, strict=True)]
+    if min(float(tt[-1]) for tt, _ in timed) <= 0.0:
         return None  # a move that ended before its command: no command to follow
-    residual = _CommandResidual.of([(tt, x) for _, tt, x in grids], a)
+    residual = _CommandResidual.of(timed, a)
 
-    d0 = np.array([float(np.max(x)) for _, _, x in grids])
+    d0 = np.array([float(np.max(x)) for _, x in timed])
     p0 = np.column_stack([d0, np.full(d0.size, 0.05)]).ravel()
     lo = np.column_stack([0.5 * d0, np.full(d0.size, 1e-3)]).ravel()
     hi = np.column_stack([1.5 * d0, np.full(d0.size, 5.0)]).ravel()
-    for k, (_, tt, x) in enumerate(grids):  # the speed from the move's middle
+    for k, (tt, x) in enumerate(timed):  # the speed from the move's middle
         mid = np.flatnonzero((x > 0.2 * d0[k]) & (x < 0.8 * d0[k]))
         if mid.size > 1 and tt[mid[-1]] > tt[mid[0]]:
             p0[2 * k + 1] = float(np.clip((x[mid[-1]] - x[mid[0]]) / (tt[mid[-1]] - tt[mid[0]]), 2e-3, 4.0))
     n_moves = d0.size
-    sparsity = np.zeros((sum(g[1].size for g in grids), 2 * n_moves + 3), dtype=np.int8)
+    sparsity = np.zeros((sum(tt.size for tt, _ in timed), 2 * n_moves + 3), dtype=np.int8)
     row = 0
-    for k, (_, tt, _) in enumerate(grids):
+    for k, (tt, _) in enumerate(timed):
         sparsity[row : row + tt.size, 2 * k : 2 * k + 2] = 1
         row += tt.size
     sparsity[:, -3:] = 1
