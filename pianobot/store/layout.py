@@ -199,8 +199,22 @@ def encode_parquet_view(table: pa.Table, *, part: bool = False) -> memoryview:
     """`encode_parquet` without copying the file into a `bytes` (a part is megabytes: the copy
     cost a simulated sweep ~20 µs per trial); for bytes written and hashed here and now."""
     sink = pa.BufferOutputStream()
+    if part:
+        table = _without_nulls_declared(table)
     pq.write_table(table, sink, **parquet_options(table.schema, part=part))
     return memoryview(sink.getvalue())
+
+
+def _without_nulls_declared(table: pa.Table) -> pa.Table:
+    """`table` with every column that holds no null declared non-nullable.
+
+    The Parquet writer then skips the definition levels (a bit per value, worked out for every
+    value): half the CPU of encoding a simulated sweep's samples part, and the same bytes of
+    data. Compaction declares the fields as the run's files have them again.
+    """
+    fields = [f.with_nullable(False) if f.nullable and table.column(i).null_count == 0 else f
+              for i, f in enumerate(table.schema)]
+    return table.cast(pa.schema(fields, metadata=table.schema.metadata))
 
 
 def sha256_file(path: Path) -> str:

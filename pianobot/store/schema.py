@@ -107,6 +107,12 @@ def as_declared(table: pa.Table, name: str) -> pa.Table:
             declared.field(field.name).type
         ):
             table = table.set_column(i, field.name, table.column(i).cast(pa.string()))
+    # A part declares its null-free columns non-nullable (`store.layout`); a run reads as declared.
+    if any(not f.nullable and f.name in declared.names and declared.field(f.name).nullable
+           for f in table.schema):
+        fields = [f.with_nullable(True) if f.name in declared.names and declared.field(f.name).nullable
+                  else f for f in table.schema]
+        table = table.cast(pa.schema(fields, metadata=table.schema.metadata))
     return table
 
 
