@@ -210,7 +210,7 @@ def _without_nulls_declared(table: pa.Table) -> pa.Table:
 
     The Parquet writer then skips the definition levels (a bit per value, worked out for every
     value): half the CPU of encoding a simulated sweep's samples part, and the same bytes of
-    data. Compaction declares the fields as the run's files have them again.
+    data. Readers get the fields as `TABLE_SCHEMAS` declares them (`schema.as_declared`).
     """
     fields = [f.with_nullable(False) if f.nullable and table.column(i).null_count == 0 else f
               for i, f in enumerate(table.schema)]

@@ -17,7 +17,9 @@ import pyarrow.parquet as pq
 
 from pianobot.run.rows import SampleChunk, TrialData, samples_table
 from pianobot.store import RunWriter, load_run
+from pianobot.store.layout import RunPaths
 from pianobot.store.schema import TABLE_SCHEMAS
+from pianobot.store.tables import read_run_table
 
 
 def _data(trial_id: str, n: int, seed: int) -> TrialData:
@@ -60,6 +62,10 @@ def test_block_samples_keep_ids_as_dictionaries_and_read_back_as_strings(tmp_pat
     stored = pq.ParquetFile(run.path / "samples" / "samples-000002.parquet")
     assert pa.types.is_dictionary(stored.schema_arrow.field("trial_id").type)
     assert "BYTE_STREAM_SPLIT" in stored.metadata.row_group(0).column(3).encodings
+    # Columns without nulls are declared so in the file (no definition levels to write); the
+    # reader hands them out as declared, nullable, live or finished.
+    assert not stored.schema_arrow.field("x0_m").nullable
+    assert read_run_table(RunPaths(run.path), "samples").schema.field("x0_m").nullable
 
 
 def test_parts_with_plain_string_ids_compact_with_dictionary_ones(tmp_path: Path) -> None:
