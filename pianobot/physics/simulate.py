@@ -40,6 +40,7 @@ FloatArray = npt.NDArray[np.float64]
 # push its output out of cache (random sweep, 128-trial blocks: 118 µs per keystroke at 16
 # lanes, 140 at 64; the same 3,840 presses sorted as a whole: 57 against 85-97).
 BATCH_LANES = K.BLOCK
+SMALL_LANES = K.SMALL_BLOCK  # a call with at most this many keystrokes runs the small kernel
 MAX_STEP_S = 2e-4  # impacts on the keybed (≈ 150 Hz) need at least ~30 steps per period
 SETTLE_S = 0.3  # simulated after the arm is back up, so the key can come to rest
 

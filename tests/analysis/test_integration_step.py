@@ -11,8 +11,15 @@ import dataclasses
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from pianobot.analysis.greybox.prediction import STEP_PER_DAMPING_TIME, integration_step_s
+from pianobot.analysis.greybox.prediction import (
+    GROUP,
+    STEP_PER_DAMPING_TIME,
+    integration_step_s,
+    length_groups,
+)
 from pianobot.physics.model import KeystrokeModel
 from pianobot.physics.simulate import simulate_arm
 
@@ -75,3 +82,33 @@ def test_a_sharply_stiffening_finger_is_judged_where_it_is_compressed(per_m: flo
     assert step > 2.5 * integration_step_s(model, LEVELS, LARGEST_S)
     x1, x2 = _press(model, step)
     assert max(np.max(np.abs(x1 - r1)), np.max(np.abs(x2 - r2))) < 1e-6
+
+
+def _cost(groups: list[np.ndarray], lengths: np.ndarray) -> float:
+    from pianobot.analysis.greybox.prediction import BLOCK_STEP_COST, CALL_COST_STEPS
+    from pianobot.physics.simulate import SMALL_LANES
+
+    return sum((1.0 if g.size <= SMALL_LANES else BLOCK_STEP_COST) * float(lengths[g].max()) + CALL_COST_STEPS
+               for g in groups)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.floats(1.0, 1e5), min_size=1, max_size=60))
+def test_length_groups_cover_every_row_once_at_no_more_cost_than_blocks_of_16(raw: list[float]) -> None:
+    lengths = np.asarray(raw)
+    groups = length_groups(lengths)
+    rows = np.concatenate(groups)
+    assert sorted(rows.tolist()) == list(range(lengths.size))
+    assert all(0 < g.size <= GROUP for g in groups)
+    order = np.argsort(-lengths, kind="stable")
+    blocks = [order[i : i + GROUP] for i in range(0, order.size, GROUP)]
+    assert _cost(groups, lengths) <= _cost(blocks, lengths) + 1e-6
+
+
+def test_length_groups_keep_the_long_presses_of_a_take_away_from_its_short_ones() -> None:
+    """A take's 16 training presses: two slow ones of 14 s, the rest 2.5-7.5 s."""
+    lengths = np.array([14.3, 14.3, 7.5, 7.5, 5.2, 5.2, 4.1, 4.1, 3.4, 3.4, 3.0, 3.0, 2.7, 2.7, 2.5, 2.5]) / 5e-4
+    groups = length_groups(lengths)
+    first = groups[0]
+    assert set(first.tolist()) >= {0, 1} and first.size <= 4  # the slow pair runs in the small kernel
+    assert _cost(groups, lengths) < 0.8 * _cost([np.arange(16)], lengths)

@@ -25,7 +25,12 @@ import numpy as np
 import numpy.typing as npt
 
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
-from pianobot.analysis.greybox.prediction import GROUP, SIM_STEP_S, Prediction, integration_step_s
+from pianobot.analysis.greybox.prediction import (
+    SIM_STEP_S,
+    Prediction,
+    integration_step_s,
+    length_groups,
+)
 from pianobot.physics.model import KeystrokeModel
 from pianobot.physics.piano import PianoParams, on_velocity_from_speed
 from pianobot.physics.simulate import simulate_presses
@@ -133,9 +138,7 @@ class Commanded:
         piano = model.readout_params()
         n = batch.n
         out = [np.full(n, np.nan) for _ in range(4)]
-        order = np.argsort(cuts, kind="stable")
-        for start in range(0, n, GROUP):
-            rows = order[start : start + GROUP]
+        for rows in length_groups(cuts / step_s):
             duration = float(cuts[rows].max())
             with np.errstate(over="ignore", invalid="ignore"):
                 sim = simulate_presses([presses[i] for i in rows], batch.vacuum_kpa[rows], model,

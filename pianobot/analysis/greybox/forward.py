@@ -42,11 +42,11 @@ import numpy.typing as npt
 
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
 from pianobot.analysis.greybox.prediction import (
-    GROUP,
     SIM_STEP_S,
     TYPICAL_COMPRESSION_M,
     Prediction,
     integration_step_s,
+    length_groups,
 )
 from pianobot.analysis.greybox.stages import KEY_MOTION_THRESHOLD_M, fill_gaps
 from pianobot.physics.effects import Effects
@@ -152,9 +152,7 @@ class MeasuredArm:
         arm = self.arm_m(input_x0_m)
         dt = batch.dt_s
         outs = [np.full(batch.x1_m.shape, np.nan) for _ in range(4 if states else 2)]
-        order = np.argsort(-self.last, kind="stable")
-        for start in range(0, order.size, GROUP):
-            rows = order[start : start + GROUP]
+        for rows in length_groups((self.lead + self.last + 1) * (dt / step_s)):
             n_out = self.lead + int(self.last[rows].max()) + 1
             n_in = min(self.t_sim_s.size, int(math.ceil(n_out * dt / (self.t_sim_s[1] - self.t_sim_s[0]))) + 2)
             with np.errstate(over="ignore", invalid="ignore"):  # trial parameters may be unstable

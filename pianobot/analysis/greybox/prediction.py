@@ -15,6 +15,7 @@ import numpy as np
 import numpy.typing as npt
 
 from pianobot.physics.model import KeystrokeModel
+from pianobot.physics.simulate import BATCH_LANES, SMALL_LANES
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -60,9 +61,13 @@ class Prediction:
 #: keystroke stays far below mocap noise (a stiffer or more heavily damped model takes a smaller
 #: one: `integration_step_s`).
 SIM_STEP_S = 2e-4
-#: Keystrokes simulated side by side (the simulator's SIMD block): rows are grouped by length,
-#: so short keystrokes are not integrated through the long ones' rest.
-GROUP = 16
+#: Keystrokes simulated side by side at most (the simulator's SIMD block): rows are grouped by
+#: length (`length_groups`), so short keystrokes are not integrated through the long ones' rest.
+GROUP = BATCH_LANES
+#: What a step of the 16-lane kernel costs against one of the 4-lane kernel (measured: 2.1× for
+#: the linear model, 2.7× with effects), and the cost of a call of its own, in 4-lane steps.
+BLOCK_STEP_COST = 2.4
+CALL_COST_STEPS = 1000.0
 
 #: The step is kept below these fractions of the model's fastest time scales. Oscillation
 #: (h·ω, ω the largest natural frequency): accuracy of the phase over a keystroke, 0.2 is ~30
@@ -118,3 +123,37 @@ def integration_step_s(model: KeystrokeModel, vacuum_kpa: FloatArray, largest_s:
         damping = _largest_eigenvalue((lp.c0_nspm + c1) / m1, -c1 / m1, -c1 / m2, (c1 + lp.c2_nspm + c_bed) / m2)
         step = min(step, STEP_PER_PERIOD / max(omega, 1e-300), STEP_PER_DAMPING_TIME / max(damping, 1e-300))
     return step
+
+
+def length_groups(lengths: npt.ArrayLike) -> list[npt.NDArray[np.intp]]:
+    """Rows to simulate together, longest first: every row of a group is integrated as long as
+    its longest one, so the rows are split where that costs least.
+
+    `lengths` are the rows' simulated lengths in steps. A group of up to `SMALL_LANES` rows runs
+    the 4-lane kernel, a larger one (up to `GROUP`) the 16-lane kernel at `BLOCK_STEP_COST` per
+    step; each call costs `CALL_COST_STEPS` more. The split is exact (dynamic programming over
+    the rows sorted by length), and a row's samples do not depend on its companions, so only
+    the time changes. A take whose slowest presses last five times its fastest simulates its
+    16 training keystrokes as four groups of four instead of one block of 16 as long as the
+    slowest: 1.3× less time per evaluation on the independent suite's takes.
+    """
+    n_steps = np.asarray(lengths, dtype=np.float64)
+    order = np.argsort(-n_steps, kind="stable")
+    longest = n_steps[order]
+    n = order.size
+    best = np.full(n + 1, np.inf)
+    best[0] = 0.0
+    cut = np.zeros(n + 1, dtype=np.intp)
+    for end in range(1, n + 1):
+        for size in range(1, min(GROUP, end) + 1):
+            start = end - size
+            per_step = 1.0 if size <= SMALL_LANES else BLOCK_STEP_COST
+            cost = best[start] + per_step * longest[start] + CALL_COST_STEPS
+            if cost < best[end]:
+                best[end], cut[end] = cost, start
+    groups = []
+    end = n
+    while end > 0:
+        groups.append(order[cut[end] : end])
+        end = cut[end]
+    return groups[::-1]
