@@ -42,11 +42,11 @@ import numpy.typing as npt
 
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
 from pianobot.analysis.greybox.prediction import (
-    SIM_STEP_S,
     TYPICAL_COMPRESSION_M,
     Prediction,
     integration_step_s,
     length_groups,
+    trace_step_s,
 )
 from pianobot.analysis.greybox.stages import KEY_MOTION_THRESHOLD_M, fill_gaps
 from pianobot.physics.effects import Effects
@@ -148,7 +148,7 @@ class MeasuredArm:
         if isinstance(model, MSDParams):
             model = KeystrokeModel(msd=model, effects=Effects.none())
         batch = self.batch
-        step_s = integration_step_s(model, batch.vacuum_kpa, SIM_STEP_S, self.compression_m)
+        step_s = integration_step_s(model, batch.vacuum_kpa, trace_step_s(model), self.compression_m)
         arm = self.arm_m(input_x0_m)
         dt = batch.dt_s
         outs = [np.full(batch.x1_m.shape, np.nan) for _ in range(4 if states else 2)]
