@@ -14,11 +14,17 @@ samples, so a fit sees smooth functions of the parameters.
 Only what the MIDI needs is simulated: each keystroke until its arm has risen back past the
 depth it pressed plus a margin (the key is back above its release depth by then); keystrokes
 are simulated in blocks of similar length.
+
+The piano's readout (trigger and release depth, full-scale speed, velocity curve) does not act
+on the keystroke, only on how it is read. A fit differentiates the readout's parameters too, so
+the last few simulations are kept with the model they came from, minus its readout: a model
+that differs from one of them only there is read again from the same key traces, not simulated
+(the same numbers: the simulation's inputs are the same).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -39,6 +45,9 @@ from pianobot.physics.trajectory import Press, press_timing
 FloatArray = npt.NDArray[np.float64]
 
 OUT_DT_S = 1e-3
+#: Simulations kept for a model that differs only in its readout (a fit's Jacobian perturbs each
+#: parameter in turn from the same point; the readout's come after the model's own).
+KEPT_SIMULATIONS = 4
 #: Simulated past the arm's rise through the pressed depth: the key settles above release.
 RISE_MARGIN_M = 5e-3
 #: Simulated past that, so the key rises through its release depth and the note-off registers.
@@ -108,6 +117,9 @@ class Commanded:
     # The presses of the last acceleration asked for: a fit varies the model far more often
     # than the drive's acceleration, and a Press is immutable.
     _last: list[Any] = field(default_factory=lambda: [None, None], init=False, repr=False, compare=False)
+    # (model without its readout, acceleration) -> each group's rows, key traces and valid samples.
+    _kept: list[tuple[Any, list[tuple[npt.NDArray[np.intp], FloatArray, npt.NDArray[np.bool_]]]]] = field(
+        default_factory=list, init=False, repr=False, compare=False)
 
     def presses(self, acceleration_mps2: float | None) -> list[Press]:
         """The batch's commanded presses (`acceleration_mps2` where none is recorded)."""
@@ -127,24 +139,46 @@ class Commanded:
         """True when some keystroke does not record its acceleration (a drive parameter)."""
         return bool(np.isnan(self.batch.acceleration_mps2).any())
 
-    def predict(self, model: KeystrokeModel, drive: dict[str, float] | None = None) -> Prediction:
-        """The model's MIDI outcome for every keystroke of the batch."""
+    def key_traces(self, model: KeystrokeModel, accel: float | None
+                   ) -> list[tuple[npt.NDArray[np.intp], FloatArray, npt.NDArray[np.bool_]]]:
+        """Each group's rows, simulated key traces (NaN as 0) and valid samples; kept for a
+        model that differs only in its readout (see the module docstring)."""
+        key = (replace(model, effects=model.effects.without("velocity_curve"), piano=PianoParams()), accel)
+        for i, (seen, traces) in enumerate(self._kept):
+            if seen == key:
+                self._kept.append(self._kept.pop(i))
+                return traces
         batch = self.batch
-        accel = (drive or {}).get("acceleration_mps2")
         presses = self.presses(accel)
         lag = model.effects.value("arm_lag", "arm_lag_s", 0.0)
         cuts = np.array([_cut_s(p, model.arm_profile, lag) for p in presses])
         step_s = integration_step_s(model, batch.vacuum_kpa, SIM_STEP_S)
-        piano = model.readout_params()
-        n = batch.n
-        out = [np.full(n, np.nan) for _ in range(4)]
+        traces = []
         for rows in length_groups(cuts / step_s):
             duration = float(cuts[rows].max())
             with np.errstate(over="ignore", invalid="ignore"):
                 sim = simulate_presses([presses[i] for i in rows], batch.vacuum_kpa[rows], model,
                                        out_dt_s=self.out_dt_s, duration_s=duration, step_s=step_s)
             valid = sim.t_s[None, :] <= cuts[rows][:, None]
-            x2 = np.where(np.isfinite(sim.x2_m), sim.x2_m, 0.0)
+            traces.append((rows, np.where(np.isfinite(sim.x2_m), sim.x2_m, 0.0), valid))
+        self._kept.append((key, traces))
+        del self._kept[: max(len(self._kept) - KEPT_SIMULATIONS, 0)]
+        return traces
+
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickled (for a worker) without the kept simulations: tens of MB of key traces."""
+        state = dict(self.__dict__)
+        state["_kept"] = []
+        return state
+
+    def predict(self, model: KeystrokeModel, drive: dict[str, float] | None = None) -> Prediction:
+        """The model's MIDI outcome for every keystroke of the batch."""
+        batch = self.batch
+        accel = (drive or {}).get("acceleration_mps2")
+        piano = model.readout_params()
+        n = batch.n
+        out = [np.full(n, np.nan) for _ in range(4)]
+        for rows, x2, valid in self.key_traces(model, accel):
             for target, values in zip(out, midi_outcomes(x2, valid, piano, self.out_dt_s), strict=True):
                 target[rows] = values
         empty = np.zeros((n, batch.t_s.size))
