@@ -294,7 +294,7 @@ def simulate_arm(
     t_s: npt.ArrayLike,
     x0_m: npt.ArrayLike,
     vacuum_kpa: npt.ArrayLike,
-    model: KeystrokeModel,
+    model: KeystrokeModel | Sequence[KeystrokeModel],
     *,
     distance_m: npt.ArrayLike = 0.0,
     out_dt_s: float = 1e-3,
@@ -311,6 +311,9 @@ def simulate_arm(
     Args:
         t_s: shared sample times (T,), increasing; non-uniform grids are resampled.
         x0_m: arm traces (n, T) or (T,), finite.
+        model: the model, or one per trace: models that differ only in their mass, spring and
+            damper values (the same effects), e.g. a fit's perturbed parameters side by side. A
+            trace's samples are those of its model alone (rows never depend on each other).
         distance_m: fingertip–key gap at the start, scalar or one per trace (a finger body that
             earlier presses yielded, `finger_hysteresis`, hangs its fingertip its set higher).
         duration_s: simulated time from t_s[0] (default: to the last sample).
@@ -329,9 +332,24 @@ def simulate_arm(
         x = np.vstack([np.interp(grid, t, row) for row in x])
         t = grid
     n = x.shape[0]
-    kp = _model_columns(model.msd, model.effects, _vacuum(vacuum_kpa, n), block_keys)
+    vacuum = _vacuum(vacuum_kpa, n)
+    if isinstance(model, KeystrokeModel):
+        kp = _model_columns(model.msd, model.effects, vacuum, block_keys)
+        ep = effect_vector(model.effects)
+    else:
+        if len(model) != n:
+            raise ValueError(f"{len(model)} models for {n} arm traces.")
+        ep = effect_vector(model[0].effects)
+        kp = np.zeros((n, K.N_KP))
+        rows_of: dict[int, tuple[KeystrokeModel, list[int]]] = {}
+        for i, m in enumerate(model):
+            rows_of.setdefault(id(m), (m, []))[1].append(i)
+        for m, rows in rows_of.values():  # each distinct model once, on its rows
+            if not np.array_equal(effect_vector(m.effects), ep):
+                raise ValueError("models simulated side by side must have the same effects.")
+            keys = None if block_keys is None else [block_keys[i] for i in rows]
+            kp[rows] = _model_columns(m.msd, m.effects, vacuum[rows], keys)
     kp[:, K.DIST] = np.broadcast_to(np.asarray(distance_m, dtype=np.float64), (n,))
-    ep = effect_vector(model.effects)
     ep[K.E_LAG_FORM] = K.LAG_NONE
     ep[K.E_LAG_S] = 0.0
     if duration_s is None:

@@ -183,22 +183,42 @@ class GreyBoxFit:
         self._last = (theta.copy(), r)
         return r
 
+    def residuals_many(self, thetas: list[FloatArray]) -> list[FloatArray]:
+        """`residuals` at several points, predicted together where the drive can
+        (`MeasuredArm.predict_many`: the same numbers, the simulator's blocks better filled)."""
+        many = getattr(self.drive, "predict_many", None)
+        if many is None or len(thetas) < 2:
+            return [self.residuals(theta) for theta in thetas]
+        with np.errstate(over="ignore", invalid="ignore"):
+            predictions = many([self.layout.model(theta) for theta in thetas],
+                               [self.layout.drive(theta) for theta in thetas])
+        out = [self.scaled(self.raw(prediction)) for prediction in predictions]
+        self._last = (thetas[-1].copy(), out[-1])
+        return out
+
     def jacobian(self, theta: FloatArray, *, central: bool = True) -> FloatArray:
         """Differences of the scaled residuals in internal units (step `JAC_STEP`)."""
         base = None
         if not central:
             base = self._last[1] if self._last is not None and np.array_equal(self._last[0], theta) else self.residuals(theta)
         lo, hi = self.layout.bounds()
-        cols = []
+        points, spans = [], []
         for j in range(theta.size):
             d = np.zeros_like(theta)
             d[j] = JAC_STEP
             if base is None:
                 up, down = np.minimum(theta + d, hi), np.maximum(theta - d, lo)
-                cols.append((self.residuals(up) - self.residuals(down)) / max(float(up[j] - down[j]), 1e-12))
+                points += [up, down]
+                spans.append(max(float(up[j] - down[j]), 1e-12))
             else:
                 step = d if theta[j] + JAC_STEP <= hi[j] else -d
-                cols.append((self.residuals(theta + step) - base) / float(step[j]))
+                points.append(theta + step)
+                spans.append(float(step[j]))
+        r = self.residuals_many(points)
+        if base is None:
+            cols = [(r[2 * j] - r[2 * j + 1]) / spans[j] for j in range(theta.size)]
+        else:
+            cols = [(r[j] - base) / spans[j] for j in range(theta.size)]
         return np.stack(cols, axis=1) if cols else np.zeros((base.size if base is not None else 0, 0))
 
     # ---- error levels -----------------------------------------------------------------------

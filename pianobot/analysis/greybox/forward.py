@@ -34,6 +34,7 @@ that the piecewise-linear arm trace the simulator interpolates is unchanged.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
 
@@ -52,7 +53,7 @@ from pianobot.analysis.greybox.stages import KEY_MOTION_THRESHOLD_M, fill_gaps
 from pianobot.physics.effects import Effects
 from pianobot.physics.model import KeystrokeModel
 from pianobot.physics.msd import MSDParams
-from pianobot.physics.simulate import simulate_arm
+from pianobot.physics.simulate import effect_vector, simulate_arm
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -147,30 +148,68 @@ class MeasuredArm:
         Arm-side effects (`arm_lag`, `arm_acceleration`) do not apply: the arm is measured."""
         if isinstance(model, MSDParams):
             model = KeystrokeModel(msd=model, effects=Effects.none())
+        step_s = integration_step_s(model, self.batch.vacuum_kpa, trace_step_s(model), self.compression_m)
+        return self._simulate([model], step_s, input_x0_m, states)[0]
+
+    def simulate_many(self, models: Sequence[KeystrokeModel], *, states: bool = False) -> list[tuple[FloatArray, ...]]:
+        """`simulate` for several models at once (a fit's Jacobian: one model per perturbed
+        parameter). Models with the same effects and integration step run side by side: the
+        rows of all of them are grouped by length together, so the simulator's wide blocks
+        fill with keystrokes of one length instead of a few of every length in narrow ones.
+        Each model's outputs are bit for bit those of `simulate` (a row never depends on its
+        companions, nor on the block it runs in)."""
         batch = self.batch
-        step_s = integration_step_s(model, batch.vacuum_kpa, trace_step_s(model), self.compression_m)
+        together: dict[tuple[float, bytes], list[int]] = {}
+        for j, model in enumerate(models):
+            step_s = integration_step_s(model, batch.vacuum_kpa, trace_step_s(model), self.compression_m)
+            together.setdefault((step_s, effect_vector(model.effects).tobytes()), []).append(j)
+        results: list[tuple[FloatArray, ...]] = [() for _ in models]
+        for (step_s, _), members in together.items():
+            for j, out in zip(members, self._simulate([models[j] for j in members], step_s, None, states), strict=True):
+                results[j] = out
+        return results
+
+    def _simulate(self, models: Sequence[KeystrokeModel], step_s: float, input_x0_m: FloatArray | None,
+                  states: bool) -> list[tuple[FloatArray, ...]]:
+        """Each model's outputs (see `simulate`); the models share their effects and step."""
+        batch = self.batch
         arm = self.arm_m(input_x0_m)
         dt = batch.dt_s
-        outs = [np.full(batch.x1_m.shape, np.nan) for _ in range(4 if states else 2)]
-        for rows in length_groups((self.lead + self.last + 1) * (dt / step_s)):
+        n = batch.n
+        outs = [[np.full(batch.x1_m.shape, np.nan) for _ in range(4 if states else 2)] for _ in models]
+        lengths = np.tile((self.lead + self.last + 1) * (dt / step_s), len(models))
+        for pairs in length_groups(lengths):
+            which, rows = np.divmod(pairs, n)
             n_out = self.lead + int(self.last[rows].max()) + 1
             n_in = min(self.t_sim_s.size, int(math.ceil(n_out * dt / (self.t_sim_s[1] - self.t_sim_s[0]))) + 2)
+            # One model alone takes the simulator's one-model path (the same numbers either way).
+            model = models[0] if len(models) == 1 else [models[j] for j in which]
             with np.errstate(over="ignore", invalid="ignore"):  # trial parameters may be unstable
                 sim = simulate_arm(self.t_sim_s[:n_in], arm[rows, :n_in], batch.vacuum_kpa[rows], model,
                                    distance_m=batch.distance_m[rows], out_dt_s=dt,
                                    duration_s=(n_out - 1) * dt, step_s=step_s)
             sims = (sim.x1_m, sim.x2_m, sim.v2_mps, sim.contact_force_n)
-            for out, values in zip(outs, sims, strict=False):
-                out[rows, : n_out - self.lead] = values[:, self.lead :]
+            for j in np.unique(which):
+                mine = which == j
+                for out, values in zip(outs[j], sims, strict=False):
+                    out[rows[mine], : n_out - self.lead] = values[mine, self.lead :]
         after = np.arange(batch.t_s.size)[None, :] > self.last[:, None]
-        for out in outs:
-            out[after] = np.nan
-        return tuple(out[self.rows] for out in outs)
+        results = []
+        for model_outs in outs:
+            for out in model_outs:
+                out[after] = np.nan
+            results.append(tuple(out[self.rows] for out in model_outs))
+        return results
 
     def predict(self, model: KeystrokeModel, drive: dict[str, float] | None = None) -> Prediction:
         """The model's trajectories (and key states) at the batch's frames."""
         x1, x2, v2, force = self.simulate(model, states=True)
         return Prediction.trajectories(x1, x2, v2, force)
+
+    def predict_many(self, models: Sequence[KeystrokeModel],
+                     drives: Sequence[dict[str, float]] | None = None) -> list[Prediction]:
+        """`predict` for several models at once (`simulate_many`): the same predictions."""
+        return [Prediction.trajectories(*out) for out in self.simulate_many(models, states=True)]
 
 
 #: The least compression a stiffening finger is judged at (a finger barely pressed).
