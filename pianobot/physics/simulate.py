@@ -41,10 +41,7 @@ FloatArray = npt.NDArray[np.float64]
 # lanes, 140 at 64; the same 3,840 presses sorted as a whole: 57 against 85-97).
 BATCH_LANES = K.BLOCK
 SMALL_LANES = K.SMALL_BLOCK  # a call with at most this many keystrokes runs the small kernel
-# The largest step any caller may ask for. A caller picks its step from the model's own time
-# scales (the world keeps 0.2 ms for its ≈ 150 Hz keybed; a grey-box fit takes
-# `greybox.prediction.integration_step_s`, which counts every stiff effect the model has).
-MAX_STEP_S = 1e-3
+MAX_STEP_S = 2e-4  # impacts on the keybed (≈ 150 Hz) need at least ~30 steps per period
 SETTLE_S = 0.3  # simulated after the arm is back up, so the key can come to rest
 
 

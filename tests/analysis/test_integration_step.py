@@ -15,14 +15,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pianobot.analysis.greybox.prediction import (
-    FIRST_ORDER_EFFECTS,
     GROUP,
-    SIM_STEP_S,
     STEP_PER_DAMPING_TIME,
-    TRACE_STEP_S,
     integration_step_s,
     length_groups,
-    trace_step_s,
 )
 from pianobot.physics.model import KeystrokeModel
 from pianobot.physics.simulate import simulate_arm
@@ -116,15 +112,3 @@ def test_length_groups_keep_the_long_presses_of_a_take_away_from_its_short_ones(
     first = groups[0]
     assert set(first.tolist()) >= {0, 1} and first.size <= 4  # the slow pair runs in the small kernel
     assert _cost(groups, lengths) < 0.8 * _cost([np.arange(16)], lengths)
-
-
-def test_a_take_is_integrated_coarser_unless_the_model_has_a_first_order_effect() -> None:
-    """Smooth models take `TRACE_STEP_S` on a take; a rest stop, dry friction, a yielding body, an
-    adhesive skin (a projection or impulse per step) or a let-off bump (a switch on the key's
-    direction) keeps the finer `SIM_STEP_S`."""
-    study = KeystrokeModel.study()
-    assert trace_step_s(study) == TRACE_STEP_S > SIM_STEP_S
-    for name in ("keybed", "finger_stiffening", "contact"):
-        assert trace_step_s(dataclasses.replace(study, effects=study.effects.with_effect(name))) == TRACE_STEP_S
-    for name in FIRST_ORDER_EFFECTS:
-        assert trace_step_s(dataclasses.replace(study, effects=study.effects.with_effect(name))) == SIM_STEP_S

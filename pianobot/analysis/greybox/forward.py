@@ -43,11 +43,11 @@ import numpy.typing as npt
 
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
 from pianobot.analysis.greybox.prediction import (
+    SIM_STEP_S,
     TYPICAL_COMPRESSION_M,
     Prediction,
     integration_step_s,
     length_groups,
-    trace_step_s,
 )
 from pianobot.analysis.greybox.stages import KEY_MOTION_THRESHOLD_M, fill_gaps
 from pianobot.physics.effects import Effects
@@ -148,7 +148,7 @@ class MeasuredArm:
         Arm-side effects (`arm_lag`, `arm_acceleration`) do not apply: the arm is measured."""
         if isinstance(model, MSDParams):
             model = KeystrokeModel(msd=model, effects=Effects.none())
-        step_s = integration_step_s(model, self.batch.vacuum_kpa, trace_step_s(model), self.compression_m)
+        step_s = integration_step_s(model, self.batch.vacuum_kpa, SIM_STEP_S, self.compression_m)
         return self._simulate([model], step_s, input_x0_m, states)[0]
 
     def simulate_many(self, models: Sequence[KeystrokeModel], *, states: bool = False) -> list[tuple[FloatArray, ...]]:
@@ -161,7 +161,7 @@ class MeasuredArm:
         batch = self.batch
         together: dict[tuple[float, bytes], list[int]] = {}
         for j, model in enumerate(models):
-            step_s = integration_step_s(model, batch.vacuum_kpa, trace_step_s(model), self.compression_m)
+            step_s = integration_step_s(model, batch.vacuum_kpa, SIM_STEP_S, self.compression_m)
             together.setdefault((step_s, effect_vector(model.effects).tobytes()), []).append(j)
         results: list[tuple[FloatArray, ...]] = [() for _ in models]
         for (step_s, _), members in together.items():

@@ -57,29 +57,15 @@ class Prediction:
         return np.asarray(np.isfinite(self.on_velocity), dtype=bool)
 
 
-#: Largest internal integration step of the commanded drive (MIDI outcomes). The fastest mode of
-#: the published model is near 20 Hz; at 0.2 ms the semi-implicit scheme's phase error over a
-#: keystroke stays far below the MIDI floors (a stiffer or more heavily damped model takes a
-#: smaller one: `integration_step_s`). MIDI outcomes are read where the key crosses its
-#: sensors, and on the study's soft_60 log a 0.5 ms step (0.01 velocity units away) tipped the
-#: velocity curve's size interval over 'off': kept at 0.2 ms.
+#: Largest internal integration step of both drives (measured arm, commanded). The fastest mode
+#: of the published model is near 20 Hz; at 0.2 ms the semi-implicit scheme's phase error over a
+#: keystroke stays far below mocap noise (a stiffer or more heavily damped model takes a smaller
+#: one: `integration_step_s`). A coarser cap for smooth models (0.5 ms: 2.5x fewer steps, the key
+#: within 0.12 um of a 50 us reference) was tried twice and lost findings both times: the study's
+#: zzz40 let-off (held-out shrink 29.4 % against 31 %), and, with every first-order effect kept at
+#: 0.2 ms, an independent weak rest stop, whose joint fit from the coarser base model stopped in
+#: another basin (preload 0.69 N, interval including 0, against 0.12 N, ΔIC 4,785).
 SIM_STEP_S = 2e-4
-#: Largest internal integration step of the measured-arm drive (trajectories). The model's own
-#: time scales (`integration_step_s`) rarely bind, so this cap sets the cost of nearly every fit
-#: evaluation on a take. Against a 50 µs reference, on the independent suite's fitted models,
-#: 0.5 ms moves the key by ≤ 0.02 µm RMS (keybed, stiffening finger), 0.12 µm (adhesion) and
-#: 3.6 µm (Stribeck friction, whose impulse is first order in the step; 1.4 µm at 0.2 ms),
-#: against fit residuals of 4–160 µm: 2.5× fewer steps than 0.2 ms. Not for a model with a
-#: `FIRST_ORDER_EFFECTS` effect.
-TRACE_STEP_S = 5e-4
-#: Effects the kernel applies as a projection or an impulse each step (a rest stop, dry friction,
-#: a yielding body's slider, an adhesive skin) or switch on the key's direction (the let-off bump
-#: resists the key on its way down only) are first order in the step: a break-away or a turn
-#: moves by whole steps, and finite differences across it see a staircase, not a slope. At 0.5 ms
-#: a weak rest stop's preload (ΔIC 4,200) got a 95 % interval wide enough to include 0, and on the
-#: study's zzz40 take the let-off's held-out shrink fell from 31 % to 29.4 % (0.2 ms; 33 % at
-#: 0.1 ms, 34 % at 0.05 ms). A model with any of them keeps `SIM_STEP_S` on a take too.
-FIRST_ORDER_EFFECTS = frozenset({"key_preload", "key_friction", "finger_hysteresis", "adhesion", "letoff"})
 #: Keystrokes simulated side by side at most (the simulator's SIMD block): rows are grouped by
 #: length (`length_groups`), so short keystrokes are not integrated through the long ones' rest.
 GROUP = BATCH_LANES
@@ -95,12 +81,6 @@ CALL_COST_STEPS = 1000.0
 #: stably, its transient lasting 1/λ, so half the limit is accurate to far below mocap noise.
 STEP_PER_PERIOD = 0.2
 STEP_PER_DAMPING_TIME = 0.5
-
-
-def trace_step_s(model: KeystrokeModel) -> float:
-    """The measured-arm drive's largest step for `model`: `TRACE_STEP_S`, or `SIM_STEP_S` for a
-    model with a first-order effect (`FIRST_ORDER_EFFECTS`)."""
-    return SIM_STEP_S if FIRST_ORDER_EFFECTS.intersection(model.effects.names) else TRACE_STEP_S
 
 
 def _largest_eigenvalue(a11: float, a12: float, a21: float, a22: float) -> float:
