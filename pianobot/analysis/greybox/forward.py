@@ -44,6 +44,7 @@ import numpy.typing as npt
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
 from pianobot.analysis.greybox.prediction import (
     SIM_STEP_S,
+    TRACE_BLOCK_STEP_COST,
     TYPICAL_COMPRESSION_M,
     Prediction,
     integration_step_s,
@@ -178,7 +179,7 @@ class MeasuredArm:
         n = batch.n
         outs = [[np.full(batch.x1_m.shape, np.nan) for _ in range(4 if states else 2)] for _ in models]
         lengths = np.tile((self.lead + self.last + 1) * (dt / step_s), len(models))
-        for pairs in length_groups(lengths):
+        for pairs in length_groups(lengths, TRACE_BLOCK_STEP_COST):
             which, rows = np.divmod(pairs, n)
             n_out = self.lead + int(self.last[rows].max()) + 1
             n_in = min(self.t_sim_s.size, int(math.ceil(n_out * dt / (self.t_sim_s[1] - self.t_sim_s[0]))) + 2)

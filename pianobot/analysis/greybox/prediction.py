@@ -69,9 +69,13 @@ SIM_STEP_S = 2e-4
 #: Keystrokes simulated side by side at most (the simulator's SIMD block): rows are grouped by
 #: length (`length_groups`), so short keystrokes are not integrated through the long ones' rest.
 GROUP = BATCH_LANES
-#: What a step of the 16-lane kernel costs against one of the 4-lane kernel (measured: 2.1× for
-#: the linear model, 2.7× with effects), and the cost of a call of its own, in 4-lane steps.
+#: What a step of the 16-lane kernel costs against one of the 4-lane kernel, and the cost of a
+#: call of its own, in 4-lane steps. Commanded presses (the arm's profile computed in the lanes):
+#: 1.8x for the linear model, 2.8x with effects. A measured arm trace (read per lane from the
+#: trace): 3.1-5.8x, no cheaper per keystroke than four 4-lane calls, so a take's keystrokes
+#: run in groups of four of similar length (`TRACE_BLOCK_STEP_COST`).
 BLOCK_STEP_COST = 2.4
+TRACE_BLOCK_STEP_COST = 4.0
 CALL_COST_STEPS = 1000.0
 
 #: The step is kept below these fractions of the model's fastest time scales. Oscillation
@@ -130,12 +134,12 @@ def integration_step_s(model: KeystrokeModel, vacuum_kpa: FloatArray, largest_s:
     return step
 
 
-def length_groups(lengths: npt.ArrayLike) -> list[npt.NDArray[np.intp]]:
+def length_groups(lengths: npt.ArrayLike, block_step_cost: float = BLOCK_STEP_COST) -> list[npt.NDArray[np.intp]]:
     """Rows to simulate together, longest first: every row of a group is integrated as long as
     its longest one, so the rows are split where that costs least.
 
     `lengths` are the rows' simulated lengths in steps. A group of up to `SMALL_LANES` rows runs
-    the 4-lane kernel, a larger one (up to `GROUP`) the 16-lane kernel at `BLOCK_STEP_COST` per
+    the 4-lane kernel, a larger one (up to `GROUP`) the 16-lane kernel at `block_step_cost` per
     step; each call costs `CALL_COST_STEPS` more. The split is exact (dynamic programming over
     the rows sorted by length), and a row's samples do not depend on its companions, so only
     the time changes. A take whose slowest presses last five times its fastest simulates its
@@ -145,11 +149,11 @@ def length_groups(lengths: npt.ArrayLike) -> list[npt.NDArray[np.intp]]:
     n_steps = np.ascontiguousarray(lengths, dtype=np.float64)
     # A fit asks again with the same lengths at every evaluation (they change only with the
     # step): the split of 135 rows costs ~1.4 ms, as much as a tenth of an evaluation.
-    return [rows.copy() for rows in _length_groups(n_steps.tobytes())]
+    return [rows.copy() for rows in _length_groups(n_steps.tobytes(), float(block_step_cost))]
 
 
 @functools.lru_cache(maxsize=64)
-def _length_groups(lengths: bytes) -> tuple[npt.NDArray[np.intp], ...]:
+def _length_groups(lengths: bytes, block_step_cost: float) -> tuple[npt.NDArray[np.intp], ...]:
     n_steps = np.frombuffer(lengths, dtype=np.float64)
     order = np.argsort(-n_steps, kind="stable")
     longest = n_steps[order]
@@ -160,7 +164,7 @@ def _length_groups(lengths: bytes) -> tuple[npt.NDArray[np.intp], ...]:
     for end in range(1, n + 1):
         for size in range(1, min(GROUP, end) + 1):
             start = end - size
-            per_step = 1.0 if size <= SMALL_LANES else BLOCK_STEP_COST
+            per_step = 1.0 if size <= SMALL_LANES else block_step_cost
             cost = best[start] + per_step * longest[start] + CALL_COST_STEPS
             if cost < best[end]:
                 best[end], cut[end] = cost, start
