@@ -176,6 +176,12 @@ def _is_linear(ep: FloatArray) -> bool:
     return not any(ep[i] != 0.0 for i in _KEY_SIDE)
 
 
+def runs_linear_kernel(effects: Effects) -> bool:
+    """Whether a model with these effects is simulated by the fast linear kernel (no effect on
+    the finger or key), whose steps cost differently (see `greybox.prediction.length_groups`)."""
+    return _is_linear(effect_vector(effects))
+
+
 def body_set_m(ep: FloatArray) -> float:
     """The permanent set of a yielding finger body that earlier presses yielded (0 for a fresh
     one): at zero force its slider has sprung back f·u_y, so the elastic share holds it at

@@ -71,9 +71,10 @@ SIM_STEP_S = 2e-4
 GROUP = BATCH_LANES
 #: What a step of the 16-lane kernel costs against one of the 4-lane kernel, and the cost of a
 #: call of its own, in 4-lane steps. Commanded presses (the arm's profile computed in the lanes):
-#: 1.8x for the linear model, 2.8x with effects. A measured arm trace (read per lane from the
-#: trace): 3.1-5.8x, no cheaper per keystroke than four 4-lane calls, so a take's keystrokes
-#: run in groups of four of similar length (`TRACE_BLOCK_STEP_COST`).
+#: 1.8x for the linear model, 2.8x with effects; a measured arm trace, the linear model: 2.4x.
+#: A measured arm trace (read per lane from the trace) with effects on the finger or key:
+#: 3.4-5.0x, no cheaper per keystroke than four 4-lane calls, so such a model runs a take's
+#: keystrokes in groups of four of similar length (`TRACE_BLOCK_STEP_COST`).
 BLOCK_STEP_COST = 2.4
 TRACE_BLOCK_STEP_COST = 4.0
 CALL_COST_STEPS = 1000.0
