@@ -282,7 +282,8 @@ def _stroke_trials(strokes: pd.DataFrame, sha: str) -> pd.DataFrame:
         }
     )
     for column in ("t_bottom_s", "t_end_s", "duration_s", "arm_travel_m", "arm_speed_mps",
-                   "fingertip_travel_m", "key_travel_m", "key_speed_mps"):  # fmt: skip
+                   "fingertip_travel_m", "key_travel_m", "key_speed_mps", "key_rest_m",
+                   "key_rest_after_m"):  # fmt: skip
         trials[column] = strokes[column].to_numpy()
     return trials
 

@@ -28,7 +28,8 @@ from pianobot.io.mocap import MocapTake
 FloatArray = npt.NDArray[np.float64]
 KEYSTROKE_COLUMNS = (
     "keystroke", "t_start_s", "t_bottom_s", "t_end_s", "duration_s", "arm_travel_m",
-    "arm_speed_mps", "fingertip_travel_m", "key_travel_m", "key_speed_mps",
+    "arm_speed_mps", "fingertip_travel_m", "key_travel_m", "key_speed_mps", "key_rest_m",
+    "key_rest_after_m",
 )  # fmt: skip
 REST_WINDOW_S = 0.25  # rest level of fingertip and key: median over this long before motion start
 MAX_BRIDGE_S = 0.5  # occlusions up to this long are interpolated for segmentation
@@ -69,6 +70,8 @@ def segment_take(take: MocapTake, baseline_window_s: float = 10.0) -> pd.DataFra
             "fingertip_travel_m": _travel(t, tip, start, end),
             "key_travel_m": _travel(t, key, start, end),
             "key_speed_mps": _peak_speed(t, key, start, end),
+            "key_rest_m": _below_arm(t, key, arm, start),
+            "key_rest_after_m": _below_arm(t, key, arm, end, after=True),
         }
         rows.append(row)
     return pd.DataFrame(rows, columns=list(KEYSTROKE_COLUMNS))
@@ -157,6 +160,23 @@ def rest_level_before(t: FloatArray, x: FloatArray, start: int) -> float:
     values = x[window & np.isfinite(x)]
     if values.size == 0:
         values = x[np.isfinite(x)][:10]
+    return float(np.median(values)) if values.size else math.nan
+
+
+def _below_arm(t: FloatArray, x: FloatArray | None, arm: FloatArray, frame: int, after: bool = False) -> float:
+    """How far `x` rests below the arm marker before frame `frame` (`after`: after it), down
+    positive. The arm returns to one pose between presses and a drift of the whole capture
+    volume moves both markers alike, so a change of this along a take is the marker's own (a
+    key left down) or the arm's."""
+    if x is None:
+        return math.nan
+    level = rest_level_after if after else rest_level_before
+    return level(t, x, frame) - level(t, arm, frame)
+
+
+def rest_level_after(t: FloatArray, x: FloatArray, end: int) -> float:
+    """Median of `x` over REST_WINDOW_S after frame `end` (NaN without a finite frame there)."""
+    values = x[(t >= t[end]) & (t <= t[end] + REST_WINDOW_S) & np.isfinite(x)]
     return float(np.median(values)) if values.size else math.nan
 
 

@@ -44,7 +44,10 @@ M1, M2, K0, C0, K1, C1, K2, C2, DIST = 0, 1, 2, 3, 4, 5, 6, 7, 8
 # A plain press has empty fast moves (all zero) and T_DN = 0.
 D_A, D_TA, D_TC, D_VP, T_UP, U_A, U_TA, U_TC, U_VP = 9, 10, 11, 12, 13, 14, 15, 16, 17
 F_A, F_TA, F_TC, F_VP, T_DN, R_A, R_TA, R_TC, R_VP, T_RE = range(18, 28)
-N_KP = 28
+# Where the key starts, below its rest position (0 for a key at rest; a key that dry friction
+# left part-way down after the previous keystroke starts there, its spring loaded).
+X2S = 28
+N_KP = 29
 
 # Entries of the effect vector `ep` (N_EP,): switches (0/1, or a form index) and values.
 (
@@ -172,9 +175,10 @@ def _load_block(
     for jj in range(w.shape[1]):
         w[S_X0P, jj] = w[S_X0, jj]
         w[S_X1, jj] = w[S_X0, jj]  # the fingertip hangs at rest from the arm
-        for row in (S_X2, S_V1, S_V2, S_A1, S_A2, S_ATT, S_FC, S_V2E, S_ZH):
+        for row in (S_V1, S_V2, S_A1, S_A2, S_ATT, S_FC, S_V2E, S_ZH):
             w[row, jj] = 0.0
-        w[S_ENG, jj] = 1.0 if w[S_X1, jj] - w[DIST, jj] >= 0.0 else 0.0
+        w[S_X2, jj] = w[X2S, jj]
+        w[S_ENG, jj] = 1.0 if w[S_X1, jj] - w[S_X2, jj] - w[DIST, jj] >= 0.0 else 0.0
 
 
 @njit(cache=True, inline="always", fastmath=True, error_model="numpy")

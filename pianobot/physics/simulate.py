@@ -300,6 +300,7 @@ def simulate_arm(
     model: KeystrokeModel | Sequence[KeystrokeModel],
     *,
     distance_m: npt.ArrayLike = 0.0,
+    key_start_m: npt.ArrayLike = 0.0,
     out_dt_s: float = 1e-3,
     duration_s: float | None = None,
     step_s: float = 1e-4,
@@ -319,6 +320,10 @@ def simulate_arm(
             trace's samples are those of its model alone (rows never depend on each other).
         distance_m: fingertip–key gap at the start, scalar or one per trace (a finger body that
             earlier presses yielded, `finger_hysteresis`, hangs its fingertip its set higher).
+        key_start_m: where the key starts below its rest position, scalar or one per trace (a
+            key that dry friction held part-way down after the previous keystroke): its spring
+            is loaded from the start, and the fingertip starts that much farther above it.
+            Key positions stay measured from the rest position.
         duration_s: simulated time from t_s[0] (default: to the last sample).
     """
     t = np.asarray(t_s, dtype=np.float64)
@@ -353,6 +358,7 @@ def simulate_arm(
             keys = None if block_keys is None else [block_keys[i] for i in rows]
             kp[rows] = _model_columns(m.msd, m.effects, vacuum[rows], keys)
     kp[:, K.DIST] = np.broadcast_to(np.asarray(distance_m, dtype=np.float64), (n,))
+    kp[:, K.X2S] = np.broadcast_to(np.asarray(key_start_m, dtype=np.float64), (n,))
     ep[K.E_LAG_FORM] = K.LAG_NONE
     ep[K.E_LAG_S] = 0.0
     if duration_s is None:

@@ -61,6 +61,26 @@ def test_simulate_arm_reproduces_the_press_simulation() -> None:
     assert np.max(np.abs(got.x2_m - ref.x2_m)) < 5e-6
 
 
+def test_a_key_left_down_starts_there_held_by_friction_or_springs_back_without_it() -> None:
+    """`key_start_m`: the key starts that far below rest with its spring loaded, and the
+    fingertip that much farther above it; 0 is the key at rest, bit for bit as before."""
+    t = np.arange(0.0, 1.0 + 1e-9, 1e-4)
+    x0, _ = sample_presses([Press(0.0, 0.006, 0.02, 0.02, 1.0, 0.2)], t, profile="trapezoid")
+    held = STUDY.with_effect("contact").with_effect("key_friction", form="stribeck", friction_n=0.1,
+                                                    static_friction_n=0.2)  # k2 * 0.4 mm = 0.12 N < 0.2 N
+    start = 4e-4
+    at_rest = simulate_arm(t, x0, -40, held)
+    assert np.array_equal(simulate_arm(t, x0, -40, held, key_start_m=0.0).x2_m, at_rest.x2_m)
+    left = simulate_arm(t, x0, -40, held, key_start_m=start)
+    touch = int(np.argmax(at_rest.x2_m[0] > 1e-6))  # the key at rest moves at first touch
+    assert np.all(left.x2_m[0, : touch + 1] == start)  # held: it waits for the finger
+    assert left.x2_m[0].max() > start + 1e-4  # and moves once pushed past the breakaway
+    # The fingertip starts 0.4 mm farther above this key: it touches later than at rest.
+    assert int(np.argmax(left.x2_m[0] > start + 1e-6)) > touch
+    free = simulate_arm(t, x0, -40, STUDY.with_effect("contact"), key_start_m=start)
+    assert free.x2_m[0, 50] < 0.5 * start  # without friction its spring sends it back up at once
+
+
 def test_simulate_arm_rejects_gaps() -> None:
     t = np.linspace(0.0, 1.0, 11)
     x = np.zeros(11)

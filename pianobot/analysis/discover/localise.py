@@ -174,6 +174,6 @@ def localise(fit: GreyBoxFit, sigma_m: float) -> Localisation:
     stages: list[dict[str, Any]] = []
     if batch.has_motion:
         times = batch.t_s[None, :] + batch.t_offset_s[:, None]
-        labels = stage_labels(times, batch.x2_m, batch.x0_m, batch.x1_m, batch.distance_m)
+        labels = stage_labels(times, batch.x2_m, batch.x0_m, batch.x1_m, batch.start_gap_m)
         stages = by_stage(fit, sigma_m, labels)
     return Localisation(stages, by_region(fit, sigma_m), outcomes(fit), against_state(fit))

@@ -249,7 +249,7 @@ def _residual_search(setting: Setting, fit: GreyBoxFit) -> tuple[Proposal, ...]:
     batch, pred = fit.batch, fit.prediction_
     if setting.mode == "trajectories":
         times = batch.t_s[None, :] + batch.t_offset_s[:, None]
-        return trajectory_proposals(times, batch.x0_m, batch.x1_m, batch.x2_m, batch.distance_m, pred.x1_m, pred.x2_m,
+        return trajectory_proposals(times, batch.x0_m, batch.x1_m, batch.x2_m, batch.start_gap_m, pred.x1_m, pred.x2_m,
                                     pred.v2_mps, pred.force_n, fit.model_.msd.m2_kg)
     residual = np.full(batch.n, np.nan)
     res = fit.residuals_

@@ -189,9 +189,10 @@ class MeasuredArm:
             model = models[0] if len(models) == 1 else [models[j] for j in which]
             with np.errstate(over="ignore", invalid="ignore"):  # trial parameters may be unstable
                 sim = simulate_arm(self.t_sim_s[:n_in], arm[rows, :n_in], batch.vacuum_kpa[rows], model,
-                                   distance_m=batch.distance_m[rows], out_dt_s=dt,
-                                   duration_s=(n_out - 1) * dt, step_s=step_s)
-            sims = (sim.x1_m, sim.x2_m, sim.v2_mps, sim.contact_force_n)
+                                   distance_m=batch.distance_m[rows], key_start_m=batch.key_start_m[rows],
+                                   out_dt_s=dt, duration_s=(n_out - 1) * dt, step_s=step_s)
+            # The key is measured from its own level before the keystroke (where it started).
+            sims = (sim.x1_m, sim.x2_m - batch.key_start_m[rows, None], sim.v2_mps, sim.contact_force_n)
             for j in np.unique(which):
                 mine = which == j
                 for out, values in zip(outs[j], sims, strict=False):
@@ -225,7 +226,7 @@ def largest_compression_m(batch: KeystrokeBatch) -> float:
     if not batch.has_motion or batch.n == 0:
         return TYPICAL_COMPRESSION_M
     inside = np.arange(batch.t_s.size)[None, :] <= model_window(batch)[:, None]
-    pen = batch.x1_m - batch.x2_m - batch.distance_m[:, None]
+    pen = batch.x1_m - batch.x2_m - batch.start_gap_m[:, None]
     pen = pen[inside & np.isfinite(pen)]
     return max(float(pen.max()), MIN_COMPRESSION_M) if pen.size else TYPICAL_COMPRESSION_M
 

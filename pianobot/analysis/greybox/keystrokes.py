@@ -37,7 +37,8 @@ COMMAND_FIELDS: tuple[str, ...] = tuple(n for n in PRESS_PARAMETERS if n != "dis
 _FACT_FIELDS = (*COMMAND_FIELDS, "command_start_s", "motion_start_s", "on_velocity", "t_on_s", "hold_midi_s",
                 "sounded")
 #: Per-keystroke arrays (n,) of a batch; `subset` indexes these and the (n, ...) trajectories.
-_ROW_FIELDS = ("vacuum_kpa", "x0_m", "x1_m", "x2_m", "distance_m", "t_offset_s", "input_x0_m", *_FACT_FIELDS)
+_ROW_FIELDS = ("vacuum_kpa", "x0_m", "x1_m", "x2_m", "distance_m", "key_start_m", "t_offset_s", "input_x0_m",
+               *_FACT_FIELDS)
 
 
 def _empty() -> FloatArray:
@@ -68,6 +69,10 @@ class KeystrokeBatch:
     clock_offset_s: float = 0.0  # output clock minus input clock (the input is already shifted)
     clock_offset_se_s: float = 0.0  # its standard error
     arm_source: str = ""  # where x0 comes from: "arm" (log), "mocap" (marker), "sim-truth", "" none
+    # (n,) where the key starts below its rest position: 0 for a key at rest; a key that dry
+    # friction held part-way down after the previous keystroke starts there (x2_m stays measured
+    # from the key's own level before the keystroke, so it starts at 0 either way).
+    key_start_m: FloatArray = field(default_factory=_empty)
     # The commanded press (NaN: not recorded).
     down_velocity_mps: FloatArray = field(default_factory=_empty)
     up_velocity_mps: FloatArray = field(default_factory=_empty)
@@ -88,7 +93,7 @@ class KeystrokeBatch:
 
     def __post_init__(self) -> None:
         n = len(self.trial_id)
-        for name in ("distance_m", "t_offset_s"):
+        for name in ("distance_m", "key_start_m", "t_offset_s"):
             if getattr(self, name).size == 0:
                 object.__setattr__(self, name, np.zeros(n))
         for name in _FACT_FIELDS:
@@ -119,6 +124,12 @@ class KeystrokeBatch:
     def dt_s(self) -> float:
         """Output sample interval (0 without trajectories)."""
         return float(self.t_s[1] - self.t_s[0]) if self.t_s.size > 1 else 0.0
+
+    @property
+    def start_gap_m(self) -> FloatArray:
+        """(n,) the fingertip-key gap at the start: the distance, plus how far below its rest
+        position a key held down by friction starts."""
+        return np.asarray(self.distance_m + self.key_start_m, dtype=np.float64)
 
     @property
     def has_motion(self) -> bool:
@@ -179,6 +190,6 @@ class KeystrokeBatch:
         """The same keystrokes with only what was commanded and heard (no frames)."""
         n = self.n
         keep = {f.name: getattr(self, f.name) for f in fields(self)
-                if f.name in ("trial_id", "vacuum_kpa", "distance_m", *_FACT_FIELDS)}
+                if f.name in ("trial_id", "vacuum_kpa", "distance_m", "key_start_m", *_FACT_FIELDS)}
         return KeystrokeBatch(t_s=np.zeros(0), x0_m=np.zeros((n, 0)), x1_m=np.zeros((n, 0)),
                               x2_m=np.zeros((n, 0)), **keep)

@@ -180,6 +180,7 @@ def load_keystrokes(run_ids: Sequence[str], data_dir: Path, *, x0_source: str = 
     if assumed:
         notes.add(f"vacuum not recorded ({', '.join(assumed)}): {assumed_vacuum_kpa:g} kPa assumed; only the finger "
                   "stiffness's starting value depends on it (the fit finds the take's own): give --vacuum-kpa to state it")
+    batch = _held_keys(batch, rows, notes)
     if "distance_m" not in rows or rows["distance_m"].isna().any():
         batch = _measured_distance(batch, rows, notes)
     columns: dict[str, Any] = {**_commands(rows, batch.distance_m, notes), **_midi(rows, midi_recorded)}
@@ -190,7 +191,7 @@ def load_keystrokes(run_ids: Sequence[str], data_dir: Path, *, x0_source: str = 
     columns["motion_start_s"] = _column(rows, "t_start_s")
     batch = replace(batch, **columns)
     if schedule is not None:
-        batch = attach_schedule(batch, rows, schedule, notes)
+        batch = _held_keys(attach_schedule(batch, rows, schedule, notes), rows, set())
     return Loaded(batch, all_trials.reset_index(drop=True), hashes, tuple(sorted(notes)))
 
 
@@ -206,12 +207,72 @@ def _median(values: np.ndarray) -> float:
     return float(np.median(finite)) if finite.size else 0.0
 
 
+#: A key resting this far below the highest rest level of its take is held down (by dry friction,
+#: after the previous keystroke); less is read as marker noise and the arm's repeatability.
+HELD_KEY_MIN_M = 2.0e-5
+
+
+def _held_keys(batch: KeystrokeBatch, rows: pd.DataFrame, notes: set[str]) -> KeystrokeBatch:
+    """Where each keystroke's key started below its rest position (`key_start_m`).
+
+    A key with dry friction in its action may stay part-way down after a keystroke: its spring
+    is loaded when the next one starts, and the fingertip starts that much farther above it.
+    An imported take records the key's rest level below the arm marker's before and after each
+    press (`key_rest_m`, `key_rest_after_m`: a drift of the whole capture volume cancels in
+    them); less the commanded distance it is the same for every press of a take but for where
+    the key was left. The highest level of each take (trial ids "run/trial") is the key at
+    rest; levels within `HELD_KEY_MIN_M` of it count as at rest.
+
+    A key is only read as held where the take shows it being left: the level's changes from
+    one press to the next must happen during the presses (`_left_by_presses`). A level that
+    wanders between presses is the arm's pose or a marker, and the keys are taken at rest."""
+    if not batch.has_motion or "key_rest_m" not in rows:
+        return batch
+    level = _column(rows, "key_rest_m") - batch.distance_m
+    after = _column(rows, "key_rest_after_m") - batch.distance_m if "key_rest_after_m" in rows else level + np.nan
+    start = _column(rows, "t_start_s")  # where each press started on its take's clock
+    out = np.zeros(batch.n)
+    runs = np.array([tid.split("/", 1)[0] for tid in batch.trial_id])
+    for run in np.unique(runs):
+        mine = (runs == run) & np.isfinite(level)
+        if not mine.any():
+            continue
+        below = level[mine] - level[mine].min()
+        if below.max() < HELD_KEY_MIN_M:
+            continue
+        order = np.argsort(start[mine])
+        if not _left_by_presses(level[mine][order], after[mine][order]):
+            notes.add(f"the key's rest level wanders by up to {1e3 * below.max():.2f} mm between presses, not "
+                      "during them (the arm's pose or a marker): every key taken to start at rest")
+            continue
+        out[mine] = np.where(below >= HELD_KEY_MIN_M, below, 0.0)
+    held = out > 0
+    if held.any():
+        notes.add(f"the key started held down in {int(held.sum())} of {batch.n} keystrokes (up to "
+                  f"{1e3 * out.max():.2f} mm below its rest position, left there by the keystroke before): "
+                  "each is simulated from where its key was")
+    return replace(batch, key_start_m=out)
+
+
+def _left_by_presses(before: FloatArray, after: FloatArray) -> bool:
+    """Whether a take's key levels (in time order) change during its presses: each press's
+    level after it against the next press's level before it, within a quarter of the RMS
+    change from press to press (a key left down moves only while it is pressed)."""
+    change = np.diff(before)
+    between = before[1:] - after[:-1]
+    ok = np.isfinite(change) & np.isfinite(between)
+    if ok.sum() < 2:
+        return False
+    return float(np.sqrt(np.mean(between[ok] ** 2))) < 0.25 * float(np.sqrt(np.mean(change[ok] ** 2)))
+
+
 def _measured_distance(batch: KeystrokeBatch, rows: pd.DataFrame, notes: set[str]) -> KeystrokeBatch:
     """Where the distance was not recorded: 0 (the finger starts on the key, as in the study's
     takes), unless the tracked fingertips clearly travelled before the key moved; then that
     travel, measured per keystroke (`features.approach_distance_m`), and the note says so."""
     recorded = _column(rows, "distance_m")
-    travel = approach_distance_m(batch) if batch.has_motion else np.full(batch.n, np.nan)
+    # A key left part-way down starts that much farther from the fingertip (not a hover).
+    travel = approach_distance_m(batch) - batch.key_start_m if batch.has_motion else np.full(batch.n, np.nan)
     unknown = ~np.isfinite(recorded)
     typical = _median(travel[unknown])
     # A finger resting on a key held by friction or a preload travels before the key moves too,
