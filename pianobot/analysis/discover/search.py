@@ -210,9 +210,11 @@ def joint(setting: Setting, current: GreyBoxFit, spec: CandidateSpec, screened: 
     that bent its parameters to imitate the missing effect (friction read as key damping) is a
     basin the joint fit may not leave from its own values. The better fit is kept.
 
-    The second start is a probe: it is fitted for `JOINT_PROBE_NFEV` evaluations and carried on
-    only if by then it is better than the first start's optimum (usually both starts reach the
-    same optimum, and a second full fit would double the cost for nothing)."""
+    The second start is a probe from two points (the effect's screened values, and its starting
+    point of least error; the base at the start model's values in both): each is fitted for
+    `JOINT_PROBE_NFEV` evaluations, and the better carried on only if by then it is better than
+    the first start's optimum (usually both starts reach the same optimum, and a second full fit
+    would double the cost for nothing)."""
     layout = _candidate_layout(current, spec, setting.train)
 
     def fit(start: np.ndarray, nfev: int) -> GreyBoxFit:
@@ -229,9 +231,16 @@ def joint(setting: Setting, current: GreyBoxFit, spec: CandidateSpec, screened: 
     probe = GreyBoxFit(setting.train_drive, layout, channels=current.channels, sigma=current.sigma)
     # The screened fit is expressed in the full layout (`as_full`): its base values are the
     # current ones this start is meant to leave; the rest (the effect, a MIDI log's readout) it fitted.
-    options = [layout.internal({**fresh, **{k: v for k, v in screened.params_.items() if k not in base}})]
-    options += [layout.internal({**fresh, **point}) for point in start_points(layout, spec, setting.train)]
-    other = fit(min(options, key=lambda th: _cost(probe, th)), JOINT_PROBE_NFEV)
+    screened_start = layout.internal({**fresh, **{k: v for k, v in screened.params_.items() if k not in base}})
+    options = [screened_start, *(layout.internal({**fresh, **point}) for point in start_points(layout, spec, setting.train))]
+    cheapest = min(options, key=lambda th: _cost(probe, th))
+    # Where the effect's screened values start is probed too, even when its error there is not
+    # the least: the screened values already fit the effect's shape (a Stribeck speed, a stop
+    # depth), and the error at the start says little about the basin it leads to (an
+    # independent Stribeck take: the cheapest start stalled at 13x the screened start's optimum).
+    probes = [fit(th, JOINT_PROBE_NFEV) for th in (cheapest, screened_start)
+              if th is screened_start or not np.array_equal(th, screened_start)]
+    other = min(probes, key=lambda f: _cost(f, f.theta_))
     best_cost = _cost(best, best.theta_)
     if not _cost(other, other.theta_) < best_cost - 1e-3 * abs(best_cost):
         return best  # no better than the first start (mostly: on its way to the same optimum)
