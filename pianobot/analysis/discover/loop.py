@@ -139,7 +139,9 @@ def _iterate(setting: Setting, current: GreyBoxFit, start: KeystrokeModel, setti
         def refit(label: str) -> Evaluated:
             e = ranked[label]
             assert e.spec is not None
-            fit = search.joint(setting, current, e.spec, e.fit, start)
+            # The screened values are a start of their own only where screening saw the effect.
+            fit = search.joint(setting, current, e.spec, e.fit, start,
+                               from_screened=reference.ic - e.ic > rule.ic_margin)
             joint = search.evaluate(setting, fit, criterion, sigma_m, e.label, e.spec)
             return joint if joint.ic <= e.ic else e
 

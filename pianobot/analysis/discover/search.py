@@ -204,13 +204,14 @@ def screen(setting: Setting, current: GreyBoxFit, spec: CandidateSpec,
 
 
 def joint(setting: Setting, current: GreyBoxFit, spec: CandidateSpec, screened: GreyBoxFit,
-          start_model: KeystrokeModel | None = None) -> GreyBoxFit:
+          start_model: KeystrokeModel | None = None, *, from_screened: bool = True) -> GreyBoxFit:
     """The candidate refitted with every parameter of the current model, from the screened fit
     and, when given, also from `start_model`'s base values with the screened effect: a base fit
     that bent its parameters to imitate the missing effect (friction read as key damping) is a
     basin the joint fit may not leave from its own values. The better fit is kept.
 
-    The second start is a probe from two points (the effect's screened values, and its starting
+    The second start is a probe from two points (the effect's screened values — unless
+    `from_screened` is False: the screening found no evidence for the effect — and its starting
     point of least error; the base at the start model's values in both): each is fitted for
     `JOINT_PROBE_NFEV` evaluations, and the better carried on only if by then it is better than
     the first start's optimum (usually both starts reach the same optimum, and a second full fit
@@ -238,8 +239,10 @@ def joint(setting: Setting, current: GreyBoxFit, spec: CandidateSpec, screened: 
     # the least: the screened values already fit the effect's shape (a Stribeck speed, a stop
     # depth), and the error at the start says little about the basin it leads to (an
     # independent Stribeck take: the cheapest start stalled at 13x the screened start's optimum).
-    probes = [fit(th, JOINT_PROBE_NFEV) for th in (cheapest, screened_start)
-              if th is screened_start or not np.array_equal(th, screened_start)]
+    starts = [cheapest]
+    if from_screened and not np.array_equal(cheapest, screened_start):
+        starts.append(screened_start)
+    probes = [fit(th, JOINT_PROBE_NFEV) for th in starts]
     other = min(probes, key=lambda f: _cost(f, f.theta_))
     best_cost = _cost(best, best.theta_)
     if not _cost(other, other.theta_) < best_cost - 1e-3 * abs(best_cost):
