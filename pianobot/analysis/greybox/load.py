@@ -25,7 +25,7 @@ import numpy as np
 import pandas as pd
 
 from pianobot.analysis.greybox.features import approach_distance_m, unloaded_travel_m
-from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
+from pianobot.analysis.greybox.keystrokes import FloatArray, KeystrokeBatch
 from pianobot.analysis.greybox.trajectories import OUTPUT_SOURCES, keystroke_batch
 from pianobot.errors import InputError
 from pianobot.spec.parameters import PRESS_PARAMETERS, recorded_or_followed
