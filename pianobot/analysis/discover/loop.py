@@ -141,7 +141,7 @@ def _iterate(setting: Setting, current: GreyBoxFit, start: KeystrokeModel, setti
             assert e.spec is not None
             # The screened values are a start of their own only where screening saw the effect,
             # in trajectories (a base fit bent to imitate friction there); on MIDI logs they
-            # changed no finding in 20 independent and 3 study logs, and cost a fifth more time.
+            # changed no finding (20 independent and 3 study logs).
             fit = search.joint(setting, current, e.spec, e.fit, start, from_screened=(
                 setting.mode == "trajectories" and reference.ic - e.ic > rule.ic_margin))
             joint = search.evaluate(setting, fit, criterion, sigma_m, e.label, e.spec)

@@ -229,7 +229,8 @@ def _held_keys(batch: KeystrokeBatch, rows: pd.DataFrame, notes: set[str]) -> Ke
     if not batch.has_motion or "key_rest_m" not in rows:
         return batch
     level = _column(rows, "key_rest_m") - batch.distance_m
-    after = _column(rows, "key_rest_after_m") - batch.distance_m if "key_rest_after_m" in rows else level + np.nan
+    after = (_column(rows, "key_rest_after_m") - batch.distance_m if "key_rest_after_m" in rows
+             else np.full(batch.n, np.nan))
     start = _column(rows, "t_start_s")  # where each press started on its take's clock
     out = np.zeros(batch.n)
     runs = np.array([tid.split("/", 1)[0] for tid in batch.trial_id])
