@@ -304,7 +304,15 @@ class GreyBoxFit:
         series, position = self._slots()
         hac = hac_covariance(J, r, series, position, n_offsets=int(np.count_nonzero(self.mask.any(axis=2))))
         noise = noise_covariance(J, self._noise_per_residual(), self.input_noise_scores(theta, J, seed))
-        self.cov_ = larger_variances(hac, noise)
+        cov = larger_variances(hac, noise)
+        # A parameter no residual depends on (a pad that never pulls hard enough to let go) is
+        # not known at all: the pseudo-inverse would give it zero variance, an interval of one point.
+        unseen = ~np.any(J != 0.0, axis=0)
+        if unseen.any():
+            cov[unseen, :] = 0.0
+            cov[:, unseen] = 0.0
+            cov[unseen, unseen] = np.inf
+        self.cov_ = cov
         self.jacobian_ = J
         return self.cov_
 
