@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pianobot.analysis.greybox.covariance import _score_window, hac_covariance
+from pianobot.analysis.greybox.covariance import _score_window, hac_covariance, unseen_unknown
 
 
 def test_the_hac_covariance_is_the_newey_west_sandwich_per_series() -> None:
@@ -27,3 +27,16 @@ def test_the_hac_covariance_is_the_newey_west_sandwich_per_series() -> None:
     bread = np.linalg.inv(J.T @ J)
     expected = bread @ meat @ bread * (r.size / (r.size - p))
     np.testing.assert_allclose(cov, 0.5 * (expected + expected.T), rtol=1e-10)
+
+
+def test_a_parameter_no_residual_depends_on_is_unknown_not_exact() -> None:
+    rng = np.random.default_rng(2)
+    J = rng.normal(size=(200, 3))
+    J[:, 1] = 0.0  # e.g. a pull-off force the pad never reaches
+    r = rng.normal(size=200)
+    series, position = np.zeros(200, dtype=np.intp), np.arange(200)
+    raw = hac_covariance(J, r, series, position)
+    assert raw[1, 1] == 0.0  # the pseudo-inverse's answer: known exactly
+    cov = unseen_unknown(raw, J)
+    assert np.isinf(cov[1, 1]) and not np.any(cov[1, [0, 2]]) and not np.any(cov[[0, 2], 1])
+    np.testing.assert_array_equal(cov[np.ix_([0, 2], [0, 2])], raw[np.ix_([0, 2], [0, 2])])

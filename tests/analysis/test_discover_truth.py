@@ -225,6 +225,9 @@ def test_a_key_left_down_by_friction_starts_its_next_keystroke_there(
     assert first["accepted_family"] == made.truth["family"], payload["verdict"]
     verdict = next(v for v in first["candidates"] if v["status"] == "accepted")
     assert verdict["ratio"] >= 3.0, verdict["gap_after"]
+    # The truth lab's pad does not stick: a pull-off force left at its start value, which no
+    # residual depends on, has an unknown size, not an exact one.
+    assert "adhesion" not in payload["accepted_effects"], payload["verdict"]
 
 
 @pytest.mark.slow

@@ -63,6 +63,21 @@ def hac_covariance(J: FloatArray, r: FloatArray, series: npt.NDArray[np.intp], p
     return np.asarray(0.5 * (cov + cov.T), dtype=np.float64)
 
 
+def unseen_unknown(cov: FloatArray, J: FloatArray) -> FloatArray:
+    """`cov` with every parameter no residual depends on (an all-zero Jacobian column, e.g. a
+    pad that never pulls hard enough to let go) unknown: infinite variance, no covariance. The
+    pseudo-inverse in the sandwich gives such a parameter zero variance, an interval of one
+    point, which would pass any test that its interval excludes a value."""
+    unseen = ~np.any(J != 0.0, axis=0)
+    if not unseen.any():
+        return cov
+    out = cov.copy()
+    out[unseen, :] = 0.0
+    out[:, unseen] = 0.0
+    out[unseen, unseen] = np.inf
+    return out
+
+
 def larger_variances(a: FloatArray, b: FloatArray) -> FloatArray:
     """Per-parameter larger variance of two covariances, with the correlations of the one that
     is larger overall (so the result stays a valid, positive semi-definite covariance)."""

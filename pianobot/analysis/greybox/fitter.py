@@ -44,7 +44,12 @@ import numpy.typing as npt
 from scipy.optimize import least_squares
 from threadpoolctl import threadpool_limits
 
-from pianobot.analysis.greybox.covariance import hac_covariance, larger_variances, noise_covariance
+from pianobot.analysis.greybox.covariance import (
+    hac_covariance,
+    larger_variances,
+    noise_covariance,
+    unseen_unknown,
+)
 from pianobot.analysis.greybox.forward import MeasuredArm
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
 from pianobot.analysis.greybox.layout import Layout
@@ -304,15 +309,7 @@ class GreyBoxFit:
         series, position = self._slots()
         hac = hac_covariance(J, r, series, position, n_offsets=int(np.count_nonzero(self.mask.any(axis=2))))
         noise = noise_covariance(J, self._noise_per_residual(), self.input_noise_scores(theta, J, seed))
-        cov = larger_variances(hac, noise)
-        # A parameter no residual depends on (a pad that never pulls hard enough to let go) is
-        # not known at all: the pseudo-inverse would give it zero variance, an interval of one point.
-        unseen = ~np.any(J != 0.0, axis=0)
-        if unseen.any():
-            cov[unseen, :] = 0.0
-            cov[:, unseen] = 0.0
-            cov[unseen, unseen] = np.inf
-        self.cov_ = cov
+        self.cov_ = unseen_unknown(larger_variances(hac, noise), J)
         self.jacobian_ = J
         return self.cov_
 
