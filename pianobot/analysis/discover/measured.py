@@ -346,7 +346,7 @@ def _clock_drift(batch: KeystrokeBatch, rows: npt.NDArray[np.intp], starts: Floa
     times = batch.motion_start_s[rows]
     if not (np.isfinite(times).all() and np.isfinite(starts).all()) or rows.size < 6:
         return None
-    runs = np.array([batch.trial_id[i].split("/", 1)[0] for i in rows])
+    runs = batch.run_ids[rows]
     press = np.column_stack([getattr(batch, name)[rows] for name in (*COMMAND_FIELDS, "distance_m")])
     keys = [f"{run}|" + "|".join(f"{v:.4g}" for v in row) for run, row in zip(runs, press, strict=True)]
     groups = sorted(set(keys))

@@ -126,6 +126,12 @@ class KeystrokeBatch:
         return float(self.t_s[1] - self.t_s[0]) if self.t_s.size > 1 else 0.0
 
     @property
+    def run_ids(self) -> npt.NDArray[np.str_]:
+        """(n,) the run each keystroke came from: its trial id's prefix before "/" (the store
+        loader's "run/trial"; the whole id when it has none)."""
+        return np.array([tid.split("/", 1)[0] for tid in self.trial_id])
+
+    @property
     def start_gap_m(self) -> FloatArray:
         """(n,) the fingertip-key gap at the start: the distance, plus how far below its rest
         position a key held down by friction starts."""

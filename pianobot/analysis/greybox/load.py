@@ -233,7 +233,7 @@ def _held_keys(batch: KeystrokeBatch, rows: pd.DataFrame, notes: set[str]) -> Ke
              else np.full(batch.n, np.nan))
     start = _column(rows, "t_start_s")  # where each press started on its take's clock
     out = np.zeros(batch.n)
-    runs = np.array([tid.split("/", 1)[0] for tid in batch.trial_id])
+    runs = batch.run_ids
     for run in np.unique(runs):
         mine = (runs == run) & np.isfinite(level)
         if not mine.any():
