@@ -216,9 +216,9 @@ def joint(setting: Setting, current: GreyBoxFit, spec: CandidateSpec, screened: 
     point of least error and its screened values (unless `from_screened` is False: the
     screening found no evidence for the effect). Usually they reach the same optimum, and the
     race costs two short fits. Where they do not, the first start is the one that tends to
-    stall: on an independent stop take it ran its whole budget through stiff end stops (each
-    evaluation 4x the usual cost) to 13x the error a start on the prior's base reached in 30
-    evaluations."""
+    stall: on an independent stop take, from a base whose dampers had grown to imitate the stop
+    (so small an integration step that each evaluation cost 3-4x the usual), it ran its whole
+    budget to 13x the error a start on the prior's base reached in 30 evaluations."""
     layout = _candidate_layout(current, spec, setting.train)
 
     def fit(start: np.ndarray, nfev: int) -> GreyBoxFit:
