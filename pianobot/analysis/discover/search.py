@@ -136,7 +136,15 @@ def _with_trigger(layout: Layout, fraction: float) -> np.ndarray:
 def _cost(fit: GreyBoxFit, theta: np.ndarray) -> float:
     if not fit.sigma:
         fit.sigma = fit.error_levels(fit.raw(fit.predict(theta)))
-    r = fit.residuals(theta)
+    return _robust(fit.residuals(theta))
+
+
+def _fitted_cost(fit: GreyBoxFit) -> float:
+    """`_cost` at the fit's own optimum, from the residuals the fit already holds there."""
+    return _robust(fit.scaled(fit.residuals_))
+
+
+def _robust(r: np.ndarray) -> float:
     return float(np.sum(np.log1p(r * r)))  # robust: one diverged start does not dominate
 
 
@@ -200,7 +208,7 @@ def screen(setting: Setting, current: GreyBoxFit, spec: CandidateSpec,
     if not earlier:
         return fitted
     again = fit(layout.internal({k: v for k, v in earlier.items() if k in layout.names}))
-    return min((fitted, again), key=lambda f: _cost(f, f.theta_))
+    return min((fitted, again), key=_fitted_cost)
 
 
 def joint(setting: Setting, current: GreyBoxFit, spec: CandidateSpec, screened: GreyBoxFit,
@@ -246,7 +254,7 @@ def joint(setting: Setting, current: GreyBoxFit, spec: CandidateSpec, screened: 
     if from_screened and not np.array_equal(cheapest, screened_start):
         starts.append(screened_start)
     probes = [fit(th, JOINT_PROBE_NFEV) for th in starts]
-    best = min(probes, key=lambda f: _cost(f, f.theta_))  # the first start wins a tie
+    best = min(probes, key=_fitted_cost)  # the first start wins a tie
     if best.converged_:
         return best
     return fit(best.theta_, JOINT_NFEV - JOINT_PROBE_NFEV)
