@@ -47,7 +47,10 @@ F_A, F_TA, F_TC, F_VP, T_DN, R_A, R_TA, R_TC, R_VP, T_RE = range(18, 28)
 # Where the key starts, below its rest position (0 for a key at rest; a key that dry friction
 # left part-way down after the previous keystroke starts there, its spring loaded).
 X2S = 28
-N_KP = 29
+# A keystroke started in flight (`physics.free_flight`): the fingertip's offset from the arm,
+# its half-step velocity and its last acceleration at the start (all 0 for a finger at rest).
+U1S, V1S, A1S = 29, 30, 31
+N_KP = 32
 
 # Entries of the effect vector `ep` (N_EP,): switches (0/1, or a form index) and values.
 (
@@ -162,9 +165,15 @@ def _arm_positions(
 @njit(cache=True, inline="always", fastmath=True, error_model="numpy")
 def _load_block(
     w: FloatArray, kp: FloatArray, b0: int, nb: int, mode: int, trace_t: FloatArray,
-    trace_x0: FloatArray, t0: float,
+    trace_x0: FloatArray, t0: float, h: float,
 ) -> None:
-    """Constants of keystrokes b0..b0+nb into `w` (padded with copies of the last) and rest state."""
+    """Constants of keystrokes b0..b0+nb into `w` (padded with copies of the last) and start state.
+
+    A commanded press (mode 0, 2) starts with the arm where its command was a step earlier as
+    the previous position: the same as the start for a press that has not begun to move, the
+    arm's own motion for one started in flight. The fingertip hangs from the arm at rest, or as
+    the columns U1S, V1S, A1S say.
+    """
     for jj in range(w.shape[1]):
         src = b0 + min(jj, nb - 1)
         for col in range(N_KP):
@@ -172,11 +181,17 @@ def _load_block(
         w[M1, jj] = 1.0 / kp[src, M1]  # inverse masses
         w[M2, jj] = 1.0 / kp[src, M2]
     _arm_positions(mode, w, S_X0, trace_t, trace_x0, b0, nb, t0)
+    if mode != 1:
+        _arm_positions(mode, w, S_X0P, trace_t, trace_x0, b0, nb, t0 - h)
+    else:
+        for jj in range(w.shape[1]):
+            w[S_X0P, jj] = w[S_X0, jj]
     for jj in range(w.shape[1]):
-        w[S_X0P, jj] = w[S_X0, jj]
-        w[S_X1, jj] = w[S_X0, jj]  # the fingertip hangs at rest from the arm
-        for row in (S_V1, S_V2, S_A1, S_A2, S_ATT, S_FC, S_V2E, S_ZH):
+        w[S_X1, jj] = w[S_X0, jj] + w[U1S, jj]
+        for row in (S_V2, S_A2, S_ATT, S_FC, S_V2E, S_ZH):
             w[row, jj] = 0.0
+        w[S_V1, jj] = w[V1S, jj]
+        w[S_A1, jj] = w[A1S, jj]
         w[S_X2, jj] = w[X2S, jj]
         w[S_ENG, jj] = 1.0 if w[S_X1, jj] - w[S_X2, jj] - w[DIST, jj] >= 0.0 else 0.0
 
@@ -282,7 +297,7 @@ def _make_integrate(block: int, linear: bool, power: bool = False, hysteresis: b
 
         for b0 in range(0, n, block):
             nb = min(block, n - b0)
-            _load_block(w, kp, b0, nb, mode, trace_t, trace_x0, t_start - delay)
+            _load_block(w, kp, b0, nb, mode, trace_t, trace_x0, t_start - delay, h)
             k_out = 0
             for i in range(n_steps + 1):
                 record = k_out < n_out and i == k_out * out_every

@@ -28,6 +28,7 @@ import numpy.typing as npt
 import pandas as pd
 
 from pianobot.physics import _kernel as K
+from pianobot.physics import free_flight
 from pianobot.physics.effects import Effects
 from pianobot.physics.model import KeystrokeModel
 from pianobot.physics.msd import MSDParams
@@ -257,6 +258,47 @@ def press_columns(presses: Sequence[Press], profile: str) -> tuple[FloatArray, F
     return kp, ends
 
 
+@dataclass(frozen=True)
+class FlightStarts:
+    """Where each press's simulation starts (s into its motion, on the output grid, before its
+    fingertip can reach the key) and its fingertip's state there (columns U1S, V1S, A1S of the
+    kernel: offset from the arm, half-step velocity, last acceleration). All zero: at rest."""
+
+    start_s: FloatArray  # (n,)
+    state: FloatArray  # (n, 3)
+    out_dt_s: float
+    step_s: float
+
+    def take(self, rows: npt.ArrayLike) -> FlightStarts:
+        """The starts of some of the presses (in that order)."""
+        idx = np.asarray(rows, dtype=np.intp)
+        return FlightStarts(self.start_s[idx], self.state[idx], self.out_dt_s, self.step_s)
+
+
+def _press_model_columns(presses: Sequence[Press], vacuum_kpa: FloatArray, model: KeystrokeModel,
+                         block_keys: Sequence[str] | None) -> tuple[FloatArray, FloatArray]:
+    """The kernel's columns of commanded presses under `model`, and each press's duration."""
+    arm, ends = press_columns(presses, model.arm_profile)
+    kp = _model_columns(model.msd, model.effects, vacuum_kpa, block_keys)
+    kp[:, K.DIST :] = arm[:, K.DIST :]
+    return kp, ends
+
+
+def flight_starts(
+    presses: Sequence[Press], vacuum_kpa: npt.ArrayLike, model: KeystrokeModel, *,
+    out_dt_s: float = 1e-3, step_s: float = 1e-4, block_keys: Sequence[str] | None = None,
+) -> FlightStarts:
+    """The latest start of each press that `simulate_presses(start=...)` can take (see
+    `physics.free_flight`): 0, at rest, where the model or the press cannot start in flight.
+    The states are for this model and these `out_dt_s`, `step_s` only."""
+    presses = list(presses)
+    kp, _ = _press_model_columns(presses, _vacuum(vacuum_kpa, len(presses)), model, block_keys)
+    ep = effect_vector(model.effects)
+    start = free_flight.flight_start_s(kp, ep, out_dt_s)
+    state = free_flight.flight_state(kp, ep, _grid(out_dt_s, step_s)[0], start)
+    return FlightStarts(start, state, out_dt_s, step_s)
+
+
 def simulate_presses(
     presses: Sequence[Press],
     vacuum_kpa: npt.ArrayLike,
@@ -266,8 +308,10 @@ def simulate_presses(
     duration_s: float | None = None,
     step_s: float = 1e-4,
     block_keys: Sequence[str] | None = None,
+    start: FlightStarts | None = None,
 ) -> SimBatch:
-    """Simulate keystrokes commanded as presses (time 0 = start of each press's motion).
+    """Simulate keystrokes commanded as presses (time 0 = start of each press's motion, or of
+    its simulation, `start`).
 
     Args:
         presses: the commanded presses.
@@ -277,20 +321,37 @@ def simulate_presses(
         duration_s: simulated time (default: the longest press plus 0.3 s to settle).
         step_s: largest internal step (the step actually used divides `out_dt_s`).
         block_keys: one label per press for `stiffness_drift` (same label, same drift).
+        start: where each press's simulation starts, in flight (`flight_starts` of the same
+            presses, model, `out_dt_s` and `step_s`): a press's samples are then at
+            start.start_s + t_s, and `duration_s` counts from there.
     """
     presses = list(presses)
     n = len(presses)
-    p = _vacuum(vacuum_kpa, n)
-    arm, ends = press_columns(presses, model.arm_profile)
-    kp = _model_columns(model.msd, model.effects, p, block_keys)
-    kp[:, K.DIST :] = arm[:, K.DIST :]
+    kp, ends = _press_model_columns(presses, _vacuum(vacuum_kpa, n), model, block_keys)
     if duration_s is None:
         duration_s = (float(ends.max()) if n else 0.0) + SETTLE_S
     empty = np.zeros(1)
     # Fast moves cost two more profile evaluations per step: only batches with any pay them.
     mode = 2 if any(p.two_segment for p in presses) else 0
-    return _run(kp, effect_vector(model.effects), mode, empty, np.zeros((1, n)), 0.0,
-                float(duration_s), out_dt_s, step_s)
+    ep = effect_vector(model.effects)
+    if start is not None and np.any(start.start_s != 0.0):
+        kp = _started_in_flight(kp, ep, mode == 2, start, out_dt_s, step_s)
+    return _run(kp, ep, mode, empty, np.zeros((1, n)), 0.0, float(duration_s), out_dt_s, step_s)
+
+
+def _started_in_flight(kp: FloatArray, ep: FloatArray, two_segment: bool, start: FlightStarts,
+                       out_dt_s: float, step_s: float) -> FloatArray:
+    """`kp` with each press's clock moved to its start and its fingertip's state there."""
+    if start.start_s.shape != (kp.shape[0],) or (start.out_dt_s, start.step_s) != (out_dt_s, step_s):
+        raise ValueError("start: made for other presses, or another out_dt_s or step_s.")
+    if not free_flight.can_start_in_flight(ep, two_segment):
+        raise ValueError("start: this model or press starts at rest only (first-order arm lag, "
+                         "a yielding finger body or two-segment presses).")
+    kp = kp.copy()
+    kp[:, [K.U1S, K.V1S, K.A1S]] = start.state
+    for col in (K.T_DN, K.T_UP, K.T_RE):
+        kp[:, col] -= start.start_s
+    return kp
 
 
 def simulate_arm(
