@@ -11,9 +11,10 @@ the way a two-sensor digital action reads it (`physics.piano`), but before round
 on-velocity is the smooth function of key speed, and the crossings are interpolated between
 samples, so a fit sees smooth functions of the parameters.
 
-Only what the MIDI needs is simulated: each keystroke until its arm has risen back past the
-depth it pressed plus a margin (the key is back above its release depth by then); keystrokes
-are simulated in blocks of similar length.
+Only what the MIDI needs is simulated: each keystroke from just before its fingertip can reach
+the key (started in flight, `physics.free_flight`: a slow press spends most of its time above
+the key) until its arm has risen back past the depth it pressed plus a margin (the key is back
+above its release depth by then); keystrokes are simulated in blocks of similar length.
 
 The piano's readout (trigger and release depth, full-scale speed, velocity curve) does not act
 on the keystroke, only on how it is read. A fit differentiates the readout's parameters too, so
@@ -39,12 +40,14 @@ from pianobot.analysis.greybox.prediction import (
 )
 from pianobot.physics.model import KeystrokeModel
 from pianobot.physics.piano import PianoParams, on_velocity_from_speed
-from pianobot.physics.simulate import simulate_presses
+from pianobot.physics.simulate import flight_starts, simulate_presses
 from pianobot.physics.trajectory import Press, press_timing
 
 FloatArray = npt.NDArray[np.float64]
 
 OUT_DT_S = 1e-3
+#: A group of keystrokes simulated together: rows, starts, key traces, valid samples.
+Traces = tuple[npt.NDArray[np.intp], FloatArray, FloatArray, npt.NDArray[np.bool_]]
 #: Simulations kept for a model that differs only in its readout (a fit's Jacobian perturbs each
 #: parameter in turn from the same point; the readout's come after the model's own).
 KEPT_SIMULATIONS = 4
@@ -117,8 +120,9 @@ class Commanded:
     # The presses of the last acceleration asked for: a fit varies the model far more often
     # than the drive's acceleration, and a Press is immutable.
     _last: list[Any] = field(default_factory=lambda: [None, None], init=False, repr=False, compare=False)
-    # (model without its readout, acceleration) -> each group's rows, key traces and valid samples.
-    _kept: list[tuple[Any, list[tuple[npt.NDArray[np.intp], FloatArray, npt.NDArray[np.bool_]]]]] = field(
+    # (model without its readout, acceleration) -> each group's rows, starts, key traces and
+    # valid samples.
+    _kept: list[tuple[Any, list[Traces]]] = field(
         default_factory=list, init=False, repr=False, compare=False)
 
     def presses(self, acceleration_mps2: float | None) -> list[Press]:
@@ -139,10 +143,10 @@ class Commanded:
         """True when some keystroke does not record its acceleration (a drive parameter)."""
         return bool(np.isnan(self.batch.acceleration_mps2).any())
 
-    def key_traces(self, model: KeystrokeModel, accel: float | None
-                   ) -> list[tuple[npt.NDArray[np.intp], FloatArray, npt.NDArray[np.bool_]]]:
-        """Each group's rows, simulated key traces (NaN as 0) and valid samples; kept for a
-        model that differs only in its readout (see the module docstring)."""
+    def key_traces(self, model: KeystrokeModel, accel: float | None) -> list[Traces]:
+        """Each group's rows, their starts (s into the press), simulated key traces from there
+        (NaN as 0) and valid samples; kept for a model that differs only in its readout (see
+        the module docstring)."""
         key = (replace(model, effects=model.effects.without("velocity_curve"), piano=PianoParams()), accel)
         for i, (seen, traces) in enumerate(self._kept):
             if seen == key:
@@ -153,14 +157,20 @@ class Commanded:
         lag = model.effects.value("arm_lag", "arm_lag_s", 0.0)
         cuts = np.array([_cut_s(p, model.arm_profile, lag) for p in presses])
         step_s = integration_step_s(model, batch.vacuum_kpa, SIM_STEP_S)
+        # Each keystroke starts just before its fingertip can reach the key, in flight.
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            flight = flight_starts(presses, batch.vacuum_kpa, model, out_dt_s=self.out_dt_s, step_s=step_s)
+        starts = flight.start_s
+        spans = np.maximum(cuts - starts, 0.0)
         traces = []
-        for rows in length_groups(cuts / step_s):
-            duration = float(cuts[rows].max())
+        for rows in length_groups(spans / step_s):
+            duration = float(spans[rows].max())
             with np.errstate(over="ignore", invalid="ignore"):
                 sim = simulate_presses([presses[i] for i in rows], batch.vacuum_kpa[rows], model,
-                                       out_dt_s=self.out_dt_s, duration_s=duration, step_s=step_s)
-            valid = sim.t_s[None, :] <= cuts[rows][:, None]
-            traces.append((rows, np.where(np.isfinite(sim.x2_m), sim.x2_m, 0.0), valid))
+                                       out_dt_s=self.out_dt_s, duration_s=duration, step_s=step_s,
+                                       start=flight.take(rows))
+            valid = sim.t_s[None, :] <= spans[rows][:, None]
+            traces.append((rows, starts[rows], np.where(np.isfinite(sim.x2_m), sim.x2_m, 0.0), valid))
         self._kept.append((key, traces))
         del self._kept[: max(len(self._kept) - KEPT_SIMULATIONS, 0)]
         return traces
@@ -178,8 +188,9 @@ class Commanded:
         piano = model.readout_params()
         n = batch.n
         out = [np.full(n, np.nan) for _ in range(4)]
-        for rows, x2, valid in self.key_traces(model, accel):
-            for target, values in zip(out, midi_outcomes(x2, valid, piano, self.out_dt_s), strict=True):
+        for rows, starts, x2, valid in self.key_traces(model, accel):
+            velocity, t_on, hold, margin = midi_outcomes(x2, valid, piano, self.out_dt_s)
+            for target, values in zip(out, (velocity, t_on + starts, hold, margin), strict=True):
                 target[rows] = values
         empty = np.zeros((n, batch.t_s.size))
         return Prediction(np.full_like(empty, np.nan), np.full_like(empty, np.nan), np.zeros((n, 0)),
