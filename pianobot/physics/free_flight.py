@@ -16,7 +16,7 @@ of its transients (a velocity jump v: v·√(m1/k0); an acceleration a: m1·a/k0
 twice that in swing), with room to spare (`FLIGHT_SWING_FACTOR`, `CLEARANCE_M`).
 
 Not for an arm that lags its command through a first-order filter, a finger body that yields
-(`finger_hysteresis`), or two-segment presses: those start at rest, as always.
+(`finger_hysteresis`), or a press with a fast approach: those start at rest, as always.
 """
 
 from __future__ import annotations
@@ -34,10 +34,16 @@ CLEARANCE_M = 2e-4
 FLIGHT_SWING_FACTOR = 2.0
 
 
-def can_start_in_flight(ep: FloatArray, two_segment: bool) -> bool:
+def has_fast_approach(kp: FloatArray) -> bool:
+    """Whether some of these presses (kernel columns) start with a fast approach (its down move
+    starts later than 0). A fast retract comes after lift-off and does not matter here."""
+    return bool(np.any(kp[:, K.T_DN] != 0.0))
+
+
+def can_start_in_flight(ep: FloatArray, fast_approach: bool) -> bool:
     """Whether keystrokes with these effects (kernel effect vector) may start in flight."""
     first_order_lag = ep[K.E_LAG_FORM] == K.LAG_FIRST_ORDER and ep[K.E_LAG_S] > 0.0
-    return not (first_order_lag or ep[K.E_HYST_SHARE] > 0.0 or two_segment)
+    return not (first_order_lag or ep[K.E_HYST_SHARE] > 0.0 or fast_approach)
 
 
 def _delay_s(ep: FloatArray) -> float:
@@ -63,7 +69,7 @@ def flight_start_s(kp: FloatArray, ep: FloatArray, out_dt_s: float) -> FloatArra
     time on the output grid at which each fingertip is surely still clear of the key (0 where
     none is, or where the model cannot start in flight)."""
     n = kp.shape[0]
-    if n == 0 or not can_start_in_flight(ep, bool(np.any(kp[:, K.T_DN] != 0.0))):
+    if n == 0 or not can_start_in_flight(ep, has_fast_approach(kp)):
         return np.zeros(n)
     m1, k0 = kp[:, K.M1], kp[:, K.K0]
     with np.errstate(divide="ignore", invalid="ignore"):

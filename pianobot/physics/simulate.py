@@ -335,18 +335,18 @@ def simulate_presses(
     mode = 2 if any(p.two_segment for p in presses) else 0
     ep = effect_vector(model.effects)
     if start is not None and np.any(start.start_s != 0.0):
-        kp = _started_in_flight(kp, ep, mode == 2, start, out_dt_s, step_s)
+        kp = _started_in_flight(kp, ep, start, out_dt_s, step_s)
     return _run(kp, ep, mode, empty, np.zeros((1, n)), 0.0, float(duration_s), out_dt_s, step_s)
 
 
-def _started_in_flight(kp: FloatArray, ep: FloatArray, two_segment: bool, start: FlightStarts,
-                       out_dt_s: float, step_s: float) -> FloatArray:
+def _started_in_flight(kp: FloatArray, ep: FloatArray, start: FlightStarts, out_dt_s: float,
+                       step_s: float) -> FloatArray:
     """`kp` with each press's clock moved to its start and its fingertip's state there."""
     if start.start_s.shape != (kp.shape[0],) or (start.out_dt_s, start.step_s) != (out_dt_s, step_s):
         raise ValueError("start: made for other presses, or another out_dt_s or step_s.")
-    if not free_flight.can_start_in_flight(ep, two_segment):
+    if not free_flight.can_start_in_flight(ep, free_flight.has_fast_approach(kp)):
         raise ValueError("start: this model or press starts at rest only (first-order arm lag, "
-                         "a yielding finger body or two-segment presses).")
+                         "a yielding finger body or a fast approach).")
     kp = kp.copy()
     kp[:, [K.U1S, K.V1S, K.A1S]] = start.state
     for col in (K.T_DN, K.T_UP, K.T_RE):

@@ -90,6 +90,17 @@ def test_models_and_presses_that_cannot_start_in_flight_start_at_rest() -> None:
     two_segment = [Press(0.05, 0.02, 0.02, 0.02, 0.5, 0.0, approach_m=0.03, retract_m=0.0,
                          travel_velocity_mps=0.25, travel_acceleration_mps2=1.0)]
     assert not flight_starts(two_segment, -40.0, trapezoid, out_dt_s=OUT_DT_S, step_s=STEP_S).start_s.any()
+    # A fast retract comes after lift-off: such a press starts in flight, the same keystroke.
+    retract_only = [Press(0.05, 0.02, 0.02, 0.02, 0.5, 0.0, approach_m=0.0, retract_m=0.03,
+                          travel_velocity_mps=0.25, travel_acceleration_mps2=1.0)]
+    late = flight_starts(retract_only, -40.0, trapezoid, out_dt_s=OUT_DT_S, step_s=STEP_S)
+    k = int(round(late.start_s[0] / OUT_DT_S))
+    assert k > 1000
+    full = simulate_presses(retract_only, -40.0, trapezoid, out_dt_s=OUT_DT_S, step_s=STEP_S)
+    part = simulate_presses(retract_only, -40.0, trapezoid, out_dt_s=OUT_DT_S, step_s=STEP_S,
+                            duration_s=full.t_s[-1] - late.start_s[0], start=late)
+    np.testing.assert_allclose(part.x0_m[0], full.x0_m[0, k:], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(part.x2_m[0], full.x2_m[0, k:], rtol=0, atol=1e-12)
     start = flight_starts(presses, -40.0, trapezoid, out_dt_s=OUT_DT_S, step_s=STEP_S)
     with pytest.raises(ValueError, match="another out_dt_s or step_s"):
         simulate_presses(presses, -40.0, trapezoid, out_dt_s=OUT_DT_S, step_s=1e-4, start=start)
