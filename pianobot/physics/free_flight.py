@@ -21,6 +21,8 @@ Not for an arm that lags its command through a first-order filter, a finger body
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import numpy.typing as npt
 
@@ -168,3 +170,32 @@ def flight_state(kp: FloatArray, ep: FloatArray, h: float, start_s: FloatArray) 
     out[:, 2] = y[:, 2]
     return np.where((steps > 0)[:, None], out, 0.0)
 
+
+
+#: What a start and its state depend on: the finger's mass, spring and damper, the down move,
+#: when the up move starts, the gap to the key and where the key starts.
+_INPUT_COLUMNS = [K.M1, K.K0, K.C0, K.D_A, K.D_TA, K.D_TC, K.D_VP, K.T_DN, K.T_UP, K.DIST, K.X2S]
+_INPUT_EFFECTS = [K.E_LAG_FORM, K.E_LAG_S, K.E_HYST_SHARE]
+
+
+def starts_in_flight(kp: FloatArray, ep: FloatArray, out_dt_s: float, h: float) -> tuple[FloatArray, FloatArray]:
+    """`flight_start_s` and `flight_state` together (read-only arrays), the last answers kept:
+    a fit varies the key's and the readout's parameters far more often than the finger's, and
+    those leave the free flight as it was."""
+    columns = np.ascontiguousarray(kp[:, _INPUT_COLUMNS], dtype=np.float64)
+    effects = np.ascontiguousarray(ep[_INPUT_EFFECTS], dtype=np.float64)
+    return _starts_in_flight(columns.tobytes(), effects.tobytes(), kp.shape[0], float(out_dt_s), float(h))
+
+
+@functools.lru_cache(maxsize=16)
+def _starts_in_flight(columns: bytes, effects: bytes, n: int, out_dt_s: float, h: float
+                      ) -> tuple[FloatArray, FloatArray]:
+    kp = np.zeros((n, K.N_KP))
+    kp[:, _INPUT_COLUMNS] = np.frombuffer(columns, dtype=np.float64).reshape(n, len(_INPUT_COLUMNS))
+    ep = np.zeros(K.N_EP)
+    ep[_INPUT_EFFECTS] = np.frombuffer(effects, dtype=np.float64)
+    start = flight_start_s(kp, ep, out_dt_s)
+    state = flight_state(kp, ep, h, start)
+    start.flags.writeable = False
+    state.flags.writeable = False
+    return start, state

@@ -17,6 +17,7 @@ on (the key keeps settling), so readers that look for "the end" should cut at th
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import math
 from collections.abc import Sequence
@@ -242,20 +243,30 @@ def _vacuum(vacuum_kpa: npt.ArrayLike, n: int) -> FloatArray:
 
 def press_columns(presses: Sequence[Press], profile: str) -> tuple[FloatArray, FloatArray]:
     """The kernel's arm columns (n, N_KP) for presses, and each press's duration (s)."""
+    kind = "trapezoid" if profile == "trapezoid" else "ramp"
     kp = np.zeros((len(presses), K.N_KP))
     ends = np.zeros(len(presses))
     for j, press in enumerate(presses):
-        tm = press_timing(press, "trapezoid" if profile == "trapezoid" else "ramp")
-        moves = ((K.D_A, tm.down), (K.U_A, tm.up), (K.F_A, tm.approach), (K.R_A, tm.retract))
-        for cols, mv in moves:
-            a = mv.acceleration_mps2 if math.isfinite(mv.acceleration_mps2) else 0.0
-            kp[j, cols : cols + 4] = (a, mv.t_accel_s, mv.t_cruise_s, mv.peak_velocity_mps)
-        kp[j, K.T_UP] = tm.t_hold_end_s
-        kp[j, K.T_DN] = tm.t_down_start_s
-        kp[j, K.T_RE] = tm.t_lifted_s
-        kp[j, K.DIST] = press.distance_m
-        ends[j] = tm.t_end_s
+        kp[j], ends[j] = _press_row(press, kind)
     return kp, ends
+
+
+@functools.lru_cache(maxsize=4096)
+def _press_row(press: Press, profile: str) -> tuple[FloatArray, float]:
+    """One press's arm columns and duration, kept: a fit simulates the same presses at every
+    evaluation (a Press is immutable, so equal presses have equal columns)."""
+    tm = press_timing(press, profile)
+    row = np.zeros(K.N_KP)
+    moves = ((K.D_A, tm.down), (K.U_A, tm.up), (K.F_A, tm.approach), (K.R_A, tm.retract))
+    for cols, mv in moves:
+        a = mv.acceleration_mps2 if math.isfinite(mv.acceleration_mps2) else 0.0
+        row[cols : cols + 4] = (a, mv.t_accel_s, mv.t_cruise_s, mv.peak_velocity_mps)
+    row[K.T_UP] = tm.t_hold_end_s
+    row[K.T_DN] = tm.t_down_start_s
+    row[K.T_RE] = tm.t_lifted_s
+    row[K.DIST] = press.distance_m
+    row.flags.writeable = False
+    return row, tm.t_end_s
 
 
 @dataclass(frozen=True)
@@ -293,9 +304,8 @@ def flight_starts(
     The states are for this model and these `out_dt_s`, `step_s` only."""
     presses = list(presses)
     kp, _ = _press_model_columns(presses, _vacuum(vacuum_kpa, len(presses)), model, block_keys)
-    ep = effect_vector(model.effects)
-    start = free_flight.flight_start_s(kp, ep, out_dt_s)
-    state = free_flight.flight_state(kp, ep, _grid(out_dt_s, step_s)[0], start)
+    start, state = free_flight.starts_in_flight(kp, effect_vector(model.effects), out_dt_s,
+                                                _grid(out_dt_s, step_s)[0])
     return FlightStarts(start, state, out_dt_s, step_s)
 
 

@@ -58,3 +58,59 @@ def test_a_readout_change_is_read_from_the_kept_traces_with_the_same_outcomes(
         kept.predict(model, {"acceleration_mps2": 2.0 + i})
     assert len(kept._kept) == KEPT_SIMULATIONS
     assert pickle.loads(pickle.dumps(kept))._kept == []  # a worker gets the drive, not its traces
+
+
+def _outcomes_by_masks(x2: np.ndarray, valid: np.ndarray, piano: commanded.PianoParams, dt: float) -> np.ndarray:
+    """midi_outcomes as boolean masks over whole traces (how it was written before the compiled scan)."""
+    def first(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return np.argmax(mask, axis=1), mask.any(axis=1)
+
+    def cross(x: np.ndarray, k: np.ndarray, level: float) -> np.ndarray:
+        rows, k = np.arange(x.shape[0]), np.maximum(k, 1)
+        a, b = x[rows, k - 1], x[rows, k]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            frac = np.where(b != a, (level - a) / (b - a), 0.0)
+        return (k - 1 + np.clip(frac, 0.0, 1.0)) * dt
+
+    x = np.where(valid, x2, -np.inf)
+    margin = np.max(x, axis=1) - piano.lower_sensor_m
+    k_up, _ = first(x >= piano.upper_sensor_m)
+    k_lo, sounded = first(x >= piano.lower_sensor_m)
+    t_up, t_on = cross(x, k_up, piano.upper_sensor_m), cross(x, k_lo, piano.lower_sensor_m)
+    speed = (piano.lower_sensor_m - piano.upper_sensor_m) / np.maximum(t_on - t_up, 1e-6)
+    velocity = commanded.on_velocity_from_speed(speed, piano, rounded=False, clipped=False)
+    k_off, released = first((np.arange(x.shape[1])[None, :] > k_lo[:, None]) & valid & (x2 <= piano.release_m))
+    rows = np.arange(x.shape[0])
+    a, b = x2[rows, np.maximum(k_off - 1, 0)], x2[rows, k_off]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        frac = np.clip(np.where(a != b, (a - piano.release_m) / (a - b), 0.0), 0.0, 1.0)
+    hold = np.where(released, (k_off - 1 + frac) * dt - t_on, np.nan)
+    return np.stack([np.where(sounded, velocity, np.nan), np.where(sounded, t_on, np.nan),
+                     np.where(sounded, hold, np.nan), margin])
+
+
+def test_the_compiled_crossing_scan_reads_what_the_whole_trace_masks_read() -> None:
+    """Simulated key traces (sounded, silent, never released), plus the edge cases of the scan:
+    no valid sample, a key that never reaches a sensor, one that starts below them."""
+    study = KeystrokeModel.study()
+    model = study.__class__(study.msd, study.effects.with_effect("arm_acceleration"), study.piano)
+    piano = model.readout_params()
+    n = 20
+    deep = KeystrokeBatch(
+        tuple(f"k{i}" for i in range(n)), np.full(n, -60.0), np.zeros(0), np.zeros((n, 0)), np.zeros((n, 0)),
+        np.zeros((n, 0)), down_velocity_mps=np.linspace(0.01, 0.08, n), up_velocity_mps=np.full(n, np.nan),
+        acceleration_mps2=np.full(n, np.nan), depth_m=np.linspace(0.005, 0.04, n), hold_s=np.zeros(n),
+        distance_m=np.full(n, 0.02))
+    groups = Commanded(deep).key_traces(model, 0.6)
+    rng = np.random.default_rng(8)
+    x2 = rng.uniform(-0.002, 0.012, (6, 300))
+    valid = rng.uniform(size=(6, 300)) < 0.9
+    valid[0] = False
+    x2[1] = 0.001
+    x2[2, :] = 0.011
+    cases = [(x, v) for _, _, x, v in groups] + [(x2, valid)]
+    for x, v in cases:
+        got = np.stack(commanded.midi_outcomes(x, v, piano, 1e-3))
+        np.testing.assert_array_equal(got, _outcomes_by_masks(x, v, piano, 1e-3))
+    velocity = [commanded.midi_outcomes(x, v, piano, 1e-3)[0] for x, v in cases[:-1]]
+    assert any(np.isfinite(o).any() for o in velocity) and any(np.isnan(o).any() for o in velocity)

@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from pianobot.analysis.greybox._midi_kernel import key_crossings
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
 from pianobot.analysis.greybox.prediction import (
     SIM_STEP_S,
@@ -64,16 +65,14 @@ def _cut_s(press: Press, profile: str, lag_s: float) -> float:
     return float(tm.t_hold_end_s + tm.up.time_at_m(rise) + RELEASE_TAIL_S + lag_s)
 
 
-def _first(mask: npt.NDArray[np.bool_]) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.bool_]]:
-    """Index of the first True per row, and whether there is one."""
-    return np.asarray(np.argmax(mask, axis=1), dtype=np.intp), np.asarray(mask.any(axis=1), dtype=bool)
-
-
-def _cross_s(x: FloatArray, k: npt.NDArray[np.intp], level: float, dt_s: float) -> FloatArray:
-    """Interpolated time of crossing `level` between samples k − 1 and k of each row."""
-    rows = np.arange(x.shape[0])
+def _cross_s(x2: FloatArray, valid: npt.NDArray[np.bool_], k: npt.NDArray[np.intp], level: float,
+             dt_s: float) -> FloatArray:
+    """Interpolated time of crossing `level` between samples k − 1 and k of each row (a sample
+    outside the valid ones counts as −inf)."""
+    rows = np.arange(x2.shape[0])
     k = np.maximum(k, 1)
-    a, b = x[rows, k - 1], x[rows, k]
+    a = np.where(valid[rows, k - 1], x2[rows, k - 1], -np.inf)
+    b = np.where(valid[rows, k], x2[rows, k], -np.inf)
     with np.errstate(divide="ignore", invalid="ignore"):
         frac = np.where(b != a, (level - a) / (b - a), 0.0)
     return np.asarray((k - 1 + np.clip(frac, 0.0, 1.0)) * dt_s, dtype=np.float64)
@@ -87,20 +86,18 @@ def midi_outcomes(x2_m: FloatArray, valid: npt.NDArray[np.bool_], piano: PianoPa
     between the two sensors; it stops when the key rises back past the release depth. `valid`
     masks each row's simulated samples.
     """
-    x = np.where(valid, x2_m, -np.inf)
-    margin = np.max(x, axis=1) - piano.lower_sensor_m
-    k_up, _ = _first(x >= piano.upper_sensor_m)
-    k_lo, sounded = _first(x >= piano.lower_sensor_m)
-    t_up = _cross_s(x, k_up, piano.upper_sensor_m, dt_s)
-    t_on = _cross_s(x, k_lo, piano.lower_sensor_m, dt_s)
+    top, k_up, k_lo, sounded, k_off, released = key_crossings(
+        np.ascontiguousarray(x2_m, dtype=np.float64), np.ascontiguousarray(valid, dtype=np.bool_),
+        piano.upper_sensor_m, piano.lower_sensor_m, piano.release_m)
+    margin = top - piano.lower_sensor_m
+    t_up = _cross_s(x2_m, valid, k_up, piano.upper_sensor_m, dt_s)
+    t_on = _cross_s(x2_m, valid, k_lo, piano.lower_sensor_m, dt_s)
     gap = piano.lower_sensor_m - piano.upper_sensor_m
     speed = gap / np.maximum(t_on - t_up, 1e-6)
     # Not clipped to the MIDI range: a fit needs the slope everywhere (measured velocities are
     # 1–127 anyway, and a model beyond them is simply that far off).
     velocity = on_velocity_from_speed(speed, piano, rounded=False, clipped=False)
-    after = np.arange(x.shape[1])[None, :] > k_lo[:, None]
-    k_off, released = _first(after & valid & (x2_m <= piano.release_m))
-    rows = np.arange(x.shape[0])
+    rows = np.arange(x2_m.shape[0])
     a, b = x2_m[rows, np.maximum(k_off - 1, 0)], x2_m[rows, k_off]
     with np.errstate(divide="ignore", invalid="ignore"):
         frac = np.clip(np.where(a != b, (a - piano.release_m) / (a - b), 0.0), 0.0, 1.0)
