@@ -171,7 +171,6 @@ def flight_state(kp: FloatArray, ep: FloatArray, h: float, start_s: FloatArray) 
     return np.where((steps > 0)[:, None], out, 0.0)
 
 
-
 #: What a start and its state depend on: the finger's mass, spring and damper, the down move,
 #: when the up move starts, the gap to the key and where the key starts.
 _INPUT_COLUMNS = [K.M1, K.K0, K.C0, K.D_A, K.D_TA, K.D_TC, K.D_VP, K.T_DN, K.T_UP, K.DIST, K.X2S]
