@@ -29,11 +29,10 @@ from pianobot.store import (
     check_run,
     list_runs,
     load_run,
-    repair_run,
     rig_summary,
     summarize_run,
 )
-from pianobot.store.tables import trial_status_counts
+from pianobot.store.reader import trial_counts
 
 RUN_COLUMNS = (
     Column("run id"),  # what people copy into the next command: never cut
@@ -70,7 +69,7 @@ def _run_details(run_id: str, data: Path) -> dict[str, Any]:
     return {
         **summary.to_dict(),
         "path": str(run.path),
-        "counts": trial_status_counts(run.paths),
+        "counts": trial_counts(run, meta),
         "spec_path": spec.get("path"),
         "spec_sha256": meta.get("spec_sha256"),
         "seed": meta.get("seed"),
@@ -168,6 +167,8 @@ def register(app: typer.Typer) -> None:
         json_out: JsonFlag = False,
     ) -> None:
         """Repair a damaged run: restore from the journal, quarantine the rest, mark lost trials to redo."""
+        from pianobot.store import repair_run  # loads pyarrow: only when repairing
+
         report = repair_run(load_run(run_id, data, check=False).paths)
         if json_out:
             emit_json(report.to_dict())

@@ -19,15 +19,20 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import pyarrow as pa
-import pyarrow.parquet as pq
-
-from pianobot.store.layout import TABLE_NAMES, RunPaths, read_json, sha256_file
+from pianobot.store.footer import ParquetFooter, read_footer
+from pianobot.store.layout import TABLE_NAMES, RunPaths, batches_of, read_json, sha256_file
 from pianobot.store.records import FileRecord, JournalIndex, index_journal
-from pianobot.store.schema import batches_of
 
-# What reading a damaged Parquet or JSON file can raise.
-READ_ERRORS = (OSError, ValueError, pa.ArrowException, UnicodeDecodeError)
+# What reading a damaged JSON file or Parquet footer can raise (`FooterError` is a ValueError).
+# The quick check reads footers without pyarrow, so `pianobot runs` starts without it.
+READ_ERRORS: tuple[type[Exception], ...] = (OSError, ValueError, UnicodeDecodeError)
+
+
+def parquet_errors() -> tuple[type[Exception], ...]:
+    """`READ_ERRORS` and pyarrow's own: what reading a damaged Parquet file's pages can raise."""
+    import pyarrow as pa
+
+    return (*READ_ERRORS, pa.ArrowException)
 
 
 @dataclass(frozen=True)
@@ -134,9 +139,9 @@ def _check_plan(check: _Check, meta: dict[str, Any] | None) -> None:
             check.add(path, "is missing", "plan")
         return
     record = FileRecord.parse(meta.get("plan_file")) if meta else None
-    rows = _check_file(check, path, "plan", None, record)
-    if rows is not None and isinstance(planned, int) and rows != planned:
-        check.add(path, f"has {rows} rows, run.json plans {planned} trials", "plan")
+    footer = _check_file(check, path, "plan", None, record)
+    if footer is not None and isinstance(planned, int) and footer.num_rows != planned:
+        check.add(path, f"has {footer.num_rows} rows, run.json plans {planned} trials", "plan")
 
 
 def _check_compacted(check: _Check) -> dict[str, set[int] | None]:
@@ -152,10 +157,10 @@ def _check_compacted(check: _Check) -> dict[str, set[int] | None]:
             if lost and _recorded_with_rows(check.index, name, lost):
                 check.add(path, f"is missing (it held batches {_batches_text(lost)})", name)
             continue
-        rows = _check_file(check, path, name, None, None, versions)
+        footer = _check_file(check, path, name, None, None, versions)
         try:
-            held[name] = batches_of(pq.read_schema(path).metadata) if rows is not None else None
-        except (*READ_ERRORS, TypeError):
+            held[name] = batches_of(footer.metadata) if footer is not None else None
+        except (ValueError, UnicodeDecodeError):
             check.add(path, "has unreadable batch metadata", name)
             held[name] = None
     return held
@@ -188,11 +193,11 @@ def _check_parts(check: _Check, held: dict[str, set[int] | None]) -> None:
 def _check_file(
     check: _Check, path: Path, table: str, batch: int | None, record: FileRecord | None,
     versions: list[FileRecord] | None = None,
-) -> int | None:
-    """Rows of a Parquet file, or None after recording why it is damaged."""
+) -> ParquetFooter | None:
+    """The footer (rows, metadata) of a Parquet file, or None after recording why it is damaged."""
     check.files += 1
     try:
-        rows = int(pq.read_metadata(path).num_rows)
+        footer = read_footer(path)
     except FileNotFoundError:
         # Gone since it was listed: a live writer compacted it away. A file that should be
         # there and is not is found from the journal's records instead.
@@ -202,25 +207,28 @@ def _check_file(
         size = _size(path)
         check.add(path, f"is truncated or unreadable ({size:,} bytes: {_why(exc)})", table, batch)
         return None
+    rows = footer.num_rows
     known = [record] if record is not None else list(versions or [])
     if known and not any(r.rows == rows for r in known):
         check.add(path, f"has {rows} rows, the journal recorded {known[-1].rows}", table, batch)
         return None
     if not check.deep or (batch is not None and table not in check.hash_tables):
-        return rows
+        return footer
     if known:
         digest = sha256_file(path)
         if not any(r.sha256 == digest for r in known):
             check.add(path, f"is not the file that was written (SHA-256 differs; {_size(path):,} "
                       f"bytes, written {known[-1].size:,})", table, batch)
             return None
-        return rows
+        return footer
+    import pyarrow.parquet as pq
+
     try:  # no record (written by an older pianobot): read every page
         pq.read_table(path)
-    except READ_ERRORS as exc:
+    except parquet_errors() as exc:
         check.add(path, f"is unreadable ({_why(exc)})", table, batch)
         return None
-    return rows
+    return footer
 
 
 def _recorded_with_rows(index: JournalIndex, name: str, batches: set[int]) -> bool:

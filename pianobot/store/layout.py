@@ -26,10 +26,7 @@ import subprocess
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
-
-import pyarrow as pa
-import pyarrow.parquet as pq
+from typing import TYPE_CHECKING, Any
 
 # The atomic writers live in a bottom-layer module (physics writes model files with them too);
 # the store's modules keep importing them from here.
@@ -38,10 +35,15 @@ from pianobot.atomic_files import write_bytes_atomic as write_bytes_atomic
 from pianobot.atomic_files import write_json_atomic as write_json_atomic
 from pianobot.errors import InputError
 
+if TYPE_CHECKING:  # pyarrow costs 0.2 s of start-up: `pianobot runs` lists runs without it
+    import pyarrow as pa
+
 RUNS_FOLDER = "runs"
 QUARANTINE_FOLDER = "quarantine"
 SAMPLES_FOLDER = "samples"
 TABLE_NAMES = ("trials", "samples", "midi")
+METADATA_BATCHES_KEY = b"pianobot.batches"  # a compacted file's key-value metadata
+TRIAL_STATUSES = ("ok", "silent", "failed")
 COMPACTED_TABLES = ("trials", "midi")  # merged into one file each at the end of a run
 _PART_RE = re.compile(r"^(trials|samples|midi)-(\d{6})\.parquet$")
 
@@ -198,6 +200,9 @@ def encode_parquet(table: pa.Table, *, part: bool = False) -> bytes:
 def encode_parquet_view(table: pa.Table, *, part: bool = False) -> memoryview:
     """`encode_parquet` without copying the file into a `bytes` (a part is megabytes: the copy
     cost a simulated sweep ~20 µs per trial); for bytes written and hashed here and now."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
     sink = pa.BufferOutputStream()
     if part:
         table = _without_nulls_declared(table)
@@ -212,9 +217,19 @@ def _without_nulls_declared(table: pa.Table) -> pa.Table:
     value): half the CPU of encoding a simulated sweep's samples part, and the same bytes of
     data. Readers get the fields as `TABLE_SCHEMAS` declares them (`schema.as_declared`).
     """
+    import pyarrow as pa
+
     fields = [f.with_nullable(False) if f.nullable and table.column(i).null_count == 0 else f
               for i, f in enumerate(table.schema)]
     return table.cast(pa.schema(fields, metadata=table.schema.metadata))
+
+
+def batches_of(metadata: dict[bytes, bytes] | None) -> set[int]:
+    """The part batches a compacted file already holds (empty for a part or a foreign file)."""
+    if not metadata or METADATA_BATCHES_KEY not in metadata:
+        return set()
+    raw = metadata[METADATA_BATCHES_KEY].decode()
+    return {int(b) for b in raw.split(",") if b}
 
 
 def sha256_file(path: Path) -> str:
@@ -258,6 +273,8 @@ def parquet_options(schema: pa.Schema, *, part: bool = False) -> dict[str, Any]:
     floats (noise in every digit) gain nothing from dictionaries; split into byte streams their
     exponents compress well: 20 % smaller samples files than plain zstd, written faster.
     """
+    import pyarrow as pa
+
     text = [f.name for f in schema if _is_text(f.type)]
     floats = [f.name for f in schema if pa.types.is_floating(f.type)]
     return {
@@ -270,6 +287,8 @@ def parquet_options(schema: pa.Schema, *, part: bool = False) -> dict[str, Any]:
 
 
 def _is_text(kind: pa.DataType) -> bool:
+    import pyarrow as pa
+
     if pa.types.is_dictionary(kind):
         kind = kind.value_type
     return bool(pa.types.is_string(kind) or pa.types.is_large_string(kind))

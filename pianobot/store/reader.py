@@ -7,14 +7,20 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import pyarrow.parquet as pq
-
-from pianobot.store.integrity import READ_ERRORS, check_run
+from pianobot.store.footer import read_footer
+from pianobot.store.integrity import READ_ERRORS, check_run, parquet_errors
 from pianobot.store.journal import read_journal
-from pianobot.store.layout import RunDamaged, RunPaths, read_json, resolve_run, runs_dir
-from pianobot.store.tables import read_run_table, trial_status_counts
+from pianobot.store.layout import (
+    TRIAL_STATUSES,
+    RunDamaged,
+    RunPaths,
+    batches_of,
+    read_json,
+    resolve_run,
+    runs_dir,
+)
 
-if TYPE_CHECKING:  # pandas takes a third of a second to import: only where frames are made
+if TYPE_CHECKING:  # pandas and pyarrow take half a second to import: only where tables are read
     import pandas as pd
 
 
@@ -56,9 +62,11 @@ class Run:
             import pandas as pd
 
             return pd.DataFrame()
+        import pyarrow.parquet as pq
+
         try:
             frame: pd.DataFrame = pq.read_table(self.paths.plan).to_pandas()
-        except READ_ERRORS as exc:
+        except parquet_errors() as exc:
             raise RunDamaged(f"plan.parquet is unreadable ({' '.join(str(exc).split())[:80]})",
                              self.run_id) from None
         return frame
@@ -85,6 +93,8 @@ class Run:
 
     def table(self, name: str, columns: list[str] | None = None) -> pd.DataFrame:
         """Table `name` ("trials" | "samples" | "midi"), optionally only some columns."""
+        from pianobot.store.tables import read_run_table
+
         frame: pd.DataFrame = read_run_table(self.paths, name, columns).to_pandas()
         return frame
 
@@ -128,10 +138,49 @@ def load_run(run_id: str, data_dir: Path, *, check: bool = True) -> Run:
     return Run(run_id=paths.run_id, path=paths.root)
 
 
+def trial_counts(run: Run, meta: dict[str, Any] | None = None) -> dict[str, int]:
+    """How many trials of a run ended ok, silent or failed (a redone trial counts once, as it
+    ended last).
+
+    The writer keeps these counts in run.json (`trial_counts`) with the last batch they
+    include. They are used when that batch is the run's last committed one, so `pianobot runs`
+    reads no table; otherwise (a run killed before its run.json caught up, an import of an older
+    pianobot, a repaired run) they are counted from the trials table.
+
+    Raises:
+        RunDamaged: the trials table had to be read and a file of it is unreadable.
+    """
+    recorded = (run.meta if meta is None else meta).get("trial_counts")
+    if isinstance(recorded, dict) and isinstance(recorded.get("batch"), int):
+        try:
+            last = _last_committed_batch(run.paths)
+        except READ_ERRORS:
+            last = None
+        if last is not None and last == recorded["batch"]:
+            return {status: int(recorded.get(status) or 0) for status in TRIAL_STATUSES}
+    from pianobot.store.tables import trial_status_counts
+
+    return trial_status_counts(run.paths)
+
+
+def _last_committed_batch(paths: RunPaths) -> int:
+    """The highest batch whose trials part, or the compacted trials file, is on disk (0: none).
+
+    Parts are listed before the compacted file is read: compaction replaces the file before it
+    removes the parts it merged, so a batch is seen in one or the other.
+    """
+    batches = set(paths.part_batches()["trials"])
+    try:
+        batches |= batches_of(read_footer(paths.table("trials")).metadata)
+    except FileNotFoundError:
+        pass
+    return max(batches, default=0)
+
+
 def summarize_run(run: Run) -> RunSummary:
-    """The `pianobot runs` line of one run, from run.json and the trials' status column."""
+    """The `pianobot runs` line of one run, from run.json and its trial counts."""
     meta = run.meta
-    counts = trial_status_counts(run.paths)
+    counts = trial_counts(run, meta)
     done = counts["ok"] + counts["silent"]
     lab_time = meta.get("lab_time_s")
     planned = meta.get("trials_planned")

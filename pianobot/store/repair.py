@@ -36,7 +36,7 @@ import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 from pianobot.errors import InputError
-from pianobot.store.integrity import READ_ERRORS, Damage, RunHealth, check_run
+from pianobot.store.integrity import Damage, RunHealth, check_run, parquet_errors
 from pianobot.store.journal import Journal
 from pianobot.store.layout import (
     COMPACTED_TABLES,
@@ -59,6 +59,8 @@ from pianobot.store.records import (
     index_journal,
 )
 from pianobot.store.schema import batches_of, with_metadata
+
+READ_ERRORS = parquet_errors()
 
 
 @dataclass
@@ -278,7 +280,7 @@ class _Repair:
             if path.is_file():
                 try:
                     held |= batches_of(pq.read_schema(path).metadata)
-                except (*READ_ERRORS, TypeError):
+                except READ_ERRORS + (TypeError,):
                     continue
         for versions in self.index.compacted.values():
             if versions:
@@ -314,7 +316,7 @@ class _Repair:
             path = self.paths.table(name)
             try:
                 held = batches_of(pq.read_schema(path).metadata)
-            except (*READ_ERRORS, TypeError):
+            except READ_ERRORS + (TypeError,):
                 continue  # absent, or damaged and repaired on its own (`_repair_compacted`)
             if held & batches:
                 rewrites.append((name, path, held))
@@ -369,7 +371,8 @@ class _Repair:
             meta = read_json(self.paths.run_json)
         except READ_ERRORS:
             return  # run.json could not be rebuilt; the journal keeps the record
-        fields: dict[str, Any] = {"repairs": [*meta.get("repairs", []), entry]}
+        # The writer's trial counts may no longer hold: readers count the table until it writes again.
+        fields: dict[str, Any] = {"repairs": [*meta.get("repairs", []), entry], "trial_counts": None}
         if report.lost_batches and meta.get("status") in ("completed", "failed", "damaged"):
             fields["status"] = "interrupted"
             fields["reason"] = (f"repaired: {report.trials_lost} trial(s) lost with damaged files; "

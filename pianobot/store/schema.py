@@ -14,6 +14,7 @@ import numpy as np
 import pyarrow as pa
 
 from pianobot.spec.parameters import PARAMETER_NAMES, PARAMETERS
+from pianobot.store.layout import METADATA_BATCHES_KEY, TRIAL_STATUSES, batches_of
 
 if TYPE_CHECKING:  # pandas takes a third of a second to import: only where frames are made
     import pandas as pd
@@ -21,9 +22,7 @@ if TYPE_CHECKING:  # pandas takes a third of a second to import: only where fram
 SCHEMA_VERSION = "1"
 METADATA_VERSION_KEY = b"pianobot.schema_version"
 METADATA_TABLE_KEY = b"pianobot.table"
-METADATA_BATCHES_KEY = b"pianobot.batches"
 
-TRIAL_STATUSES = ("ok", "silent", "failed")
 RUN_STATUSES = ("running", "completed", "stopped", "interrupted", "failed")
 RUN_KINDS = ("sweep", "import", "play")
 SAMPLE_SOURCES = ("arm", "mocap", "sim-truth")
@@ -190,13 +189,6 @@ def schema_version_of(metadata: dict[bytes, bytes] | None) -> str | None:
         return None
     return metadata[METADATA_VERSION_KEY].decode()
 
-
-def batches_of(metadata: dict[bytes, bytes] | None) -> set[int]:
-    """The part batches a compacted file already holds (empty for a part or a foreign file)."""
-    if not metadata or METADATA_BATCHES_KEY not in metadata:
-        return set()
-    raw = metadata[METADATA_BATCHES_KEY].decode()
-    return {int(b) for b in raw.split(",") if b}
 
 
 __all__ = [

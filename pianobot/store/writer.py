@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 import shutil
+from collections import Counter
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -54,12 +55,18 @@ from pianobot.store.schema import (
     RUN_STATUSES,
     SCHEMA_VERSION,
     TABLE_SCHEMAS,
+    TRIAL_STATUSES,
     batches_of,
     storage_schema,
     to_table,
     with_metadata,
 )
-from pianobot.store.tables import committed_batches, dedupe_trials, drop_orphan_parts
+from pianobot.store.tables import (
+    committed_batches,
+    dedupe_trials,
+    drop_orphan_parts,
+    read_run_table,
+)
 
 if TYPE_CHECKING:  # pandas takes a third of a second to import: only where frames are made
     import pandas as pd
@@ -89,6 +96,7 @@ class RunWriter:
             self._lock.release()
             raise
         self._has_samples_folder = False
+        self._statuses: dict[str, str] | None = None  # trial id -> status as it ended last
         # A batch number is never used twice, not even one a repair quarantined.
         self._next_batch = max(max(known, default=0), index_journal(paths.journal).max_batch) + 1
 
@@ -168,6 +176,7 @@ class RunWriter:
             record["plan_file"] = FileRecord.of_bytes("plan.parquet", data, table.num_rows).to_dict()
         write_json_atomic(paths.run_json, record)
         writer = cls(paths, fsync=fsync)
+        writer._statuses = {}  # a new run has no trials yet
         writer.journal(RUN_CREATED, meta=record)
         return writer
 
@@ -219,6 +228,7 @@ class RunWriter:
                 trials_bytes = data
         self._next_batch += 1
         self._journal.write(PART, part_record(batch, files, trials_bytes))
+        self._count_trials(batch, tables["trials"])
         return batch
 
     def append_encoded(self, parts: dict[str, bytes]) -> int:
@@ -239,7 +249,27 @@ class RunWriter:
                 files[name] = FileRecord.of_bytes(self.paths.relative(path), data, rows)
         self._next_batch += 1
         self._journal.write(PART, part_record(batch, files, parts["trials"]))
+        columns = ["trial_id", "status"]
+        self._count_trials(batch, pq.read_table(pa.BufferReader(parts["trials"]), columns=columns))
         return batch
+
+    def _count_trials(self, batch: int, trials: pa.Table) -> None:
+        """Keep run.json's `trial_counts` (ok, silent, failed; the last batch they include)
+        current, so `pianobot runs` lists a run without reading its tables.
+
+        They are written with the next change to run.json (the runner records the lab time
+        after every batch); a reader that finds them behind the run's last batch counts the
+        trials table instead.
+        """
+        if self._statuses is None:  # a reopened run: the trials as stored (this batch included)
+            stored = read_run_table(self.paths, "trials", columns=["trial_id", "status"])
+            self._statuses = dict(zip(stored.column("trial_id").to_pylist(),
+                                      stored.column("status").to_pylist(), strict=True))
+        if "status" in trials.column_names:
+            self._statuses.update(zip(trials.column("trial_id").to_pylist(),
+                                      trials.column("status").to_pylist(), strict=True))
+        counts = Counter(self._statuses.values())
+        self._meta["trial_counts"] = {**{s: counts.get(s, 0) for s in TRIAL_STATUSES}, "batch": batch}
 
     def _samples_folder(self) -> None:
         """samples/ exists (a run an older pianobot started has none until it is resumed)."""
