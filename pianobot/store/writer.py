@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import pyarrow as pa
+import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 import pianobot
@@ -96,7 +97,8 @@ class RunWriter:
             self._lock.release()
             raise
         self._has_samples_folder = False
-        self._statuses: dict[str, str] | None = None  # trial id -> status as it ended last
+        self._failed: set[str] | None = None  # ids of the trials that ended failed, so far
+        self._counts: Counter[str] = Counter()  # trials by the status they ended with last
         # A batch number is never used twice, not even one a repair quarantined.
         self._next_batch = max(max(known, default=0), index_journal(paths.journal).max_batch) + 1
 
@@ -176,7 +178,7 @@ class RunWriter:
             record["plan_file"] = FileRecord.of_bytes("plan.parquet", data, table.num_rows).to_dict()
         write_json_atomic(paths.run_json, record)
         writer = cls(paths, fsync=fsync)
-        writer._statuses = {}  # a new run has no trials yet
+        writer._failed = set()  # a new run has no trials yet
         writer.journal(RUN_CREATED, meta=record)
         return writer
 
@@ -216,6 +218,7 @@ class RunWriter:
         }
         self._lock.verify()
         self._samples_folder()
+        self._count_stored_trials()
         batch = self._next_batch
         files: dict[str, FileRecord] = {}
         trials_bytes: bytes | memoryview = b""
@@ -238,6 +241,7 @@ class RunWriter:
             raise ValueError("an encoded batch needs its trials part")
         self._lock.verify()  # the run is still ours (a parallel sweep's driver holds the lock)
         self._samples_folder()
+        self._count_stored_trials()
         batch = self._next_batch
         files: dict[str, FileRecord] = {}
         for name in ("samples", "midi", "trials"):
@@ -257,19 +261,34 @@ class RunWriter:
         """Keep run.json's `trial_counts` (ok, silent, failed; the last batch they include)
         current, so `pianobot runs` lists a run without reading its tables.
 
-        They are written with the next change to run.json (the runner records the lab time
-        after every batch); a reader that finds them behind the run's last batch counts the
-        trials table instead.
+        A trial is written again only after it failed (a resume takes the ok and silent ones
+        from the data), so only the failed trials' ids are kept: memory stays flat over a
+        million-trial run. The counts are written with the next change to run.json (the runner
+        records the lab time after every batch); a reader that finds them behind the run's last
+        batch counts the trials table instead.
         """
-        if self._statuses is None:  # a reopened run: the trials as stored (this batch included)
-            stored = read_run_table(self.paths, "trials", columns=["trial_id", "status"])
-            self._statuses = dict(zip(stored.column("trial_id").to_pylist(),
-                                      stored.column("status").to_pylist(), strict=True))
+        assert self._failed is not None, "the stored counts are read before a part lands"
         if "status" in trials.column_names:
-            self._statuses.update(zip(trials.column("trial_id").to_pylist(),
-                                      trials.column("status").to_pylist(), strict=True))
-        counts = Counter(self._statuses.values())
-        self._meta["trial_counts"] = {**{s: counts.get(s, 0) for s in TRIAL_STATUSES}, "batch": batch}
+            for trial_id, status in zip(trials.column("trial_id").to_pylist(),
+                                        trials.column("status").to_pylist(), strict=True):
+                if trial_id in self._failed:  # redone: it counts as it ended last
+                    self._counts["failed"] -= 1
+                    self._failed.discard(trial_id)
+                self._counts[status] += 1
+                if status == "failed":
+                    self._failed.add(trial_id)
+        counts = {status: self._counts[status] for status in TRIAL_STATUSES}
+        self._meta["trial_counts"] = {**counts, "batch": batch}
+
+    def _count_stored_trials(self) -> None:
+        """The counts of a reopened run, from its trials table, before its next part lands."""
+        if self._failed is not None:
+            return
+        stored = read_run_table(self.paths, "trials", columns=["trial_id", "status"])
+        status = stored.column("status")
+        self._counts = Counter({str(entry["values"]): int(entry["counts"])
+                                for entry in pc.value_counts(status).to_pylist()})
+        self._failed = set(stored.column("trial_id").filter(pc.equal(status, "failed")).to_pylist())
 
     def _samples_folder(self) -> None:
         """samples/ exists (a run an older pianobot started has none until it is resumed)."""
