@@ -151,13 +151,14 @@ def trial_counts(run: Run, meta: dict[str, Any] | None = None) -> dict[str, int]
         RunDamaged: the trials table had to be read and a file of it is unreadable.
     """
     recorded = (run.meta if meta is None else meta).get("trial_counts")
-    if isinstance(recorded, dict) and isinstance(recorded.get("batch"), int):
+    keys = ("batch", *TRIAL_STATUSES)
+    if isinstance(recorded, dict) and all(type(recorded.get(k)) is int for k in keys):
         try:
             last = _last_committed_batch(run.paths)
         except READ_ERRORS:
             last = None
-        if last is not None and last == recorded["batch"]:
-            return {status: int(recorded.get(status) or 0) for status in TRIAL_STATUSES}
+        if last == recorded["batch"]:
+            return {status: recorded[status] for status in TRIAL_STATUSES}
     from pianobot.store.tables import trial_status_counts
 
     return trial_status_counts(run.paths)

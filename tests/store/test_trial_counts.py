@@ -87,3 +87,19 @@ def test_a_repaired_run_is_counted_from_its_table(data_dir: Path) -> None:
     assert repair_run(run.paths).ok
     assert run.meta["trial_counts"] is None
     assert trial_counts(run) == {"ok": 2, "silent": 1, "failed": 0} == _table_counts(run)
+
+
+def test_counts_that_are_not_numbers_are_not_used(data_dir: Path) -> None:
+    """A run.json edited by hand (or by another tool): the table decides."""
+    import json
+
+    writer = RunWriter.create(data_dir, name="edited", kind="sweep", meta={}, plan=None)
+    _append(writer, ["a", "b"], "ok")
+    writer.close()
+    run = load_run(writer.run_id, data_dir)
+    meta = run.meta
+    meta["trial_counts"] = {"ok": "2", "silent": None, "failed": 0, "batch": 1}
+    run.paths.run_json.write_text(json.dumps(meta))
+    assert trial_counts(run) == {"ok": 2, "silent": 0, "failed": 0}
+    (summary,) = list_runs(data_dir)
+    assert summary.trials_done == 2
