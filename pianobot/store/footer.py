@@ -20,7 +20,7 @@ from pathlib import Path
 
 MAGIC = b"PAR1"
 ENCRYPTED_MAGIC = b"PARE"  # a footer encrypted with the Parquet modular encryption
-MAX_DEPTH = 64  # nested structs and collections; Parquet's own footers nest about 6 deep
+MAX_NESTING = 64  # nested structs and collections; Parquet's own footers nest about 6 deep
 
 # Thrift compact protocol type codes: field headers carry booleans as their type (TRUE, FALSE).
 STOP, TRUE, FALSE, BYTE, I16, I32, I64, DOUBLE, BINARY, LIST, SET, MAP, STRUCT = range(13)
@@ -152,8 +152,8 @@ def _skip(data: bytes, pos: int, kind: int, depth: int) -> int:
         pos += 1
     elif kind == DOUBLE:
         pos += 8
-    elif depth >= MAX_DEPTH:
-        raise _garbled(f"nested more than {MAX_DEPTH} deep")
+    elif depth >= MAX_NESTING:
+        raise _garbled(f"nested more than {MAX_NESTING} deep")
     elif kind in (LIST, SET):
         element, size, pos = _collection_header(data, pos)
         for _ in range(size):
@@ -178,8 +178,8 @@ def _skip(data: bytes, pos: int, kind: int, depth: int) -> int:
 
 def _skip_struct(data: bytes, pos: int, depth: int) -> int:
     """Skip a struct up to its STOP; integers inline, since footers are mostly integers."""
-    if depth >= MAX_DEPTH:
-        raise _garbled(f"nested more than {MAX_DEPTH} deep")
+    if depth >= MAX_NESTING:
+        raise _garbled(f"nested more than {MAX_NESTING} deep")
     while True:
         byte = data[pos]
         kind = byte & 0x0F

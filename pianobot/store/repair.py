@@ -60,7 +60,7 @@ from pianobot.store.records import (
 )
 from pianobot.store.schema import batches_of, with_metadata
 
-READ_ERRORS = parquet_errors()
+_READ_ERRORS = parquet_errors()
 
 
 @dataclass
@@ -185,7 +185,7 @@ class _Repair:
     def _rebuild_plan(self) -> None:
         try:
             meta = read_json(self.paths.run_json)
-        except READ_ERRORS:
+        except _READ_ERRORS:
             self.report.unrepairable.append("plan.parquet: run.json, which holds the spec, is damaged too")
             return
         problem = _plan_problem(meta)
@@ -223,7 +223,7 @@ class _Repair:
                 try:
                     recorded |= set(pq.read_table(pa.BufferReader(copy), columns=["trial_id"])
                                     .column("trial_id").to_pylist())
-                except READ_ERRORS:
+                except _READ_ERRORS:
                     continue
         return recorded <= ids
 
@@ -280,7 +280,7 @@ class _Repair:
             if path.is_file():
                 try:
                     held |= batches_of(pq.read_schema(path).metadata)
-                except READ_ERRORS + (TypeError,):
+                except _READ_ERRORS + (TypeError,):
                     continue
         for versions in self.index.compacted.values():
             if versions:
@@ -316,7 +316,7 @@ class _Repair:
             path = self.paths.table(name)
             try:
                 held = batches_of(pq.read_schema(path).metadata)
-            except READ_ERRORS + (TypeError,):
+            except _READ_ERRORS + (TypeError,):
                 continue  # absent, or damaged and repaired on its own (`_repair_compacted`)
             if held & batches:
                 rewrites.append((name, path, held))
@@ -369,7 +369,7 @@ class _Repair:
             journal.close()
         try:
             meta = read_json(self.paths.run_json)
-        except READ_ERRORS:
+        except _READ_ERRORS:
             return  # run.json could not be rebuilt; the journal keeps the record
         # The writer's trial counts may no longer hold: readers count the table until it writes again.
         fields: dict[str, Any] = {"repairs": [*meta.get("repairs", []), entry], "trial_counts": None}
