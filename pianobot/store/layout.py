@@ -34,6 +34,7 @@ from pianobot.atomic_files import fsync_dir as fsync_dir
 from pianobot.atomic_files import write_bytes_atomic as write_bytes_atomic
 from pianobot.atomic_files import write_json_atomic as write_json_atomic
 from pianobot.errors import InputError
+from pianobot.store.footer import read_footer
 
 if TYPE_CHECKING:  # pyarrow costs 0.2 s of start-up: `pianobot runs` lists runs without it
     import pyarrow as pa
@@ -230,6 +231,29 @@ def batches_of(metadata: dict[bytes, bytes] | None) -> set[int]:
         return set()
     raw = metadata[METADATA_BATCHES_KEY].decode()
     return {int(b) for b in raw.split(",") if b}
+
+
+def committed_batches(paths: RunPaths, parts: dict[str, dict[int, Path]] | None = None) -> set[int]:
+    """Batches whose trials part (or a compacted trials file holding them) is on disk.
+
+    `parts`: the run's parts as just listed (`paths.part_batches()`). They are listed before
+    the compacted file is read: compaction replaces trials.parquet before it removes the trials
+    parts it merged, so a batch is seen committed in one or the other, never in neither. The
+    compacted file's batches come from its footer (no pyarrow: `pianobot runs` uses this).
+
+    Raises:
+        RunDamaged: trials.parquet is there but its footer is unreadable.
+    """
+    listed = set((paths.part_batches() if parts is None else parts)["trials"])
+    compacted = paths.table("trials")
+    try:
+        held = batches_of(read_footer(compacted).metadata)
+    except FileNotFoundError:
+        held = set()
+    except (OSError, ValueError) as exc:
+        why = " ".join(str(exc).split())[:80] or type(exc).__name__
+        raise RunDamaged(f"{paths.relative(compacted)} is unreadable ({why})", paths.run_id) from None
+    return held | listed
 
 
 def sha256_file(path: Path) -> str:

@@ -7,14 +7,13 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from pianobot.store.footer import read_footer
 from pianobot.store.integrity import READ_ERRORS, check_run, parquet_errors
 from pianobot.store.journal import read_journal
 from pianobot.store.layout import (
     TRIAL_STATUSES,
     RunDamaged,
     RunPaths,
-    batches_of,
+    committed_batches,
     read_json,
     resolve_run,
     runs_dir,
@@ -154,28 +153,14 @@ def trial_counts(run: Run, meta: dict[str, Any] | None = None) -> dict[str, int]
     keys = ("batch", *TRIAL_STATUSES)
     if isinstance(recorded, dict) and all(type(recorded.get(k)) is int for k in keys):
         try:
-            last = _last_committed_batch(run.paths)
-        except READ_ERRORS:
-            last = None
+            last: int | None = max(committed_batches(run.paths), default=0)
+        except RunDamaged:
+            last = None  # the table read below says what is wrong
         if last == recorded["batch"]:
             return {status: recorded[status] for status in TRIAL_STATUSES}
     from pianobot.store.tables import trial_status_counts
 
     return trial_status_counts(run.paths)
-
-
-def _last_committed_batch(paths: RunPaths) -> int:
-    """The highest batch whose trials part, or the compacted trials file, is on disk (0: none).
-
-    Parts are listed before the compacted file is read: compaction replaces the file before it
-    removes the parts it merged, so a batch is seen in one or the other.
-    """
-    batches = set(paths.part_batches()["trials"])
-    try:
-        batches |= batches_of(read_footer(paths.table("trials")).metadata)
-    except FileNotFoundError:
-        pass
-    return max(batches, default=0)
 
 
 def summarize_run(run: Run) -> RunSummary:

@@ -8,30 +8,11 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
-from pianobot.store.layout import TABLE_NAMES, RunDamaged, RunPaths
+from pianobot.store.layout import TABLE_NAMES, RunDamaged, RunPaths, committed_batches
 from pianobot.store.schema import TABLE_SCHEMAS, as_declared, batches_of, with_metadata
 
 # What reading a damaged Parquet file raises.
 _READ_ERRORS = (OSError, ValueError, pa.ArrowException)
-
-
-def committed_batches(paths: RunPaths, parts: dict[str, dict[int, Path]] | None = None) -> set[int]:
-    """Batches whose trials part (or a compacted trials file holding them) is on disk.
-
-    `parts`: the run's parts as just listed (`paths.part_batches()`). They are listed before
-    the compacted file is read: compaction replaces trials.parquet before it removes the trials
-    parts it merged, so a batch is seen committed in one or the other, never in neither.
-    """
-    listed = set((paths.part_batches() if parts is None else parts)["trials"])
-    held: set[int] = set()
-    compacted = paths.table("trials")
-    try:
-        held |= batches_of(pq.read_schema(compacted).metadata)
-    except FileNotFoundError:
-        pass
-    except _READ_ERRORS as exc:
-        raise _damaged(paths, compacted, exc) from None
-    return held | listed
 
 
 def _damaged(paths: RunPaths, path: Path, exc: BaseException) -> RunDamaged:

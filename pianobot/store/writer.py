@@ -27,6 +27,7 @@ from pianobot.store.layout import (
     RunDamaged,
     RunPaths,
     check_data_dir,
+    committed_batches,
     encode_parquet,
     encode_parquet_view,
     fsync_dir,
@@ -62,12 +63,7 @@ from pianobot.store.schema import (
     to_table,
     with_metadata,
 )
-from pianobot.store.tables import (
-    committed_batches,
-    dedupe_trials,
-    drop_orphan_parts,
-    read_run_table,
-)
+from pianobot.store.tables import dedupe_trials, drop_orphan_parts, read_run_table
 
 if TYPE_CHECKING:  # pandas takes a third of a second to import: only where frames are made
     import pandas as pd
