@@ -49,8 +49,8 @@ def compile_physics() -> int:
     from pianobot.physics.world import World
     from pianobot.plan.trial import press_from
 
-    press = press_from({"distance_m": 0.002, "depth_m": 0.01, "down_velocity_mps": 0.05,
-                        "acceleration_mps2": 1.0})
+    depth_m, speed_mps = 0.01, 0.05  # the rest from the parameter table's defaults
+    press = press_from({"depth_m": depth_m, "down_velocity_mps": speed_mps})
     calls = 0
     t = np.linspace(0.0, 0.05, 51)
     for model in _models():
