@@ -202,8 +202,14 @@ def samples_table(batch: Sequence[TrialData]) -> pa.Table | None:
 
 
 def _floats(arrays: list[FloatArray]) -> pa.ChunkedArray:
-    """One float64 column over the chunks' arrays (zero-copy where they are float64 already)."""
-    return pa.chunked_array([pa.array(a, type=pa.float64()) for a in arrays], type=pa.float64())
+    """One float64 column over the chunks' arrays, zero-copy: each chunk wraps its array's
+    memory (a simulated sweep has three chunks per trial and column; `pa.array` on each cost
+    ~10 µs more per trial, profiled)."""
+    chunks = []
+    for a in arrays:
+        values = np.ascontiguousarray(a, dtype=np.float64)
+        chunks.append(pa.Array.from_buffers(pa.float64(), values.size, [None, pa.py_buffer(values)]))
+    return pa.chunked_array(chunks, type=pa.float64())
 
 
 def _dictionary(codes: list[int], lengths: npt.NDArray[np.int64], values: list[str]) -> pa.Array:
