@@ -31,7 +31,8 @@ from pianobot.executor import (
     usable_cores,
 )
 from pianobot.run import run_sweep
-from pianobot.store import Run, check_run, load_run, read_journal
+from pianobot.store import Run, StagedPart, check_run, load_run, read_journal
+from pianobot.store.records import FileRecord
 from tests.run.test_batched_sweep import OUTCOME, _spec
 from tests.run.test_crash_resume import SWEEP_ONLY, _journal_lines, _run_folder
 
@@ -170,10 +171,20 @@ def test_local_workers_keep_glibc_memory_defaults_unless_the_user_set_them() -> 
 
 
 @pytest.mark.slow
-def test_a_sweep_on_two_worker_processes_equals_the_serial_sweep(tmp_path: Path) -> None:
+def test_a_sweep_on_two_worker_processes_equals_the_serial_sweep(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     spec = _spec(tmp_path, 70, "approach: fast\n")  # faulty rig: drops, MIDI and mocap losses
     serial = run_sweep(spec, data_dir=tmp_path / "serial", progress=False, batch_trials=16,
                        executor=ExecutorSettings(workers=1))
+    committed: list[str] = []  # samples parts the workers staged and the driver renamed
+    commit = StagedPart.commit
+
+    def counted(self: StagedPart, path: Path, relative: str) -> FileRecord:
+        committed.append(relative)
+        return commit(self, path, relative)
+
+    monkeypatch.setattr(StagedPart, "commit", counted)
     dask = run_sweep(spec, data_dir=tmp_path / "dask", progress=False, batch_trials=16,
                      executor=TWO)
     assert load_run(dask.run_id, tmp_path / "dask").meta["executor"]["kind"] == "local-cluster"
@@ -195,6 +206,9 @@ def test_a_sweep_on_two_worker_processes_equals_the_serial_sweep(tmp_path: Path)
 
     assert parts(b) == parts(a) > 0
     assert check_run(b.paths, deep=True).ok
+    # The workers wrote the samples parts themselves (staged, then renamed by the driver).
+    assert committed and all(c.startswith("samples/") for c in committed)
+    assert not list(b.paths.samples.glob(".*.tmp"))
 
 
 @pytest.mark.slow
@@ -248,5 +262,6 @@ def test_kill_9_of_the_driver_with_dask_workers_and_resume(tmp_path: Path) -> No
     a = run.trials.sort_values("trial_id")[cols].reset_index(drop=True)
     b = expected.trials.sort_values("trial_id")[cols].reset_index(drop=True)
     pd.testing.assert_frame_equal(a, b, check_exact=False, rtol=1e-9, atol=1e-12)
+    assert not list(run.paths.samples.glob(".*.tmp"))  # staged parts the kill stranded were swept
     counts = run.samples.groupby(["trial_id", "source"]).size().sort_index()
     pd.testing.assert_series_equal(counts, expected.samples.groupby(["trial_id", "source"]).size().sort_index())

@@ -1,6 +1,7 @@
 """A simulated sweep on an executor: the driver keeps the clock, the workers do the keystrokes.
 
-The driver (this process) holds the run lock, the journal and the store; workers only compute.
+The driver (this process) holds the run lock, the journal and the store; workers compute (and, on a
+local cluster, write their samples part ahead under a temp name: `store.stage_part`).
 For each block of trials:
 
 1. a worker simulates the block's distinct keystrokes once and returns when each arm comes back
@@ -15,8 +16,9 @@ For each block of trials:
    plan order to the store sink, the progress bar and any subscriber, one part per block.
 
 So the trials, their samples and MIDI, retries, faults and stops are the same as a sweep in one
-process with the same seed, and exactly-once holds as before: only the driver writes parts and
-journals them. A kill -9 of the driver loses the blocks in flight; resume redoes them.
+process with the same seed, and exactly-once holds as before: only the driver commits parts (a
+staged one by renaming it into place) and journals them. A kill -9 of the driver loses the blocks
+in flight; resume redoes them and sweeps the staged parts they left.
 """
 
 from __future__ import annotations
@@ -42,7 +44,7 @@ from pianobot.run.records import (
 from pianobot.run.rows import TrialData, midi_table, samples_table, trials_table
 from pianobot.run.runner import RetryPolicy, Runner, SessionResult
 from pianobot.run.signals import StopControl
-from pianobot.store import encode_part
+from pianobot.store import StagedPart, encode_part, stage_part
 
 
 @dataclass(frozen=True)
@@ -57,6 +59,9 @@ class SweepSetup:
     motion: bool
     retry: RetryPolicy
     clock_offset_s: float
+    # The run's samples folder when the workers share this file system (a local cluster): a
+    # worker then writes its samples part there itself (`stage_part`), the driver only renames it.
+    stage_dir: str | None = None
 
 
 @dataclass(frozen=True)
@@ -76,7 +81,7 @@ class BlockResult:
     records: list[Record]
     outcome: tuple[str, str] | None
     end: Any  # sim_blocks.SimSnapshot
-    parts: dict[str, bytes]  # the block's Parquet parts, encoded (table name -> bytes)
+    parts: dict[str, bytes | StagedPart]  # the block's Parquet parts, encoded or staged
 
 
 def block_times(task: tuple[SweepSetup, tuple[Any, ...]]) -> dict[Any, Any]:
@@ -107,14 +112,19 @@ def run_block(task: BlockTask) -> BlockResult:
         outcome = runner.run_block(task.trials, counts)
         end = sim_blocks.snapshot(rig)
     # The heavy part of storing, encoding the Parquet parts, happens here; the driver only
-    # writes the bytes and journals them. The records go back with their trial rows only.
+    # writes the bytes (or renames the samples part staged here) and journals them. The records
+    # go back with their trial rows only.
     data = [r.data for r in records if isinstance(r, TrialDone)]
-    parts: dict[str, bytes] = {}
+    parts: dict[str, bytes | StagedPart] = {}
     if data:
         tables = {"trials": trials_table(data), "samples": samples_table(data),
                   "midi": midi_table(data)}
-        parts = {name: encode_part(table, name, setup.run_id)
-                 for name, table in tables.items() if table is not None and table.num_rows}
+        for name, table in tables.items():
+            if table is None or not table.num_rows:
+                continue
+            encoded = encode_part(table, name, setup.run_id)
+            staged = name == "samples" and setup.stage_dir is not None
+            parts[name] = stage_part(str(setup.stage_dir), encoded, table.num_rows) if staged else encoded
     slim = [TrialDone(TrialData(row=r.data.row), r.lab_time_s) if isinstance(r, TrialDone) else r
             for r in records]
     return BlockResult(slim, outcome, end, parts)

@@ -9,9 +9,12 @@ blocks of keystrokes ahead (the simulator), each block ends with a `BlockEnded`.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 from pianobot.run.rows import TrialData
+
+if TYPE_CHECKING:
+    from pianobot.store import StagedPart
 
 
 @dataclass(frozen=True)
@@ -83,9 +86,10 @@ class BlockEnded:
 
     trials: int  # trials of the block that were run
     lab_time_s: float
-    # The block's parts already encoded by a worker (table name -> Parquet bytes), or None
-    # when the store writes the block from the trials' records itself.
-    parts: dict[str, bytes] | None = None
+    # The block's parts already encoded by a worker (table name -> Parquet bytes, or the part
+    # the worker staged in the run folder), or None when the store writes the block from the
+    # trials' records itself.
+    parts: dict[str, bytes | StagedPart] | None = None
 
 
 @dataclass(frozen=True)

@@ -30,7 +30,7 @@ from pianobot.run.records import (
     TrialStopped,
 )
 from pianobot.run.rows import TrialData, midi_table, samples_table, trials_table
-from pianobot.store import RunWriter
+from pianobot.store import RunWriter, StagedPart
 
 
 class StoreSink:
@@ -95,10 +95,11 @@ class StoreSink:
                 retries=record.retries, lab_time_s=record.lab_time_s,
             )
 
-    def flush(self, encoded: dict[str, bytes] | None = None) -> None:
+    def flush(self, encoded: dict[str, bytes | StagedPart] | None = None) -> None:
         """Write the pending batch as one part set, then journal its trials as done/failed.
 
-        `encoded`: the batch's parts as a worker encoded them (its records carry rows only).
+        `encoded`: the batch's parts as a worker encoded (or staged) them (its records carry
+        rows only).
         """
         self._last_flush = time.monotonic()
         self._journal_started()

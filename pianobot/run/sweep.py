@@ -316,8 +316,12 @@ def _session(
             pool = _executor(rig, executor, len(todo))
             writer.update_meta(executor=pool.describe())
             if pool.kind != "in-process":
+                # Workers of a local cluster share this file system: they write the samples
+                # parts themselves (the driver's writing bounded a sweep's speed-up on a cluster).
+                local = pool.kind == "local-cluster"
                 setup = SweepSetup(writer.run_id, prepared.rig, prepared.seed, world,
-                                   tuple(prepared.spec.record), fast, policy, offset_s)
+                                   tuple(prepared.spec.record), fast, policy, offset_s,
+                                   stage_dir=str(writer.paths.samples) if local else None)
                 result = run_parallel(
                     rig, setup, pool, run_id=writer.run_id, trials=todo,
                     planned=len(prepared.trials), done=len(done_ids), block_trials=batch_trials,

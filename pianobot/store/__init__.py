@@ -27,7 +27,7 @@ if TYPE_CHECKING:
     )
     from pianobot.store.repair import RepairReport, repair_run
     from pianobot.store.schema import SCHEMA_VERSION, TABLE_SCHEMAS, empty_frame
-    from pianobot.store.writer import RunWriter, encode_part
+    from pianobot.store.writer import RunWriter, StagedPart, encode_part, stage_part
 
 _HOME = {
     "integrity": ("Damage", "RunHealth", "check_run"),
@@ -37,7 +37,7 @@ _HOME = {
     "reader": ("Run", "RunSummary", "list_runs", "load_run", "rig_summary", "summarize_run"),
     "repair": ("RepairReport", "repair_run"),
     "schema": ("SCHEMA_VERSION", "TABLE_SCHEMAS", "empty_frame"),
-    "writer": ("RunWriter", "encode_part"),
+    "writer": ("RunWriter", "StagedPart", "encode_part", "stage_part"),
 }
 _MODULE_OF = {name: module for module, names in _HOME.items() for name in names}
 
@@ -65,6 +65,7 @@ __all__ = [
     "RunPaths",
     "RunSummary",
     "RunWriter",
+    "StagedPart",
     "check_data_dir",
     "check_run",
     "empty_frame",
@@ -77,5 +78,6 @@ __all__ = [
     "resolve_run",
     "rig_summary",
     "runs_dir",
+    "stage_part",
     "summarize_run",
 ]

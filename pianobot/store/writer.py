@@ -8,9 +8,11 @@ run against these records, `runs repair` restores from them.
 
 from __future__ import annotations
 
+import hashlib
 import os
 import shutil
 from collections import Counter
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -19,6 +21,7 @@ import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 import pianobot
+from pianobot.atomic_files import temp_name
 from pianobot.errors import InputError
 from pianobot.store.integrity import check_run
 from pianobot.store.journal import Journal
@@ -230,25 +233,37 @@ class RunWriter:
         self._count_trials(batch, tables["trials"])
         return batch
 
-    def append_encoded(self, parts: dict[str, bytes]) -> int:
+    def append_encoded(self, parts: dict[str, bytes | StagedPart]) -> int:
         """Write one batch that was encoded elsewhere (`encode_part`): the same order and
-        atomicity as `append` (samples, midi, then the trials part that commits the batch)."""
-        if "trials" not in parts:
-            raise ValueError("an encoded batch needs its trials part")
+        atomicity as `append` (samples, midi, then the trials part that commits the batch).
+
+        A part may come as bytes, or staged (`stage_part`): already written and fsync'd by the
+        worker that encoded it, under a temp name in the folder it belongs in; it is renamed
+        into place here (the rename is the write; its record is the worker's size and hash).
+        The trials part always comes as bytes (the journal keeps a copy of it).
+        """
+        trials = parts.get("trials")
+        if not isinstance(trials, bytes):
+            raise ValueError("an encoded batch needs its trials part, as bytes")
         self._lock.verify()  # the run is still ours (a parallel sweep's driver holds the lock)
         self._samples_folder()
         self._count_stored_trials()
         batch = self._next_batch
         files: dict[str, FileRecord] = {}
         for name in ("samples", "midi", "trials"):
-            if name in parts:
-                path = self.paths.part(name, batch)
-                data = parts[name]
-                write_bytes_atomic(path, data)
-                rows = pq.read_metadata(pa.BufferReader(data)).num_rows
-                files[name] = FileRecord.of_bytes(self.paths.relative(path), data, rows)
+            part = parts.get(name)
+            if part is None:
+                continue
+            path = self.paths.part(name, batch)
+            relative = self.paths.relative(path)
+            if isinstance(part, StagedPart):
+                files[name] = part.commit(path, relative)
+            else:
+                write_bytes_atomic(path, part)
+                rows = pq.read_metadata(pa.BufferReader(part)).num_rows
+                files[name] = FileRecord.of_bytes(relative, part, rows)
         self._next_batch += 1
-        self._journal.write(PART, part_record(batch, files, parts["trials"]))
+        self._journal.write(PART, part_record(batch, files, trials))
         columns = ["trial_id", "status"]
         self._count_trials(batch, pq.read_table(pa.BufferReader(parts["trials"]), columns=columns))
         return batch
@@ -391,6 +406,55 @@ class RunWriter:
 def encode_part(table: pd.DataFrame | pa.Table, name: str, run_id: str) -> bytes:
     """One part of table `name` of run `run_id`, encoded as `RunWriter.append` would write it."""
     return encode_parquet(with_metadata(to_table(table, name, run_id), name), part=True)
+
+
+@dataclass(frozen=True)
+class StagedPart:
+    """A part written ahead by a worker (`stage_part`), waiting for the writer to commit it."""
+
+    temp: str  # the temp file: in the part's own folder, named as the store sweeps leftovers
+    rows: int
+    size: int
+    sha256: str
+
+    def commit(self, path: Path, relative: str) -> FileRecord:
+        """Rename the staged file to `path` (same folder: atomic) and make the rename durable.
+
+        Raises:
+            RunDamaged: the staged file is gone or is not the size the worker wrote.
+        """
+        temp = Path(self.temp)
+        if temp.parent.resolve() != path.parent.resolve():
+            raise ValueError(f"a part staged in {temp.parent} cannot become {path}")
+        try:
+            size = temp.stat().st_size
+        except FileNotFoundError:
+            size = -1
+        if size != self.size:
+            raise RunDamaged(f"the staged part {temp.name} is {'gone' if size < 0 else f'{size} bytes'}, "
+                             f"not the {self.size} bytes its worker wrote", path.parent.parent.name)
+        os.replace(temp, path)
+        fsync_dir(path.parent)
+        return FileRecord(relative, self.rows, self.size, self.sha256)
+
+
+def stage_part(folder: Path | str, data: bytes, rows: int) -> StagedPart:
+    """Write an encoded part ahead of its commit, as a worker sharing the run's file system does:
+    under a temp name in `folder` (the part's folder: the run's samples folder for a samples
+    part), fsync'd, with its size and SHA-256. Readers never see it; the run's writer commits it
+    (`RunWriter.append_encoded`) or sweeps it as a leftover (`drop_orphan_parts`)."""
+    target = Path(folder)
+    target.mkdir(parents=True, exist_ok=True)
+    temp = temp_name(target / "staged.parquet")
+    try:
+        with open(temp, "wb") as handle:
+            handle.write(data)
+            handle.flush()
+            os.fsync(handle.fileno())
+    except BaseException:
+        temp.unlink(missing_ok=True)
+        raise
+    return StagedPart(str(temp), rows, len(data), hashlib.sha256(data).hexdigest())
 
 
 def _new_folder(base: Path, name: str) -> Path:
