@@ -265,7 +265,7 @@ class RunWriter:
         self._next_batch += 1
         self._journal.write(PART, part_record(batch, files, trials))
         columns = ["trial_id", "status"]
-        self._count_trials(batch, pq.read_table(pa.BufferReader(parts["trials"]), columns=columns))
+        self._count_trials(batch, pq.read_table(pa.BufferReader(trials), columns=columns))
         return batch
 
     def _count_trials(self, batch: int, trials: pa.Table) -> None:
