@@ -82,7 +82,9 @@ def score(result: DiscoveryResult, expected_family: str | None, cpu_s: float, n:
     measured_families = [family_of(e) for e in measured if e not in present]
     extra_measured = [e for e in measured if e not in present and e not in expected_effects]
     first = next((v for v in result.accepted if v.effect not in present), None)
-    measured_case = expected_family in MEASURED_FAMILIES or (expected_family == "piano" and result.mode == "trajectories")
+    # Arm and clock effects are judged against the measurement where there is one; from a MIDI
+    # log alone (no arm trace) they are discovered like any other.
+    measured_case = result.mode == "trajectories" and (expected_family in MEASURED_FAMILIES or expected_family == "piano")
     if expected_family is None:
         hit = not families and not extra_measured
     elif measured_case:
@@ -133,9 +135,12 @@ def own_suite(only: list[str] | None, log: Callable[[str], None]) -> list[dict[s
         result, cpu = run_one(batch)
         family = scenario.expected_families[0] if scenario.expected else None
         # pianobot's simulated arm moves in trapezoids too: naming its acceleration is right; a
-        # finger that leaves the key is measured on the release, never discovered.
+        # finger that leaves the key is measured on the release, never discovered. Where one of
+        # them is the hidden effect (a MIDI log of trapezoids the study's ramp model lacks),
+        # naming it is the answer.
+        present = tuple(e for e in ("arm_acceleration", "contact") if e not in scenario.expected)
         row = {"scenario": scenario.name, "kind": scenario.kind,
-               **score(result, family, cpu, batch.n, scenario.expected, ("arm_acceleration", "contact"))}
+               **score(result, family, cpu, batch.n, scenario.expected, present)}
         rows.append(row)
         log(f"own   {scenario.name:30s} {cpu:6.1f}s cpu  found={row['found']} measured={row['measured']} hit={row['hit']}")
     return rows
