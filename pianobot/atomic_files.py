@@ -46,17 +46,29 @@ def temp_name(path: Path) -> Path:
 
 def write_bytes_atomic(path: Path, data: bytes | memoryview) -> None:
     """Write a file's bytes so readers see either nothing (or the old file) or all of `data`."""
+    temp = write_temp(path, data)
+    try:
+        os.replace(temp, path)
+    except BaseException:
+        temp.unlink(missing_ok=True)
+        raise
+    fsync_dir(path.parent)
+
+
+def write_temp(path: Path, data: bytes | memoryview) -> Path:
+    """The first half of an atomic write: `data` in a fresh temp file beside `path`, fsync'd
+    (nothing is left behind if that fails). Renaming it over `path` and fsyncing the folder
+    completes the write (`write_bytes_atomic`; or later, by the process that commits it)."""
     temp = temp_name(path)
     try:
         with open(temp, "wb") as handle:
             handle.write(data)
             handle.flush()
             os.fsync(handle.fileno())
-        os.replace(temp, path)
     except BaseException:
-        temp.unlink(missing_ok=True)  # after a rename there is nothing left to remove
+        temp.unlink(missing_ok=True)
         raise
-    fsync_dir(path.parent)
+    return temp
 
 
 def write_text_atomic(path: Path, text: str) -> None:

@@ -21,7 +21,7 @@ import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 import pianobot
-from pianobot.atomic_files import temp_name
+from pianobot.atomic_files import write_temp
 from pianobot.errors import InputError
 from pianobot.store.integrity import check_run
 from pianobot.store.journal import Journal
@@ -445,15 +445,7 @@ def stage_part(folder: Path | str, data: bytes, rows: int) -> StagedPart:
     (`RunWriter.append_encoded`) or sweeps it as a leftover (`drop_orphan_parts`)."""
     target = Path(folder)
     target.mkdir(parents=True, exist_ok=True)
-    temp = temp_name(target / "staged.parquet")
-    try:
-        with open(temp, "wb") as handle:
-            handle.write(data)
-            handle.flush()
-            os.fsync(handle.fileno())
-    except BaseException:
-        temp.unlink(missing_ok=True)
-        raise
+    temp = write_temp(target / "staged.parquet", data)
     return StagedPart(str(temp), rows, len(data), hashlib.sha256(data).hexdigest())
 
 
