@@ -29,7 +29,7 @@ from pianobot.analysis.discover.sparse import (
 )
 from pianobot.analysis.greybox.criterion import Criterion
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
-from pianobot.analysis.greybox.layout import Layout
+from pianobot.analysis.greybox.layout import Layout, Param
 from pianobot.analysis.greybox.noise import autocorrelation_time, noise_sigma_m, systematic_rms
 from pianobot.physics.effects import EFFECTS
 from pianobot.physics.model import KeystrokeModel
@@ -184,7 +184,8 @@ def test_a_yielding_body_is_bounded_by_the_deflection_the_data_show() -> None:
         layout = Layout(KeystrokeModel.study(), tuple(params.values()), (40.0,), {"finger_hysteresis": "elastoplastic"})
         points = start_points(layout, spec, take(deflection))
         assert {round(p["finger_hysteresis.yield_m"] / deflection, 6) for p in points} == set(YIELD_FRACTIONS)
-        assert len({p.get("finger_hysteresis.yield_share") for p in points}) == 5  # default + 4 across the range
+        # The default, 4 across the range and one next to "off".
+        assert len({p.get("finger_hysteresis.yield_share") for p in points}) == 6
     assert size_params(layout, "finger_hysteresis") == [params["finger_hysteresis.yield_share"]]
 
 
@@ -230,3 +231,40 @@ def test_a_stribeck_friction_is_started_small_in_both_its_forces() -> None:
         assert static == pytest.approx(kinetic * shape)
     assert {p.name for p in size_params(layout, "key_friction")} == {"key_friction.friction_n",
                                                                    "key_friction.static_friction_n"}
+
+
+def _next_to_off(start: dict[str, float], switchable: list[Param]) -> bool:
+    """Whether every switchable parameter starts off "off", within a tenth of its way to its default."""
+    for p in switchable:
+        off = min(max(float(p.off or 0.0), p.lower), p.upper)
+        reach = abs((p.start if p.start != off else p.upper) - off)
+        if not 0.0 < abs(start.get(p.name, p.start) - off) <= 0.1 * reach + 1e-12:
+            return False
+    return True
+
+
+def test_every_candidate_is_also_started_next_to_the_model_without_it() -> None:
+    """Besides its spread of sizes, each candidate starts a tenth of the way from "off" in every
+    switchable parameter: its other starts put the siblings at their defaults (a velocity curve's
+    tanh saturation at 1 bends the whole map), from where a local fit ended worse than the model
+    without the effect on an independent log, and at "off" itself a tanh's saturation has no
+    gradient."""
+    n, T = 3, 20
+    traj = KeystrokeBatch(("a", "b", "c"), np.zeros(n), np.arange(T) / 120, np.zeros((n, T)), np.zeros((n, T)),
+                          np.ones((n, T)) * 1e-3, arm_source="mocap")
+    checked = 0
+    for effect, spec_of in EFFECTS.items():
+        for form in spec_of.forms:
+            spec = CandidateSpec(effect, form)
+            params = candidate_params(spec, traj)
+            layout = Layout(KeystrokeModel.study(), tuple(params), (0.0,), {effect: form})
+            switchable = [p for p in params if p.off is not None]
+            if not switchable:
+                continue
+            assert any(_next_to_off(s, switchable) for s in start_points(layout, spec, traj)), spec.label
+            checked += 1
+    assert checked >= 8
+    curve = CandidateSpec("velocity_curve", EFFECTS["velocity_curve"].forms[0])
+    layout = Layout(KeystrokeModel.study(), tuple(candidate_params(curve, traj)), (0.0,), {})
+    assert {"velocity_curve.curve_exponent": pytest.approx(1.1), "velocity_curve.curve_saturation": pytest.approx(0.1)} in [
+        s for s in start_points(layout, curve, traj)]

@@ -159,6 +159,7 @@ def start_points(layout: Layout, spec: CandidateSpec, batch: KeystrokeBatch) -> 
             value = size.from_internal(lo + fraction * (hi - lo))
             if value != size.off:
                 sizes.append({size.name: value, **_scaled_siblings(params, size, value)})
+        sizes.append(_near_off(params))
     yield_m = next((p for p in params if p.name == "finger_hysteresis.yield_m"), None)
     if yield_m is not None:
         # Where the body yields decides whether a keystroke's deflection reaches it at all: a
@@ -172,6 +173,21 @@ def start_points(layout: Layout, spec: CandidateSpec, batch: KeystrokeBatch) -> 
     depths = ([f * travel for f in (0.5, 0.7, 0.85, 0.97)] if travel is not None
               else list(np.linspace(depth.lower, depth.upper, 6)[1:-1]))
     return [{depth.name: min(max(d, depth.lower), depth.upper), **s} for d in depths for s in sizes]
+
+
+def _near_off(params: Sequence[Param]) -> dict[str, float]:
+    """A start next to the current model: each switchable parameter a tenth of the way from
+    "off" to its default. Every other start puts the size's siblings at their defaults, which
+    may be far from the current model (a velocity curve's tanh saturation at 1 bends the whole
+    map): a local fit from there can end worse than the model without the effect. Not at "off"
+    itself: a shape parameter may have no gradient there (the saturation of a tanh curve)."""
+    out = {}
+    for p in params:
+        if p.off is None:
+            continue
+        off = min(max(float(p.off), p.lower), p.upper)
+        out[p.name] = min(max(off + 0.1 * ((p.start if p.start != off else p.upper) - off), p.lower), p.upper)
+    return out
 
 
 def _scaled_siblings(params: Sequence[Param], size: Param, value: float) -> dict[str, float]:

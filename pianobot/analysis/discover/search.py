@@ -23,7 +23,12 @@ from typing import Literal
 
 import numpy as np
 
-from pianobot.analysis.discover.candidates import CandidateSpec, candidate_params, start_points
+from pianobot.analysis.discover.candidates import (
+    FAMILIES,
+    CandidateSpec,
+    candidate_params,
+    start_points,
+)
 from pianobot.analysis.discover.gap import Gap, held_out_gap
 from pianobot.analysis.greybox.commanded import Commanded
 from pianobot.analysis.greybox.criterion import Criterion
@@ -194,10 +199,22 @@ def screen(setting: Setting, current: GreyBoxFit, spec: CandidateSpec,
     accepted stalled at exponent 1.2 from the generic start; alone it had reached 4.0)."""
     full = _candidate_layout(current, spec, setting.train)
     # With MIDI only, an effect on the outcome is seen through the piano's readout, which must be
-    # free to follow (a velocity curve's exponent and the full-scale speed trade off).
-    layout = full.restricted([spec.effect, "readout"] if setting.mode == "midi" else [spec.effect])
+    # free to follow (a velocity curve's exponent and the full-scale speed trade off). A curve of
+    # the piano's own changes the velocities only: its sensor depths stay, or the fit trades the
+    # hold (on the current model's error levels, those of the model before it: 270 ms where the
+    # arm's acceleration was missing) for velocity, which the criterion then rejects.
+    piano = FAMILIES.get(spec.effect) == "piano"
+    readout = ["readout.full_scale_speed_mps"] if piano else ["readout"]
+    layout = full.restricted([spec.effect, *readout] if setting.mode == "midi" else [spec.effect])
     probe = GreyBoxFit(setting.train_drive, layout, channels=current.channels, sigma=current.sigma)
     starts = [layout.internal(s) for s in start_points(layout, spec, setting.train)] or [layout.start()]
+    if setting.mode == "midi" and piano:
+        # A start of the piano's curve changes the loudness everywhere: each start is also tried
+        # with the full-scale speed matched to it, or its error would say more about the scale
+        # than about the shape. (An effect on the finger or the arm keeps the current scale: its
+        # starts change a few keystrokes, and on a study log a rescaled start for the arm's
+        # acceleration led to another optimum that held out no better.)
+        starts += [_scaled_readout(setting.train_drive, layout, th) for th in starts]
     best = min(starts, key=lambda th: _cost(probe, th))
 
     def fit(start: np.ndarray) -> GreyBoxFit:

@@ -161,8 +161,9 @@ class Layout:
                       self.fixed_drive)
 
     def restricted(self, groups: Sequence[str]) -> Layout:
-        """Only the parameters of these groups free (the others stay at the prior's values)."""
-        keep = tuple(p for p in self.params if p.group in groups)
+        """Only the parameters of these groups (or these names) free (the others stay at the
+        prior's values)."""
+        keep = tuple(p for p in self.params if p.group in groups or p.name in groups)
         return Layout(self.prior, keep, self.levels_kpa, self.forms, self.fixed_drive)
 
     def rebased(self, model: KeystrokeModel, drive: Mapping[str, float] | None = None) -> Layout:
