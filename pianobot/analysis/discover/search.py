@@ -201,8 +201,8 @@ def screen(setting: Setting, current: GreyBoxFit, spec: CandidateSpec,
     # With MIDI only, an effect on the outcome is seen through the piano's readout, which must be
     # free to follow (a velocity curve's exponent and the full-scale speed trade off). A curve of
     # the piano's own changes the velocities only: its sensor depths stay, or the fit trades the
-    # hold (on the current model's error levels, those of the model before it: 270 ms where the
-    # arm's acceleration was missing) for velocity, which the criterion then rejects.
+    # hold for velocity (every candidate is fitted on the base model's error levels, 270 ms of hold
+    # where the arm's acceleration was missing), which the criterion then rejects.
     piano = FAMILIES.get(spec.effect) == "piano"
     readout = ["readout.full_scale_speed_mps"] if piano else ["readout"]
     layout = full.restricted([spec.effect, *readout] if setting.mode == "midi" else [spec.effect])
