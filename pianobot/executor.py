@@ -134,10 +134,13 @@ class Executor:
                 task.advance()
         return out
 
-    def imap(self, fn: Callable[[T], R], items: Iterable[T], *, ahead: int | None = None) -> Iterator[R]:
+    def imap(self, fn: Callable[[T], R], items: Iterable[T], *, ahead: int | None = None,
+             where: Callable[[T], str | None] | None = None) -> Iterator[R]:
         """Results of `fn` over `items` in order, at most `ahead` tasks in flight (memory bound).
 
-        With `ahead` None: twice the workers, enough to keep every worker busy.
+        With `ahead` None: twice the workers, enough to keep every worker busy. `where` names
+        the worker an item should run on (what it needs is kept there); another takes it when
+        that one is gone.
         """
         if self._client is None:
             for item in items:
@@ -150,7 +153,9 @@ class Executor:
         shared = self._client.scatter(fn, broadcast=True, hash=False)
         try:
             for item in items:
-                window.append(self._client.submit(_apply, shared, item, pure=False))
+                worker = where(item) if where is not None else None
+                pinned = {"workers": [worker], "allow_other_workers": True} if worker else {}
+                window.append(self._client.submit(_apply, shared, item, pure=False, **pinned))
                 if len(window) >= limit:
                     yield window.popleft().result()
             while window:

@@ -170,6 +170,22 @@ def test_local_workers_keep_glibc_memory_defaults_unless_the_user_set_them() -> 
     assert seen == {EXPORTED_TRIM}  # None unless the user exported a value
 
 
+def _count_adoptions(_: object = None) -> int:
+    """On a worker: count the blocks whose run took the truths worked out for their times."""
+    from pianobot.physics import world
+
+    if not getattr(world.World.adopt, "counted", False):
+        adopt = world.World.adopt
+
+        def counted(self: world.World, truths: Any) -> None:
+            world.ADOPTED = getattr(world, "ADOPTED", 0) + 1  # type: ignore[attr-defined]
+            adopt(self, truths)
+
+        counted.counted = True  # type: ignore[attr-defined]
+        world.World.adopt = counted  # type: ignore[method-assign]
+    return int(getattr(world, "ADOPTED", 0))
+
+
 @pytest.mark.slow
 def test_a_sweep_on_two_worker_processes_equals_the_serial_sweep(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
@@ -185,6 +201,8 @@ def test_a_sweep_on_two_worker_processes_equals_the_serial_sweep(
         return commit(self, path, relative)
 
     monkeypatch.setattr(StagedPart, "commit", counted)
+    client = open_executor(TWO)._client
+    adopted_before = sum(client.run(_count_adoptions).values())
     dask = run_sweep(spec, data_dir=tmp_path / "dask", progress=False, batch_trials=16,
                      executor=TWO)
     assert load_run(dask.run_id, tmp_path / "dask").meta["executor"]["kind"] == "local-cluster"
@@ -209,6 +227,10 @@ def test_a_sweep_on_two_worker_processes_equals_the_serial_sweep(
     # The workers wrote the samples parts themselves (staged, then renamed by the driver).
     assert committed and all(c.startswith("samples/") for c in committed)
     assert not list(b.paths.samples.glob(".*.tmp"))
+    # Blocks run where their times were worked out and take the truths simulated for those,
+    # instead of simulating them again (one sample part per block).
+    adopted = sum(client.run(_count_adoptions).values()) - adopted_before
+    assert adopted >= len(committed) / 2
 
 
 @pytest.mark.slow

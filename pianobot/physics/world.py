@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import hashlib
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -211,6 +211,16 @@ class World:
                 truth[k] = _Truth(batch.t_s[:own], batch.x0_m[j, :own], batch.x1_m[j, :own],
                                   batch.x2_m[j, :own], batch.v2_mps[j, :own])
         self._truth = truth
+
+    def prefetched(self) -> dict[Any, Any]:
+        """The truths the last `prefetch` holds and no keystroke has taken yet, for `adopt`."""
+        return dict(self._truth)
+
+    def adopt(self, truths: Mapping[Any, Any]) -> None:
+        """Truths an equal world prefetched (`prefetched`): the next `prefetch` keeps those it
+        wants instead of simulating them again (the same samples: a truth depends only on its
+        keystroke, the model and the seed, which its key holds)."""
+        self._truth.update(truths)
 
     def keystroke(
         self,

@@ -120,10 +120,14 @@ class TimingWorld:
         return _TimedStroke(times=(t.arm_back_s, t.key_ready_s), t0_s=float(t0_s))
 
 
-def keystroke_times(world: Any, keystrokes: Sequence[tuple[Press, float]]) -> dict[tuple[Press, float], KeystrokeTimes]:
-    """The times of every distinct (press, vacuum) in `keystrokes`, from its simulated truth."""
+def keystroke_times(world: Any, keystrokes: Sequence[tuple[Press, float]],
+                    kept: dict[Any, Any] | None = None) -> dict[tuple[Press, float], KeystrokeTimes]:
+    """The times of every distinct (press, vacuum) in `keystrokes`, from its simulated truth;
+    `kept` receives those truths (`World.prefetched`), for the block's run to `adopt`."""
     unique = list(dict.fromkeys((press, float(v)) for press, v in keystrokes))
     world.prefetch([p for p, _ in unique], [v for _, v in unique])
+    if kept is not None:
+        kept.update(world.prefetched())
     retrigger = _retrigger_m(world)
     out: dict[tuple[Press, float], KeystrokeTimes] = {}
     for press, vacuum in unique:

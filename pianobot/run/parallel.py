@@ -11,7 +11,9 @@ For each block of trials:
    the next block starts from, so the timeline runs ahead of the workers;
 3. a worker builds a fresh simulated rig in the block's start state, replays the observations of
    earlier keystrokes that can still reach into the block, and runs the block exactly as one
-   process would (`Runner.run_block`), returning its records (trial rows, samples, MIDI);
+   process would (`Runner.run_block`), returning its records (trial rows, samples, MIDI). The
+   task goes to the worker that did step 1 for the block, which kept the block's true
+   trajectories: its rig takes them (`World.adopt`) instead of simulating them again;
 4. the driver checks that the worker ended where the timeline did, then publishes the records in
    plan order to the store sink, the progress bar and any subscriber, one part per block.
 
@@ -23,6 +25,8 @@ in flight; resume redoes them and sweeps the staged parts they left.
 
 from __future__ import annotations
 
+import sys
+from collections import OrderedDict
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -72,6 +76,7 @@ class BlockTask:
     trials: tuple[TrialLike, ...]
     start: Any  # sim_blocks.SimSnapshot
     prelude: tuple[Any, ...]  # sim_blocks.KeystrokeCall
+    worker: str | None = None  # where the block's truths are kept (`block_times`)
 
 
 @dataclass(frozen=True)
@@ -84,12 +89,19 @@ class BlockResult:
     parts: dict[str, bytes | StagedPart]  # the block's Parquet parts, encoded or staged
 
 
-def block_times(task: tuple[SweepSetup, tuple[Any, ...]]) -> dict[Any, Any]:
-    """Worker: when arm and key are ready after each distinct keystroke of a block."""
+def block_times(task: tuple[SweepSetup, tuple[Any, ...]]) -> tuple[dict[Any, Any], str | None]:
+    """Worker: when arm and key are ready after each distinct keystroke of a block, and the
+    address of this worker (None outside a cluster), which keeps the block's truths for its run
+    (`run_block` there simulates nothing again)."""
     from pianobot.rig import sim_blocks
 
     setup, keystrokes = task
-    return sim_blocks.keystroke_times(_world(setup), list(keystrokes))
+    kept: dict[Any, Any] = {}
+    times = sim_blocks.keystroke_times(_world(setup), list(keystrokes), kept)
+    _KEPT[(setup.run_id, keystrokes)] = kept
+    while len(_KEPT) > KEPT_BLOCKS:
+        _KEPT.popitem(last=False)
+    return times, _worker_address()
 
 
 def run_block(task: BlockTask) -> BlockResult:
@@ -102,11 +114,15 @@ def run_block(task: BlockTask) -> BlockResult:
     def keep(record: Record) -> None:
         records.append(record)
 
-    with open_rig(setup.rig_spec, seed=setup.seed, world=_world(setup)) as rig:
+    world = _world(setup)
+    with open_rig(setup.rig_spec, seed=setup.seed, world=world) as rig:
         sim_blocks.restore(rig, task.start)
         sim_blocks.replay(rig, task.prelude)
         runner = Runner(rig, subscribers=[keep], retry=setup.retry, record=setup.record,
                         clock_offset_s=setup.clock_offset_s, motion=setup.motion)
+        kept = _KEPT.pop((setup.run_id, tuple((t.press(), t.vacuum_kpa) for t in task.trials)), None)
+        if kept:  # this worker worked out the block's times: its truths are simulated already
+            world.adopt(kept)
         rig.prepare(task.trials)
         counts = {"executed": 0, "silent": 0, "retries": 0, "done": 0}
         outcome = runner.run_block(task.trials, counts)
@@ -131,6 +147,22 @@ def run_block(task: BlockTask) -> BlockResult:
 
 
 _WORLDS: dict[tuple[str, int], Any] = {}
+#: Truths `block_times` simulated on this worker, by (run, block keystrokes), until the block runs
+#: here; the oldest go first (a block that ran elsewhere, or stopped early, is never asked for).
+_KEPT: OrderedDict[tuple[str, tuple[Any, ...]], dict[Any, Any]] = OrderedDict()
+KEPT_BLOCKS = 4
+
+
+def _worker_address() -> str | None:
+    """This Dask worker's address; None in a process that is not one (checked without importing
+    distributed, which a serial sweep never loads)."""
+    distributed = sys.modules.get("distributed")
+    if distributed is None:
+        return None
+    try:
+        return str(distributed.get_worker().address)
+    except ValueError:  # distributed is loaded, but this is not a worker
+        return None
 
 
 def _world(setup: SweepSetup) -> Any:
@@ -205,7 +237,9 @@ def run_parallel(
                                             for b in blocks), ahead=2)
         tasks = _tasks(timeline, setup, blocks, times)
         try:
-            for number, result in enumerate(executor.imap(run_block, tasks)):
+            # Each block runs where its times were worked out, if that worker is free to: its
+            # truths are kept there.
+            for number, result in enumerate(executor.imap(run_block, tasks, where=lambda t: t.worker)):
                 if result.end != timeline.expected_end.pop(number):
                     raise RuntimeError(f"block {number} of run {run_id} ended in another state on "
                                        "its worker than in the driver's timeline")
@@ -247,7 +281,8 @@ def _tasks(
 
     world, rig = timeline.world, timeline.rig
     for number, block in enumerate(blocks):
-        world.times.update(next(times))
+        found, worker = next(times)
+        world.times.update(found)
         start = sim_blocks.snapshot(rig)
         reach = start.clock_s
         prelude = tuple(c for c in world.calls if c.end_s > reach)
@@ -260,7 +295,7 @@ def _tasks(
         if not ran:
             return
         timeline.expected_end[number] = sim_blocks.snapshot(rig)
-        yield BlockTask(setup, ran, start, prelude)
+        yield BlockTask(setup, ran, start, prelude, worker)
         if timeline.outcome is not None:
             return
 
