@@ -174,6 +174,7 @@ def _world(setup: SweepSetup) -> Any:
     key = (setup.rig_spec.model_dump_json(), setup.seed)
     if key not in _WORLDS:
         _WORLDS.clear()  # one sweep at a time per process
+        _KEPT.clear()
         _WORLDS[key] = sim_blocks.world_for(setup.rig_spec, setup.seed)
     return _WORLDS[key]
 
