@@ -120,7 +120,7 @@ def run_block(task: BlockTask) -> BlockResult:
         sim_blocks.replay(rig, task.prelude)
         runner = Runner(rig, subscribers=[keep], retry=setup.retry, record=setup.record,
                         clock_offset_s=setup.clock_offset_s, motion=setup.motion)
-        kept = _KEPT.pop((setup.run_id, tuple((t.press(), t.vacuum_kpa) for t in task.trials)), None)
+        kept = _KEPT.pop((setup.run_id, _keystrokes(task.trials)), None)
         if kept:  # this worker worked out the block's times: its truths are simulated already
             world.adopt(kept)
         rig.prepare(task.trials)
@@ -151,6 +151,12 @@ _WORLDS: dict[tuple[str, int], Any] = {}
 #: here; the oldest go first (a block that ran elsewhere, or stopped early, is never asked for).
 _KEPT: OrderedDict[tuple[str, tuple[Any, ...]], dict[Any, Any]] = OrderedDict()
 KEPT_BLOCKS = 4
+
+
+def _keystrokes(trials: Sequence[TrialLike]) -> tuple[tuple[Any, float], ...]:
+    """A block's keystrokes as (press, vacuum): what its times are worked out for, and the key
+    its kept truths are found by."""
+    return tuple((t.press(), t.vacuum_kpa) for t in trials)
 
 
 def _worker_address() -> str | None:
@@ -234,8 +240,7 @@ def run_parallel(
             started=started,
         )
         sim_blocks.restore(timeline_rig, sim_blocks.snapshot(rig))
-        times = executor.imap(block_times, ((setup, tuple((t.press(), t.vacuum_kpa) for t in b))
-                                            for b in blocks), ahead=2)
+        times = executor.imap(block_times, ((setup, _keystrokes(b)) for b in blocks), ahead=2)
         tasks = _tasks(timeline, setup, blocks, times)
         try:
             # Each block runs where its times were worked out, if that worker is free to: its

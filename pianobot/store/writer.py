@@ -8,11 +8,10 @@ run against these records, `runs repair` restores from them.
 
 from __future__ import annotations
 
-import hashlib
 import os
 import shutil
 from collections import Counter
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -413,9 +412,15 @@ class StagedPart:
     """A part written ahead by a worker (`stage_part`), waiting for the writer to commit it."""
 
     temp: str  # the temp file: in the part's own folder, named as the store sweeps leftovers
-    rows: int
-    size: int
-    sha256: str
+    record: FileRecord  # rows, size and SHA-256 as the worker wrote it (its file: the temp name)
+
+    @property
+    def size(self) -> int:
+        return self.record.size
+
+    @property
+    def sha256(self) -> str:
+        return self.record.sha256
 
     def commit(self, path: Path, relative: str) -> FileRecord:
         """Rename the staged file to `path` (same folder: atomic) and make the rename durable.
@@ -435,7 +440,7 @@ class StagedPart:
                              f"not the {self.size} bytes its worker wrote", path.parent.parent.name)
         os.replace(temp, path)
         fsync_dir(path.parent)
-        return FileRecord(relative, self.rows, self.size, self.sha256)
+        return replace(self.record, file=relative)
 
 
 def stage_part(folder: Path | str, data: bytes, rows: int) -> StagedPart:
@@ -446,7 +451,7 @@ def stage_part(folder: Path | str, data: bytes, rows: int) -> StagedPart:
     target = Path(folder)
     target.mkdir(parents=True, exist_ok=True)
     temp = write_temp(target / "staged.parquet", data)
-    return StagedPart(str(temp), rows, len(data), hashlib.sha256(data).hexdigest())
+    return StagedPart(str(temp), FileRecord.of_bytes(temp.name, data, rows))
 
 
 def _new_folder(base: Path, name: str) -> Path:
