@@ -5,6 +5,8 @@ Suites, reported apart:
 - `truth`: the independent generators of tests/truth (they share no code with pianobot's physics:
   other functional forms, other base numbers; they write Motive CSV takes and ctrl_midi-style
   keystroke logs). The acceptance table, split by "form equals a candidate" / "form differs".
+  `--truth-subset variants`: suite takes recorded otherwise (other frame rates, fewer keystrokes,
+  faster presses), a check that nothing is tuned to the suite's recording.
 - `own`: pianobot's own simulated world (tests/analysis/own_world.py). An inverse crime by
   construction, so it only checks the plumbing: every effect of the vocabulary, arm-side
   effects in an arm log, the mocap clock, MIDI-only logs.
@@ -179,9 +181,9 @@ def truth_suite(only: list[str] | None, log: Callable[[str], None], subset: str 
     """The independent suite (tests/truth): each scenario written to disk, imported with `files`
     (FILE_SETS), discovered; on clean takes also identified as `pianobot identify` does. With
     `files="take"` only the mocap scenarios run (a keystroke log has no take)."""
-    from tests.truth import full_suite, materialise, small_suite
+    from tests.truth import full_suite, materialise, small_suite, variant_suite
 
-    scenarios = full_suite() if subset == "full" else small_suite()
+    scenarios = {"full": full_suite, "small": small_suite, "variants": variant_suite}[subset]()
     takes_only = files == "take"
     if takes_only:
         scenarios = [sc for sc in scenarios if sc.kind == "mocap"]
@@ -424,7 +426,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     parser.add_argument("--suite", nargs="*", default=["truth", "own", "real"], choices=["truth", "own", "real"])
     parser.add_argument("--only", nargs="*", default=None, help="scenario names (or parts of names) to run")
-    parser.add_argument("--truth-subset", default="full", choices=["full", "small"])
+    parser.add_argument("--truth-subset", default="full", choices=["full", "small", "variants"],
+                        help="variants: suite takes recorded otherwise (100/240 Hz, 10 keystrokes, faster presses)")
     parser.add_argument("--files", default="presses", choices=FILE_SETS,
                         help="what of a truth take is imported: the take alone as Motive wrote it (no commanded presses, "
                              "no vacuum), with the lab's commanded presses, or with its UR arm log as well")

@@ -322,3 +322,34 @@ def test_an_arm_that_follows_its_command_through_a_servo_is_measured_as_lagging(
     assert lag.accepted, lag.text
     freq, zeta = (float(v) for v in re.findall(r"servo of ([\d.]+) Hz, damping ratio ([\d.]+)", lag.text)[0])
     assert freq == pytest.approx(servo[0], rel=0.15) and zeta == pytest.approx(servo[1], abs=0.15)
+
+
+# Suite takes recorded otherwise (tests/truth `variant_suite`): nothing in discovery may be tuned to
+# the suite's 120 Hz, 24-keystroke recording. Imported as the lab records them: the take with its
+# UR arm log, and the script's presses.
+def _discover_lab(name: str, tmp_path: Path, cli: Run) -> tuple[dict[str, Any], dict[str, Any]]:
+    made = materialise(scenario(name), tmp_path / "files")
+    data = tmp_path / "data"
+    run_id = import_mocap(made.files["take"], data, vacuum_kpa=float(made.truth["vacuum_kpa"]),
+                          arm_log=made.files["arm_log"]).run_id
+    return _discover([run_id, "--data", str(data), "--presses", str(made.files["presses"])], cli), made.truth
+
+
+@pytest.mark.parametrize("name", ["variant-clean-240hz", "variant-clean-100hz", "variant-clean-10-keystrokes"])
+def test_a_clean_take_recorded_otherwise_accepts_nothing(
+        name: str, tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    payload, truth = _discover_lab(name, tmp_path, (capsys, monkeypatch))
+    assert payload["accepted_effects"] == [], payload["verdict"]
+    assert set(payload["measured_effects"]) <= set(truth["always_present"])
+
+
+@pytest.mark.parametrize("name", ["variant-friction-stribeck-strong-100hz",
+                                  "variant-letoff-gaussian-strong-10-keystrokes"])
+def test_an_effect_in_a_take_recorded_otherwise_is_named(
+        name: str, tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    payload, truth = _discover_lab(name, tmp_path, (capsys, monkeypatch))
+    named = [e for e in payload["accepted_effects"] if e not in truth["always_present"]]
+    assert named and family_of(named[0]) == truth["family"], payload["verdict"]
+    assert set(named) <= set(truth["accepted_effects"]), payload["verdict"]
+    first = next(c for c in payload["iterations"][0]["candidates"] if c["status"] == "accepted")
+    assert first["ratio"] is None or first["ratio"] >= 3.0, first

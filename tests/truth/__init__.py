@@ -26,6 +26,7 @@ from .catalogue import (
     full_suite,
     scenario,
     small_suite,
+    variant_suite,
     with_seed,
 )
 from .forms import FAMILY_OF, FORMS, Effect, FormInfo
@@ -81,6 +82,7 @@ __all__ = [
     "small_suite",
     "suite",
     "truth_dict",
+    "variant_suite",
     "with_seed",
     "write_suite",
 ]

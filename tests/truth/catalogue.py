@@ -225,9 +225,45 @@ def small_suite() -> list[Scenario]:
     return [by_name[n] for n in SMALL]
 
 
-def scenario(name: str) -> Scenario:
-    """One scenario of the full suite by name (KeyError naming the known ones)."""
+#: Takes recorded otherwise than the suite's: (name, suite scenario, frame rate Hz, speeds or None,
+#: repeats or None, hover distance m or None). Other frame rates (OptiTrack's 100 and 240 Hz), fewer
+#: keystrokes (5 speeds × 2), faster presses (up to 0.12 m/s); each with a seed of its own.
+VARIANTS: tuple[tuple[str, str, float, tuple[float, ...] | None, int | None, float | None], ...] = (
+    ("clean-240hz", "mocap-clean-light-finger-shallow-0", 240.0, None, None, None),
+    ("clean-100hz", "mocap-clean-light-finger-shallow-0", 100.0, None, None, None),
+    ("clean-10-keystrokes", "mocap-clean-light-finger-shallow-0", 120.0, (0.015, 0.03, 0.045, 0.06, 0.075), 2, None),
+    ("clean-deep-240hz", "mocap-clean-stiff-key-deep-0", 240.0, None, None, None),
+    ("clean-hover-fast-100hz", "mocap-clean-stiff-key-deep-0", 100.0, (0.02, 0.04, 0.06, 0.08, 0.1, 0.12), 3, 0.005),
+    ("preload-felt_rail-weak-240hz", "mocap-key_preload-felt_rail-weak", 240.0, None, None, None),
+    ("friction-stribeck-strong-100hz", "mocap-key_friction-stribeck-strong", 100.0, None, None, None),
+    ("letoff-gaussian-strong-10-keystrokes", "mocap-letoff-gaussian-strong", 120.0, (0.015, 0.03, 0.045, 0.06, 0.075), 2, None),
+    ("stiffening-exponential-weak-240hz-10-keystrokes", "mocap-finger_stiffening-exponential-weak", 240.0,
+     (0.015, 0.03, 0.045, 0.06, 0.075), 2, None),
+    ("keybed-power_law-strong-fast", "mocap-keybed-power_law-strong", 120.0, (0.02, 0.04, 0.06, 0.08, 0.1, 0.12), 3, None),
+)
+
+
+def variant_suite() -> list[Scenario]:
+    """Suite scenarios recorded otherwise (`VARIANTS`): frame rate, keystroke count, speeds.
+    Named `variant-<what>`; the hidden effect and base set are the suite scenario's."""
     by_name = {s.name: s for s in full_suite()}
+    out = []
+    for what, source, rate, speeds, repeats, distance in VARIANTS:
+        s = by_name[source]
+        take = s.take
+        if speeds is not None:
+            take = replace(take, speeds_mps=speeds, repeats=repeats or take.repeats)
+        if distance is not None:
+            take = replace(take, distance_m=distance, key_target_m=None)
+        name = f"variant-{what}"
+        out.append(replace(s, name=name, seed=_seed(name), take=take, frame_rate_hz=rate,
+                           description=f"{s.description}; recorded as {what}"))
+    return out
+
+
+def scenario(name: str) -> Scenario:
+    """One scenario of the full suite or the variants by name (KeyError naming the known ones)."""
+    by_name = {s.name: s for s in full_suite() + variant_suite()}
     if name not in by_name:
         raise KeyError(f"unknown scenario {name!r}; known: {sorted(by_name)}")
     return by_name[name]

@@ -27,7 +27,7 @@ from .base import BASE_SETS
 from .ctrl_log import Stroke, assemble, simulate_stroke, write_log
 from .forms import FAMILY_OF
 from .motive import build_take, write_take
-from .plant import MOCAP_RATE_HZ, STEP_S, Plant, Trajectory
+from .plant import STEP_S, Plant, Trajectory
 from .scenario import Scenario
 
 SCHEMA = "pianobot-truth/1"
@@ -76,17 +76,18 @@ def _commanded(scenario: Scenario) -> tuple[list[PressCommand], list[Any], float
 
 
 def simulate_take(scenario: Scenario) -> tuple[list[PressCommand], Trajectory]:
-    """The commanded presses and the true trajectories at the 120 Hz frame times."""
+    """The commanded presses and the true trajectories at the frame times (k/rate s)."""
     presses, moves, t_end = _commanded(scenario)
     plant = _plant(scenario, scenario.take.distance_m)
     delay_s, rate_ppm = scenario.mocap_clock()
+    rate = scenario.frame_rate_hz
     if delay_s == 0.0 and rate_ppm == 0.0:
-        return presses, plant.simulate(moves, t_end, record_every=400)
-    # The mocap clock runs off the arm's: frame k (k/120 s on the mocap clock) shows the state at
-    # true time (k/120 − δ)/(1 + r). Recorded finely, then interpolated at those times.
+        return presses, plant.simulate(moves, t_end, record_every=int(round(1.0 / (rate * STEP_S))))
+    # The mocap clock runs off the arm's: frame k (k/rate s on the mocap clock) shows the state at
+    # true time (k/rate − δ)/(1 + r). Recorded finely, then interpolated at those times.
     fine = plant.simulate(moves, t_end + abs(delay_s) + 1.0, record_every=40)
-    n = int(round(t_end * MOCAP_RATE_HZ)) + 1
-    t_mocap = np.arange(n) / MOCAP_RATE_HZ
+    n = int(round(t_end * rate)) + 1
+    t_mocap = np.arange(n) / rate
     t_true = (t_mocap - delay_s) / (1.0 + rate_ppm * 1e-6)
     frames = resample(fine, np.clip(t_true, 0.0, None))
     frames.data[:, K.OUT_T] = t_mocap  # the record is labelled by the mocap clock
@@ -175,7 +176,7 @@ def _write_mocap(scenario: Scenario, folder: Path) -> tuple[dict[str, Path], dic
     presses, traj = simulate_take(scenario)
     rng_obs = _streams(scenario.seed)[1]
     take = build_take(scenario.name, traj["x0_m"], traj["x1_m"], traj["x2_m"],
-                      scenario.observation, rng_obs)  # fmt: skip
+                      scenario.observation, rng_obs, scenario.frame_rate_hz)  # fmt: skip
     take_path = folder / "take.csv"
     write_take(take_path, take)
     presses_path = folder / "presses.csv"
@@ -190,14 +191,14 @@ def _write_mocap(scenario: Scenario, folder: Path) -> tuple[dict[str, Path], dic
     x2 = traj["x2_m"]
     extra: dict[str, Any] = {
         "presses": [p.to_dict() for p in presses],
-        "clock": "motion starts are on the arm's clock; frame k is at k/120 s on the mocap "
+        "clock": f"motion starts are on the arm's clock; frame k is at k/{scenario.frame_rate_hz:g} s on the mocap "
         "clock, which equals the arm's unless the hidden effect is mocap_delay",
         "mocap_clock": {
             "delay_s": scenario.mocap_clock()[0],
             "rate_ppm": scenario.mocap_clock()[1],
         },
         "mocap": {
-            "frame_rate_hz": 120.0,
+            "frame_rate_hz": scenario.frame_rate_hz,
             "roles": take.roles,
             "observation": scenario.observation.to_dict(),
             "frames": int(x2.size),

@@ -1,4 +1,4 @@
-"""Mocap takes written as OptiTrack Motive CSV exports (format 1.21, 120 Hz, metres, Y up).
+"""Mocap takes written as OptiTrack Motive CSV exports (format 1.21, 120 Hz unless the scenario says otherwise, metres, Y up).
 
 What the cameras see: four persistent markers (UR end effector, middle of the finger,
 fingertip, key surface) with micrometre noise, a slow common-mode drift of the whole capture
@@ -54,6 +54,7 @@ class Take:
     tracks: dict[str, FloatArray]  # marker name → positions
     roles: dict[str, str]  # role → marker name
     start_text: str
+    rate_hz: float = RATE_HZ
 
 
 def build_take(
@@ -63,10 +64,11 @@ def build_take(
     x2_m: FloatArray,
     obs: MocapObservation,
     rng: np.random.Generator,
+    rate_hz: float = RATE_HZ,
 ) -> Take:
-    """Marker tracks from the true downward displacements at the frame times k/120 s."""
+    """Marker tracks from the true downward displacements at the frame times k/rate_hz s."""
     n = x0_m.size
-    t = np.arange(n) / RATE_HZ
+    t = np.arange(n) / rate_hz
     base_id = int(rng.integers(100, 600))
     drift = _drift(t, obs.drift_peak_m, rng)
     down = {
@@ -85,7 +87,7 @@ def build_take(
         label = f"Unlabeled:{base_id + i}"
         tracks[label] = xyz
         roles[role] = label
-    _drop(tracks, roles, n, obs, rng)
+    _drop(tracks, roles, n, obs, rng, rate_hz)
     ghost_id = base_id + 250
     for _ in range(obs.ghosts):
         ghost_id += int(rng.integers(1, 9))
@@ -93,7 +95,7 @@ def build_take(
     day = int(rng.integers(1, 28))
     start = f"2022-03-{day:02d} {int(rng.integers(1, 12)):02d}.{int(rng.integers(0, 60)):02d}." \
             f"{int(rng.integers(0, 60)):02d}.{int(rng.integers(0, 1000)):03d} PM"  # fmt: skip
-    return Take(name, t, tracks, roles, start)
+    return Take(name, t, tracks, roles, start, rate_hz)
 
 
 def _drift(t: FloatArray, peak_m: float, rng: np.random.Generator) -> FloatArray:
@@ -117,8 +119,9 @@ def _drop(
     n: int,
     obs: MocapObservation,
     rng: np.random.Generator,
+    rate_hz: float = RATE_HZ,
 ) -> None:
-    lead = int(RATE_HZ)  # nothing is lost in the first second (the rest level is taken there)
+    lead = int(rate_hz)  # nothing is lost in the first second (the rest level is taken there)
     for _ in range(obs.dropouts):
         i0 = int(rng.integers(lead, max(lead + 1, n - 5)))
         for xyz in tracks.values():
@@ -146,7 +149,7 @@ def write_take(path: Path, take: Take) -> None:
     n = take.t_s.size
     meta = [
         "Format Version", "1.21", "Take Name", take.name,
-        "Capture Frame Rate", f"{RATE_HZ:.6f}", "Export Frame Rate", f"{RATE_HZ:.6f}",
+        "Capture Frame Rate", f"{take.rate_hz:.6f}", "Export Frame Rate", f"{take.rate_hz:.6f}",
         "Capture Start Time", take.start_text, "Total Frames in Take", str(n),
         "Total Exported Frames", str(n), "Rotation Type", "Quaternion",
         "Length Units", "Meters", "Coordinate Space", "Global",

@@ -14,6 +14,7 @@ import numpy as np
 from .arm import ArmServo, PressCommand
 from .forms import Effect
 from .motive import MocapObservation
+from .plant import MOCAP_RATE_HZ, STEP_S
 from .readout import Piano, VelocityCurve
 
 KINDS = ("mocap", "midi")
@@ -96,8 +97,12 @@ class Scenario:
     piano: Piano = field(default_factory=Piano)
     observation: MocapObservation = field(default_factory=MocapObservation)
     description: str = ""
+    frame_rate_hz: float = MOCAP_RATE_HZ  # the capture's frame rate (a divisor of the plant's step rate)
 
     def __post_init__(self) -> None:
+        if abs(1.0 / (self.frame_rate_hz * STEP_S) - round(1.0 / (self.frame_rate_hz * STEP_S))) > 1e-9:
+            raise ValueError(f"{self.name}: frame rate {self.frame_rate_hz} Hz does not divide the plant's "
+                             f"{1.0 / STEP_S:g} steps/s")
         if self.kind not in KINDS:
             raise ValueError(f"scenario kind should be one of {KINDS}, got {self.kind!r}")
         if self.strength not in STRENGTHS:

@@ -24,6 +24,7 @@ from tests.truth import (
     materialise,
     scenario,
     small_suite,
+    variant_suite,
     with_seed,
 )
 from tests.truth.__main__ import main as truth_main
@@ -120,6 +121,29 @@ def test_takes_import_as_24_keystrokes_with_the_right_roles(
         assert np.all(np.abs(trials["t_start_s"].to_numpy() - starts) < 0.25)
         depth = commanded[0]["depth_m"] + commanded[0]["distance_m"]
         assert np.allclose(trials["arm_travel_m"], depth, rtol=0.1)
+
+
+def test_a_take_captured_at_240_hz_says_so_and_imports_at_that_rate(tmp_path: Path) -> None:
+    made = materialise(scenario("variant-clean-240hz"), tmp_path / "files")
+    header = made.files["take"].read_text(encoding="utf-8").splitlines()[0].split(",")
+    assert header[header.index("Capture Frame Rate") + 1] == "240.000000"
+    assert made.truth["mocap"]["frame_rate_hz"] == 240.0
+    result = import_mocap(made.files["take"], tmp_path / "data", vacuum_kpa=made.scenario.vacuum_kpa)
+    assert result.trials == 24
+    samples = load_run(result.run_id, tmp_path / "data").samples
+    one = samples[samples.trial_id == samples.trial_id.iloc[0]]
+    assert np.median(np.diff(one.t_s.to_numpy())) == pytest.approx(1 / 240, rel=1e-3)  # Motive writes ms
+
+
+def test_variants_are_suite_takes_recorded_otherwise() -> None:
+    by_name = {s.name: s for s in full_suite()}
+    variants = variant_suite()
+    assert len(variants) == len({v.name for v in variants}) == 10
+    assert {v.frame_rate_hz for v in variants} == {100.0, 120.0, 240.0}
+    assert sum(v.effect is None for v in variants) == 5
+    assert all(v.name not in by_name and v.seed not in {s.seed for s in by_name.values()} for v in variants)
+    with pytest.raises(ValueError, match="does not divide"):
+        replace(variants[0], frame_rate_hz=180.0)
 
 
 def test_logs_import_with_every_outcome_on_its_line(
