@@ -13,6 +13,9 @@ Base sets and vacuum levels rotate through the scenarios; each scenario has its 
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import Any
+
+import numpy as np
 
 from .base import BASE_SETS
 from .forms import Effect
@@ -225,39 +228,49 @@ def small_suite() -> list[Scenario]:
     return [by_name[n] for n in SMALL]
 
 
-#: Takes recorded otherwise than the suite's: (name, suite scenario, frame rate Hz, speeds or None,
-#: repeats or None, hover distance m or None). Other frame rates (OptiTrack's 100 and 240 Hz), fewer
-#: keystrokes (5 speeds × 2), faster presses (up to 0.12 m/s); each with a seed of its own.
-VARIANTS: tuple[tuple[str, str, float, tuple[float, ...] | None, int | None, float | None], ...] = (
-    ("clean-240hz", "mocap-clean-light-finger-shallow-0", 240.0, None, None, None),
-    ("clean-100hz", "mocap-clean-light-finger-shallow-0", 100.0, None, None, None),
-    ("clean-10-keystrokes", "mocap-clean-light-finger-shallow-0", 120.0, (0.015, 0.03, 0.045, 0.06, 0.075), 2, None),
-    ("clean-deep-240hz", "mocap-clean-stiff-key-deep-0", 240.0, None, None, None),
-    ("clean-hover-fast-100hz", "mocap-clean-stiff-key-deep-0", 100.0, (0.02, 0.04, 0.06, 0.08, 0.1, 0.12), 3, 0.005),
-    ("preload-felt_rail-weak-240hz", "mocap-key_preload-felt_rail-weak", 240.0, None, None, None),
-    ("friction-stribeck-strong-100hz", "mocap-key_friction-stribeck-strong", 100.0, None, None, None),
-    ("letoff-gaussian-strong-10-keystrokes", "mocap-letoff-gaussian-strong", 120.0, (0.015, 0.03, 0.045, 0.06, 0.075), 2, None),
-    ("stiffening-exponential-weak-240hz-10-keystrokes", "mocap-finger_stiffening-exponential-weak", 240.0,
-     (0.015, 0.03, 0.045, 0.06, 0.075), 2, None),
-    ("keybed-power_law-strong-fast", "mocap-keybed-power_law-strong", 120.0, (0.02, 0.04, 0.06, 0.08, 0.1, 0.12), 3, None),
+FEW_SPEEDS = {"speeds_mps": (0.015, 0.03, 0.045, 0.06, 0.075), "repeats": 2}  # 10 keystrokes
+FAST_SPEEDS = {"speeds_mps": (0.02, 0.04, 0.06, 0.08, 0.1, 0.12), "repeats": 3}
+SMALL_GRID = {"accelerations_mps2": (0.25, 0.75), "speeds_mps": tuple(float(v) for v in np.linspace(0.015, 0.075, 10)),
+              "depths_m": (0.025, 0.035)}  # 40 keystrokes
+OTHER_GRID = {"accelerations_mps2": (0.2, 0.6, 1.2), "speeds_mps": tuple(float(v) for v in np.linspace(0.015, 0.1, 15)),
+              "depths_m": (0.025, 0.035, 0.045)}  # 135 keystrokes at other levels
+
+#: Sessions recorded otherwise than the suite's: (what, suite scenario, changes). Changes set the
+#: frame rate (OptiTrack's 100 and 240 Hz), the take's schedule (`take`: 10 keystrokes, faster
+#: presses, hovering) or a MIDI-only grid (`grid`: 40 keystrokes, other accelerations, speeds and
+#: depths). Each variant gets a seed of its own.
+VARIANTS: tuple[tuple[str, str, dict[str, Any]], ...] = (
+    ("clean-240hz", "mocap-clean-light-finger-shallow-0", {"frame_rate_hz": 240.0}),
+    ("clean-100hz", "mocap-clean-light-finger-shallow-0", {"frame_rate_hz": 100.0}),
+    ("clean-10-keystrokes", "mocap-clean-light-finger-shallow-0", {"take": FEW_SPEEDS}),
+    ("clean-deep-240hz", "mocap-clean-stiff-key-deep-0", {"frame_rate_hz": 240.0}),
+    ("clean-hover-fast-100hz", "mocap-clean-stiff-key-deep-0",
+     {"frame_rate_hz": 100.0, "take": {**FAST_SPEEDS, "distance_m": 0.005, "key_target_m": None}}),
+    ("preload-felt_rail-weak-240hz", "mocap-key_preload-felt_rail-weak", {"frame_rate_hz": 240.0}),
+    ("friction-stribeck-strong-100hz", "mocap-key_friction-stribeck-strong", {"frame_rate_hz": 100.0}),
+    ("letoff-gaussian-strong-10-keystrokes", "mocap-letoff-gaussian-strong", {"take": FEW_SPEEDS}),
+    ("stiffening-exponential-weak-240hz-10-keystrokes", "mocap-finger_stiffening-exponential-weak",
+     {"frame_rate_hz": 240.0, "take": FEW_SPEEDS}),
+    ("keybed-power_law-strong-fast", "mocap-keybed-power_law-strong", {"take": FAST_SPEEDS}),
+    ("midi-clean-40-keystrokes", "midi-clean-light-finger-0", {"grid": SMALL_GRID}),
+    ("midi-clean-other-grid", "midi-clean-stiff-key-1", {"grid": OTHER_GRID}),
+    ("midi-velocity_curve-tanh-strong-40-keystrokes", "midi-velocity_curve-tanh-strong", {"grid": SMALL_GRID}),
+    ("midi-velocity_curve-rational-strong-other-grid", "midi-velocity_curve-rational-strong", {"grid": OTHER_GRID}),
 )
 
 
 def variant_suite() -> list[Scenario]:
-    """Suite scenarios recorded otherwise (`VARIANTS`): frame rate, keystroke count, speeds.
-    Named `variant-<what>`; the hidden effect and base set are the suite scenario's."""
+    """Suite sessions recorded otherwise (`VARIANTS`), named `variant-<what>`; the hidden effect,
+    base set and vacuum are the suite scenario's."""
     by_name = {s.name: s for s in full_suite()}
     out = []
-    for what, source, rate, speeds, repeats, distance in VARIANTS:
+    for what, source, changes in VARIANTS:
         s = by_name[source]
-        take = s.take
-        if speeds is not None:
-            take = replace(take, speeds_mps=speeds, repeats=repeats or take.repeats)
-        if distance is not None:
-            take = replace(take, distance_m=distance, key_target_m=None)
         name = f"variant-{what}"
-        out.append(replace(s, name=name, seed=_seed(name), take=take, frame_rate_hz=rate,
-                           description=f"{s.description}; recorded as {what}"))
+        out.append(replace(s, name=name, seed=_seed(name), description=f"{s.description}; recorded as {what}",
+                           take=replace(s.take, **changes.get("take", {})),
+                           grid=replace(s.grid, **changes.get("grid", {})),
+                           frame_rate_hz=changes.get("frame_rate_hz", s.frame_rate_hz)))
     return out
 
 

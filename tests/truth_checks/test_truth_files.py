@@ -138,9 +138,10 @@ def test_a_take_captured_at_240_hz_says_so_and_imports_at_that_rate(tmp_path: Pa
 def test_variants_are_suite_takes_recorded_otherwise() -> None:
     by_name = {s.name: s for s in full_suite()}
     variants = variant_suite()
-    assert len(variants) == len({v.name for v in variants}) == 10
+    assert len(variants) == len({v.name for v in variants}) == 14
     assert {v.frame_rate_hz for v in variants} == {100.0, 120.0, 240.0}
-    assert sum(v.effect is None for v in variants) == 5
+    assert sum(v.effect is None for v in variants) == 7
+    assert {v.kind for v in variants} == {"mocap", "midi"}
     assert all(v.name not in by_name and v.seed not in {s.seed for s in by_name.values()} for v in variants)
     with pytest.raises(ValueError, match="does not divide"):
         replace(variants[0], frame_rate_hz=180.0)
