@@ -10,7 +10,9 @@ Suites, reported apart:
 - `own`: pianobot's own simulated world (tests/analysis/own_world.py). An inverse crime by
   construction, so it only checks the plumbing: every effect of the vocabulary, arm-side
   effects in an arm log, the mocap clock, MIDI-only logs.
-- `real`: the study's fixtures (ctrl_midi logs, zzz40), when present beside the checkout.
+- `real`: the study's fixtures (ctrl_midi logs, zzz40), when present beside the checkout. For a
+  MIDI log also how on-velocity grows with speed, measured and by the models (`velocity_growth`:
+  does the growth slow down, as the study's §6.3 reports?).
 
 Time is process CPU time of one discovery (one core), not wall time: the benchmark machine is
 shared.
@@ -217,6 +219,32 @@ def truth_suite(only: list[str] | None, log: Callable[[str], None], subset: str 
     return rows
 
 
+def velocity_growth(result: DiscoveryResult) -> dict[str, Any] | None:
+    """How on-velocity grows with the commanded speed on the held-out keystrokes of a MIDI log:
+    the mean over the slowest, middle and fastest third of the speeds (sounded keystrokes),
+    measured and predicted by the base and the final model. `curvature` is (top − middle) /
+    (middle − bottom): below 1 the growth slows down (the study's §6.3 saturation), above 1 it
+    speeds up. None for trajectories."""
+    import numpy as np
+
+    if result.mode != "midi":
+        return None
+    held = result.held_out
+    speed = held.down_velocity_mps
+    edges = np.quantile(np.unique(speed), [1 / 3, 2 / 3])
+    third = np.digitize(speed, edges, right=True)
+    out: dict[str, Any] = {"speed_thirds_mps": [round(float(speed[third == i].min()), 4) for i in range(3)]
+                           + [round(float(speed.max()), 4)]}
+    for name, values in (("measured", held.on_velocity), ("base", result.predictions_before.on_velocity),
+                         ("final", result.predictions_after.on_velocity)):
+        means = [float(np.nanmean(values[third == i])) if np.isfinite(values[third == i]).any() else math.nan
+                 for i in range(3)]
+        rise = means[1] - means[0]
+        out[name] = {"mean_on_velocity": [round(m, 2) for m in means],
+                     "curvature": round((means[2] - means[1]) / rise, 2) if abs(rise) > 1e-9 else None}
+    return out
+
+
 def real_suite(log: Callable[[str], None]) -> list[dict[str, Any]]:
     """The study's fixtures: what is named, the held-out gap before and after, the time."""
     if not FIXTURES.is_dir():
@@ -247,7 +275,8 @@ def real_suite(log: Callable[[str], None]) -> list[dict[str, Any]]:
             row = {"file": name, **score(result, None, cpu, batch.n),
                    "steps": [{"effect": v.label, "measure": v.measure, "ratio": v.ratio, "delta_ic": v.delta_ic,
                               "gap_before": v.gap_before.text(), "gap_after": v.gap_after.text(),
-                              "params": v.params} for v in result.accepted]}
+                              "params": v.params} for v in result.accepted],
+                   "velocity_growth": velocity_growth(result)}
             row.pop("hit")
             row.pop("false_discovery")
             rows.append(row)
