@@ -296,8 +296,8 @@ def as_full(setting: Setting, current: GreyBoxFit, spec: CandidateSpec, screened
     return GreyBoxFit(setting.train_drive, layout, channels=current.channels, sigma=current.sigma).evaluate(start)
 
 
-#: The arm-fingertip coupling: free in a candidate's fit even where the base model ties it.
-COUPLING = ("k0_over_k1", "c0_over_c1", "m1_kg")
+# The arm-fingertip coupling: free in a candidate's fit even where the base model ties it.
+_COUPLING = ("k0_over_k1", "c0_over_c1", "m1_kg")
 
 
 def _candidate_layout(current: GreyBoxFit, spec: CandidateSpec, batch: KeystrokeBatch) -> Layout:
@@ -308,10 +308,10 @@ def _candidate_layout(current: GreyBoxFit, spec: CandidateSpec, batch: Keystroke
     missing effect, whose misfit can hide what freeing it gains; with the effect in the model the
     coupling may matter. Seen on an independent weak power-law finger whose body is 1.3x stiffer
     than its pad: with the coupling tied, the power form's exponent went to its bound (4, truth 3)
-    and the held-out gap shrank 20 %; with it free, exponent 3.08, scale 223 /m (truth 222) and
-    a 93 % shrink. The coupling's parameters count in the candidate's information criterion."""
+    and the held-out gap shrank 20 %; with it free, exponent 2.99, scale 222 /m (truth 222) and
+    a 94 % shrink. The coupling's parameters count in the candidate's information criterion."""
     layout = current.layout.rebased(current.model_, current.drive_)
     if not layout.free_coupling and "c1_nspm" in layout.names:  # trajectories: damping is free
         free = base_params(current.model_, layout.levels_kpa, free_coupling=True)
-        layout = layout.with_params([p for p in free if p.name in COUPLING])
+        layout = layout.with_params([p for p in free if p.name in _COUPLING])
     return layout.with_params(candidate_params(spec, batch), {spec.effect: spec.form})
