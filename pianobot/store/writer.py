@@ -414,14 +414,6 @@ class StagedPart:
     temp: str  # the temp file: in the part's own folder, named as the store sweeps leftovers
     record: FileRecord  # rows, size and SHA-256 as the worker wrote it (its file: the temp name)
 
-    @property
-    def size(self) -> int:
-        return self.record.size
-
-    @property
-    def sha256(self) -> str:
-        return self.record.sha256
-
     def commit(self, path: Path, relative: str) -> FileRecord:
         """Rename the staged file to `path` (same folder: atomic) and make the rename durable.
 
@@ -435,9 +427,9 @@ class StagedPart:
             size = temp.stat().st_size
         except FileNotFoundError:
             size = -1
-        if size != self.size:
+        if size != self.record.size:
             raise RunDamaged(f"the staged part {temp.name} is {'gone' if size < 0 else f'{size} bytes'}, "
-                             f"not the {self.size} bytes its worker wrote", path.parent.parent.name)
+                             f"not the {self.record.size} bytes its worker wrote", path.parent.parent.name)
         os.replace(temp, path)
         fsync_dir(path.parent)
         return replace(self.record, file=relative)

@@ -30,7 +30,7 @@ def test_a_staged_samples_part_is_committed_by_rename_with_the_workers_record(da
     trials, samples, rows = _batch(writer.run_id)
     staged = stage_part(writer.paths.samples, samples, rows)
     assert Path(staged.temp).parent == writer.paths.samples and Path(staged.temp).name.startswith(".")
-    assert staged.sha256 == hashlib.sha256(samples).hexdigest() and staged.size == len(samples)
+    assert staged.record.sha256 == hashlib.sha256(samples).hexdigest() and staged.record.size == len(samples)
     assert load_run(writer.run_id, data_dir).samples.empty  # staged: no reader sees it yet
     batch = writer.append_encoded({"samples": staged, "trials": trials})
     assert not Path(staged.temp).exists()
