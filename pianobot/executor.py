@@ -37,6 +37,7 @@ from __future__ import annotations
 import atexit
 import importlib
 import os
+import threading
 import tomllib
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Sequence
@@ -136,30 +137,48 @@ class Executor:
 
     def imap(self, fn: Callable[[T], R], items: Iterable[T], *, ahead: int | None = None,
              where: Callable[[T], str | None] | None = None) -> Iterator[R]:
-        """Results of `fn` over `items` in order, at most `ahead` tasks in flight (memory bound).
+        """Results of `fn` over `items` in order, at most `ahead` tasks running at once.
 
-        With `ahead` None: twice the workers, enough to keep every worker busy. `where` names
-        the worker an item should run on (what it needs is kept there); another takes it when
-        that one is gone.
+        With `ahead` None: twice the workers, enough to keep every worker busy. A task that
+        finishes before the ones ahead of it frees its place at once (its result waits for its
+        turn), so one long task does not idle the other workers; finished results waiting
+        their turn are bounded too (`ahead` more), which bounds memory. `where` names the
+        worker an item should run on (what it needs is kept there); another takes it when that
+        one is gone.
         """
         if self._client is None:
             for item in items:
                 yield fn(item)
             return
+        finished = threading.Event()  # set whenever a task of this map finishes
         window: deque[Any] = deque()
         limit = max(1, ahead if ahead is not None else 2 * self.workers)
+        pending = iter(items)
+        exhausted = False
         # The function goes to each worker once, not with every task: a discovery round's
         # candidate fit carries its keystrokes and current fit (tens of MB) in its closure.
         shared = self._client.scatter(fn, broadcast=True, hash=False)
         try:
-            for item in items:
-                worker = where(item) if where is not None else None
-                pinned = {"workers": [worker], "allow_other_workers": True} if worker else {}
-                window.append(self._client.submit(_apply, shared, item, pure=False, **pinned))
-                if len(window) >= limit:
+            while True:
+                finished.clear()  # before looking: a task finishing from here on sets it again
+                running = [f for f in window if not f.done()]
+                while not exhausted and len(running) < limit and len(window) < 2 * limit:
+                    try:
+                        item = next(pending)
+                    except StopIteration:
+                        exhausted = True
+                        break
+                    worker = where(item) if where is not None else None
+                    pinned = {"workers": [worker], "allow_other_workers": True} if worker else {}
+                    window.append(self._client.submit(_apply, shared, item, pure=False, **pinned))
+                    window[-1].add_done_callback(lambda _: finished.set())
+                    running.append(window[-1])
+                if not window:
+                    return
+                if window[0].done():
                     yield window.popleft().result()
-            while window:
-                yield window.popleft().result()
+                else:
+                    finished.wait()
         finally:
             for future in window:  # a consumer that stops early leaves nothing running
                 future.cancel()

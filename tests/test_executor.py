@@ -106,6 +106,23 @@ def test_a_local_cluster_of_two_processes_gives_the_serial_results() -> None:
     assert list(cluster.imap(_bootstrap_mean, tasks, ahead=3)) == serial
 
 
+def _timed_sleep(seconds: float) -> tuple[float, float]:
+    start = time.time()
+    time.sleep(seconds)
+    return start, time.time()
+
+
+def test_a_long_task_does_not_hold_up_the_tasks_behind_it() -> None:
+    """In-order results, yet a worker that finishes early takes the next task at once: while
+    the first task runs, the other worker works through the ones behind it."""
+    cluster = open_executor(TWO)
+    seconds = [3.0] + [0.05] * 7
+    out = list(cluster.imap(_timed_sleep, seconds, ahead=2))
+    assert all(end - start >= s for (start, end), s in zip(out, seconds, strict=True))  # in order
+    first_end = out[0][1]
+    assert sum(start < first_end for start, _ in out[1:]) >= 3  # the window: 2 running, 2 waiting
+
+
 def test_cross_validation_folds_on_two_worker_processes_equal_the_serial_table() -> None:
     """`pianobot fit`'s folds as Dask tasks: the same CV table as in this process (each fold is
     seeded alike and warm-started from the same full fit), whatever ran where."""
