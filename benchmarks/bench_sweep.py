@@ -21,7 +21,8 @@ Every sweep stores every stream (MIDI, arm, mocap and the simulated truth). Figu
 4. `lab_time`: the study grid's planned lab time as specified, with `approach: fast`, and by
    the study's own script (0.5 s sleep before and after each press plus the two moveLs); where
    the fast plan's press time goes; what a settle worked out from the finger's own mode would
-   save, checked in the simulated world.
+   save, checked in the simulated world; and `fast_vs_study_bounds`, how low a fast plan gets
+   with no settle, a 2 mm clearance and UR5 travel moves at 1 m/s (not the same data: bounds).
 
 `--baseline REF` runs grid and random also with the pianobot of git revision REF (baseline,
 this, baseline, this; the better run of each kept) and reports the speed-up over it. Dask (2 processes
@@ -350,7 +351,33 @@ def scenario_lab_time() -> dict[str, Any]:
         "fast_presses_h": _press_parts_h(with_fast_approach(trials, rig)),
         "approach_settings": rig.approach.model_dump(),
         "settle_from_physics": _settle_from_physics(trials, rig, study_s, fast.total_s),
+        "fast_vs_study_bounds": _fast_bounds(trials, rig, study_s),
     }
+
+
+#: Fast plans that drop what the default keeps, each against the study's script: how low the
+#: exact-kinematics fast approach can go on this grid at all.
+FAST_BOUNDS = {
+    "no_settle": {"settle_s": 0.0},
+    "no_settle_2mm_clearance": {"settle_s": 0.0, "clearance_m": 0.002},
+    "no_settle_2mm_clearance_travel_1mps_3mps2": {"settle_s": 0.0, "clearance_m": 0.002,
+                                                  "velocity_mps": 1.0, "acceleration_mps2": 3.0},
+}
+
+
+def _fast_bounds(trials: list[Any], rig: Any, study_s: float) -> dict[str, float]:
+    """The fast plan's lab time against the study's script with no settle before contact (the
+    finger then still rings from the stop: not the same data), a 2 mm clearance, and UR5
+    travel moves at 1 m/s and 3 m/s². What stays is the spec's own motion in contact, its
+    acceleration phases and the pauses between presses."""
+    from pianobot.plan import lab_time
+    from pianobot.plan.approach import with_fast_approach
+
+    out = {}
+    for name, change in FAST_BOUNDS.items():
+        plan_rig = rig.model_copy(update={"approach": rig.approach.model_copy(update=change)})
+        out[name] = round(lab_time(with_fast_approach(trials, plan_rig), plan_rig).total_s / study_s, 3)
+    return out
 
 
 def _press_parts_h(trials: list[Any]) -> dict[str, float]:
