@@ -6,7 +6,9 @@ Suites, reported apart:
   other functional forms, other base numbers; they write Motive CSV takes and ctrl_midi-style
   keystroke logs). The acceptance table, split by "form equals a candidate" / "form differs".
   `--truth-subset variants`: suite takes recorded otherwise (other frame rates, fewer keystrokes,
-  faster presses), a check that nothing is tuned to the suite's recording.
+  faster presses), a check that nothing is tuned to the suite's recording. `--files take`: each
+  take alone, as Motive wrote it (no presses, no arm log); an arm lag or a mocap clock offset
+  then leaves nothing to find, and those rows are counted apart (`not_observable_from_files`).
 - `own`: pianobot's own simulated world (tests/analysis/own_world.py). An inverse crime by
   construction, so it only checks the plumbing: every effect of the vocabulary, arm-side
   effects in an arm log, the mocap clock, MIDI-only logs.
@@ -204,6 +206,9 @@ def truth_suite(only: list[str] | None, log: Callable[[str], None], subset: str 
                    "truth_effect": truth.get("effect"), "truth_form": truth.get("form"),
                    "presses": not takes_only and "presses" in made.files,
                    "arm_log": files == "lab" and "arm_log" in made.files,
+                   # The take alone has no command to lag and no second clock: an arm lag or a
+                   # mocap clock offset leaves nothing in it to find (not counted in the rates).
+                   "observable": not (takes_only and family in MEASURED_FAMILIES),
                    **score(result, family, cpu, batch.n, tuple(truth.get("accepted_effects") or ()),
                            tuple(truth.get("always_present") or ()))}
             if family is None and result.mode == "trajectories":
@@ -370,7 +375,8 @@ def summary(own: list[dict[str, Any]], truth: list[dict[str, Any]]) -> dict[str,
     out: dict[str, Any] = {}
     if truth:
         def table(form: bool | None) -> dict[str, Any]:
-            rows = [r for r in truth if r["strength"] != "clean" and (form is None or r["form_equals_candidate"] == form)]
+            effects = [r for r in truth if r["strength"] != "clean" and (form is None or r["form_equals_candidate"] == form)]
+            rows = [r for r in effects if r.get("observable", True)]
             accepted = [r for r in rows if r["hit"] and r["found"] and r["gap_ratio"] is not None]
             return {
                 "strong_right_family": _rate(rows, lambda r: r["strength"] == "strong"),
@@ -383,6 +389,7 @@ def summary(own: list[dict[str, Any]], truth: list[dict[str, Any]]) -> dict[str,
                 # the hidden family ("unexplained", with the right pointer).
                 "missed_but_residual_search_names_family": sum(
                     not r["hit"] and not r["found"] and _residual_family(r) == r["expected_family"] for r in rows),
+                "not_observable_from_files": len(effects) - len(rows),
             }
 
         def per_family() -> dict[str, Any]:
