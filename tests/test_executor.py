@@ -112,15 +112,24 @@ def _timed_sleep(seconds: float) -> tuple[float, float]:
     return start, time.time()
 
 
+def _this_worker(seconds: float) -> str:
+    import distributed
+
+    time.sleep(seconds)  # long enough that both workers get some
+    return str(distributed.get_worker().address)
+
+
 def test_a_long_task_does_not_hold_up_the_tasks_behind_it() -> None:
     """In-order results, yet a worker that finishes early takes the next task at once: while
-    the first task runs, the other worker works through the ones behind it."""
+    the first task runs on one worker, the other works through the ones behind it (before,
+    the next task waited for the first one's result)."""
     cluster = open_executor(TWO)
+    slow, quick = sorted(set(cluster.map(_this_worker, [0.3] * 6)))
     seconds = [3.0] + [0.05] * 7
-    out = list(cluster.imap(_timed_sleep, seconds, ahead=2))
+    out = list(cluster.imap(_timed_sleep, seconds, ahead=2, where=lambda s: slow if s > 1 else quick))
     assert all(end - start >= s for (start, end), s in zip(out, seconds, strict=True))  # in order
     first_end = out[0][1]
-    assert sum(start < first_end for start, _ in out[1:]) >= 3  # the window: 2 running, 2 waiting
+    assert sum(start < first_end for start, _ in out[1:]) == 3  # the window: 2 running, 2 waiting
 
 
 def test_cross_validation_folds_on_two_worker_processes_equal_the_serial_table() -> None:
