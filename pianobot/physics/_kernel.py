@@ -77,8 +77,9 @@ N_KP = 32
     E_HYST_SHARE,
     E_HYST_YIELD,
     E_HYST_SET,
-) = range(23)
-N_EP = 23
+    E_PRELOAD_W,
+) = range(24)
+N_EP = 24
 
 # Rows of the per-block work array: the constants above, then the state of each keystroke.
 # One array (keystroke index last) instead of many keeps the compiler free of aliasing doubts,
@@ -269,7 +270,10 @@ def _make_integrate(block: int, linear: bool, power: bool = False, hysteresis: b
         bed_hc = ep[E_BED_HC] != 0.0
         x_bed, k_bed, c_bed = ep[E_BED_DEPTH], ep[E_BED_K], ep[E_BED_C]
         preload = ep[E_PRELOAD]
-        rest_stop = preload > 0.0
+        # A rigid rest stop, or one that lets go over the width (a net −P·tanh(x/w)).
+        smooth_stop = preload > 0.0 and ep[E_PRELOAD_W] > 0.0
+        inv_w_pre = 1.0 / ep[E_PRELOAD_W] if smooth_stop else 0.0
+        rest_stop = preload > 0.0 and not smooth_stop
         f_c = ep[E_FRIC_C] if ep[E_FRIC_ON] != 0.0 else 0.0
         stribeck = ep[E_FRIC_ON] != 0.0 and ep[E_FRIC_S] > 0.0
         f_s = ep[E_FRIC_S] if stribeck else f_c
@@ -345,7 +349,8 @@ def _make_integrate(block: int, linear: bool, power: bool = False, hysteresis: b
 
                         # The key's spring is preloaded against its rest stop: the down-weight always
                         # acts, and the stop (below) holds the key at rest until the finger pushes harder.
-                        f2 = fc - w[K2, jj] * x2_j - w[C2, jj] * v2e - preload
+                        f2 = fc - w[K2, jj] * x2_j - w[C2, jj] * v2e
+                        f2 -= preload * math.tanh(x2_j * inv_w_pre) if smooth_stop else preload
                         # Keybed: a felt stop, linear spring-damper or Hunt–Crossley (force and damping
                         # grow with indentation, so there is no force jump on impact); it never pulls.
                         pen_bed = max(x2_j - x_bed, 0.0)

@@ -77,10 +77,20 @@ _SPECS: tuple[EffectSpec, ...] = (
         ),
         ("linear", "hunt_crossley"),
     ),
+    # A key's return spring presses it up against a rest rail; the finger must overcome that
+    # preload before the key moves. On a rigid rail (the default form) nothing moves below it.
+    # A felt or cloth rail gives: the key leaves it over a short travel, the rail's push fading
+    # as it decompresses (`smooth`: a net −P·tanh(x/w) at key travel x, the rigid rail as w → 0).
     EffectSpec(
         "key_preload",
-        "The key rests on a stop with a constant down-weight: it needs a minimum force to move.",
-        (ParamSpec("preload_n", 0.5, 0.0, 1.5, 0.0, "N", "down-weight the finger must overcome"),),
+        "The key rests on a stop with a constant down-weight: it needs a minimum force to move "
+        "(default: a rigid stop; smooth: the stop lets go over a short travel, like a felt rail).",
+        (
+            ParamSpec("preload_n", 0.5, 0.0, 1.5, 0.0, "N", "down-weight the finger must overcome"),
+            ParamSpec("preload_width_m", 3e-4, 2e-5, 3e-3, None, "m",
+                      "key travel over which the stop lets go", ("smooth",)),
+        ),
+        ("default", "smooth"),
     ),
     EffectSpec(
         "key_friction",

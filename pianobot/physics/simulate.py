@@ -100,6 +100,8 @@ def effect_vector(effects: Effects) -> FloatArray:
         ep[K.E_BED_K] = p["bed_stiffness_npm"]
         ep[K.E_BED_C] = p["bed_damping_nspm"]
     ep[K.E_PRELOAD] = effects.value("key_preload", "preload_n", 0.0)
+    if "key_preload" in effects and effects.form("key_preload") == "smooth":
+        ep[K.E_PRELOAD_W] = effects.params("key_preload")["preload_width_m"]
     if "key_friction" in effects:
         p = effects.params("key_friction")
         ep[K.E_FRIC_C] = p["friction_n"]

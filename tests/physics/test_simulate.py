@@ -109,6 +109,24 @@ def test_preload_makes_slow_shallow_presses_silent() -> None:
     assert held.x2_m.min() >= 0.0  # the rest stop holds the key
 
 
+def test_a_smooth_rest_stop_lets_go_over_its_width_and_is_the_rigid_one_when_narrow() -> None:
+    """key_preload `smooth`: the stop's push fades over the width (a net −P·tanh(x/w)), so the
+    key starts to move below the preload and further down it feels the full preload; a narrow
+    width is the rigid stop."""
+    press = [Press(0.005, 0.012, 0.02, 0.02, 1.0, 0.2)]
+    touch = STUDY.with_effect("contact")
+    rigid = simulate_presses(press, -40, touch.with_effect("key_preload", preload_n=0.4), step_s=2e-5)
+    narrow = simulate_presses(press, -40, touch.with_effect("key_preload", form="smooth", preload_n=0.4,
+                                                            preload_width_m=2e-5), step_s=2e-5)
+    felt = simulate_presses(press, -40, touch.with_effect("key_preload", form="smooth", preload_n=0.4,
+                                                          preload_width_m=5e-4), step_s=2e-5)
+    assert np.max(np.abs(narrow.x2_m - rigid.x2_m)) < 0.05 * rigid.x2_m.max()
+    moved = [float(b.t_s[np.argmax(b.x2_m[0] > 1e-4)]) for b in (rigid, felt)]
+    assert moved[1] < moved[0] - 0.05  # the felt gives before the preload is reached
+    # Past a few widths the felt key carries the whole preload: it stops about as deep.
+    assert abs(felt.x2_m.max() - rigid.x2_m.max()) < 0.1 * rigid.x2_m.max()
+
+
 def test_contact_lets_the_key_lag_a_fast_retracting_finger() -> None:
     press = [Press(0.0, 0.03, 0.05, 0.7, 5.0, 0.3)]
     glued = simulate_presses(press, -60, STUDY.with_effect("arm_acceleration"))

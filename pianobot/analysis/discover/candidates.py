@@ -85,8 +85,10 @@ class CandidateSpec:
 
     @property
     def label(self) -> str:
-        """`effect` or `effect/form` when the effect has several forms."""
-        return self.effect if len(EFFECTS[self.effect].forms) == 1 else f"{self.effect}/{self.form}"
+        """`effect`, or `effect/form` when the effect has several forms and this is not the
+        one called "default" (a form added beside an effect's original shape)."""
+        plain = len(EFFECTS[self.effect].forms) == 1 or self.form == "default"
+        return self.effect if plain else f"{self.effect}/{self.form}"
 
     @property
     def family(self) -> str | None:

@@ -105,7 +105,8 @@ def integration_step_s(model: KeystrokeModel, vacuum_kpa: FloatArray, largest_s:
 
     The time scales are those of the 2-DoF system with every spring and damper it may engage at
     once (the arm coupling k0, c0 on the fingertip, the finger k1, c1 between fingertip and key,
-    the key's k2, c2 and the stiffest effect: an end stop, a let-off bump's slope, a stiffening
+    the key's k2, c2 and the stiffest effect: an end stop, a let-off bump's slope, a smooth rest
+    stop's slope at rest, a stiffening
     finger at `compression_m`), from the exact eigenvalues of M⁻¹K and M⁻¹C. A fit may try
     stiff, heavily damped or strongly stiffening parameters; a bound on the diagonal alone would
     either miss the coupled mode or (as before) take a step several times smaller than needed.
@@ -115,6 +116,9 @@ def integration_step_s(model: KeystrokeModel, vacuum_kpa: FloatArray, largest_s:
     c_bed = fx.value("keybed", "bed_damping_nspm", 0.0)
     width = fx.value("letoff", "letoff_width_m", 1.0)
     k_let = fx.value("letoff", "letoff_force_n", 0.0) / max(width, 1e-6)
+    smooth = "key_preload" in fx and fx.form("key_preload") == "smooth"
+    pre_w = fx.value("key_preload", "preload_width_m", 0.0) if smooth else 0.0
+    k_pre = fx.value("key_preload", "preload_n", 0.0) / pre_w if pre_w > 0 else 0.0
     beta = fx.value("finger_stiffening", "stiffening_per_m", 0.0)
     grow = 1.0
     if beta > 0:
@@ -129,7 +133,7 @@ def integration_step_s(model: KeystrokeModel, vacuum_kpa: FloatArray, largest_s:
         k1, c1 = lp.k1_npm * grow, lp.c1_nspm
         m1, m2 = lp.m1_kg, lp.m2_kg
         omega = math.sqrt(max(_largest_eigenvalue((lp.k0_npm + k1) / m1, -k1 / m1, -k1 / m2,
-                                                  (k1 + lp.k2_npm + k_bed + k_let) / m2), 0.0))
+                                                  (k1 + lp.k2_npm + k_bed + k_let + k_pre) / m2), 0.0))
         damping = _largest_eigenvalue((lp.c0_nspm + c1) / m1, -c1 / m1, -c1 / m2, (c1 + lp.c2_nspm + c_bed) / m2)
         step = min(step, STEP_PER_PERIOD / max(omega, 1e-300), STEP_PER_DAMPING_TIME / max(damping, 1e-300))
     return step
