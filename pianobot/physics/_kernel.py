@@ -348,7 +348,8 @@ def _make_integrate(block: int, linear: bool, power: bool = False, hysteresis: b
                         fc = fc_uni if contact else eng * raw
 
                         # The key's spring is preloaded against its rest stop: the down-weight always
-                        # acts, and the stop (below) holds the key at rest until the finger pushes harder.
+                        # acts, and the stop (below) holds the key at rest until the finger pushes harder
+                        # (a smooth stop instead hands the down-weight over within its width).
                         f2 = fc - w[K2, jj] * x2_j - w[C2, jj] * v2e
                         f2 -= preload * math.tanh(x2_j * inv_w_pre) if smooth_stop else preload
                         # Keybed: a felt stop, linear spring-damper or Hunt–Crossley (force and damping
