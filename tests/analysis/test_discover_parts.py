@@ -138,6 +138,10 @@ def test_arm_side_effects_are_not_key_candidates_when_the_arm_is_measured() -> N
     assert family_of("keybed") == family_of("letoff") == "key_stop"
     # A yielding finger body: with the fingertip and arm tracked only (its deflection is what it acts on).
     assert "finger_hysteresis" in tried and "finger_hysteresis" not in midi_only
+    # A rest stop that lets go smoothly: beside the rigid one where the key is tracked only.
+    midi_forms = {c.label for c in candidates(KeystrokeModel.study(), midi)}
+    assert {"key_preload", "key_preload/smooth"} <= forms
+    assert "key_preload" in midi_forms and "key_preload/smooth" not in midi_forms
     assert family_of("finger_hysteresis") == family_of("finger_stiffening") == "finger"
 
 
