@@ -8,7 +8,7 @@ this step the first simulated sweep of an installation spends ~6 s compiling, an
 `pianobot identify` or `discover` ~50 s (measured: the quickstart sweep 7.6 s cold, 1.5 s
 warm; a 24-keystroke discovery 134 s cold, 82 s warm). Each kernel is called here with tiny
 inputs of the types the commands pass, so every specialisation they use is compiled and
-cached: the integrator in each of its five model classes and both block sizes, the simulated
+cached: the integrator in each of its nine model classes and both block sizes, the simulated
 world's observation loops, the MIDI readout of the grey-box fitter and the keystroke-log
 importer's assignment.
 """
@@ -37,8 +37,9 @@ def _models() -> list[KeystrokeModel]:
     power = full.with_effect("finger_stiffening", form="power")
     hysteresis = full.with_effect("finger_hysteresis")
     both = power.with_effect("finger_hysteresis")
-    return [KeystrokeModel(msd=MSDParams(), effects=fx)
-            for fx in (Effects.none(), full, power, hysteresis, both)]
+    classes = [full, power, hysteresis, both]
+    smooth = [fx.with_effect("key_preload", form="smooth") for fx in classes]
+    return [KeystrokeModel(msd=MSDParams(), effects=fx) for fx in (Effects.none(), *classes, *smooth)]
 
 
 def compile_physics() -> int:

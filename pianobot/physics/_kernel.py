@@ -211,7 +211,8 @@ def _record(w: FloatArray, b0: int, nb: int, k: int, outs: tuple[FloatArray, ...
             out_fc[b0 + jj, k] = w[S_FC, jj]
 
 
-def _make_integrate(block: int, linear: bool, power: bool = False, hysteresis: bool = False) -> Any:
+def _make_integrate(block: int, linear: bool, power: bool = False, hysteresis: bool = False,
+                    smooth_stop: bool = False) -> Any:
     """The kernel compiled for blocks of `block` keystrokes and one model class.
 
     Both arguments are compile-time constants: numba freezes a closure's values into the
@@ -235,6 +236,9 @@ def _make_integrate(block: int, linear: bool, power: bool = False, hysteresis: b
     (elastic trial, then clamped): branch-free, so the step still vectorises, and exact for a
     deflection that changes linearly over the step. Only models with the effect on pay for it;
     the other kernels are the same code as without the flag.
+    smooth_stop=True is for a rest stop that lets go over a width (`key_preload` form smooth: a
+    net −P·tanh(x/w)). A tanh in the vectorised step is evaluated whether a lane needs it or not
+    (it cost every model with key-side effects 45 %), so only models with that form pay for it.
     """
 
     @njit(cache=True, fastmath=True, error_model="numpy")
@@ -270,8 +274,7 @@ def _make_integrate(block: int, linear: bool, power: bool = False, hysteresis: b
         bed_hc = ep[E_BED_HC] != 0.0
         x_bed, k_bed, c_bed = ep[E_BED_DEPTH], ep[E_BED_K], ep[E_BED_C]
         preload = ep[E_PRELOAD]
-        # A rigid rest stop, or one that lets go over the width (a net −P·tanh(x/w)).
-        smooth_stop = preload > 0.0 and ep[E_PRELOAD_W] > 0.0
+        # A rigid rest stop, or (smooth_stop kernels) one that lets go over the width.
         inv_w_pre = 1.0 / ep[E_PRELOAD_W] if smooth_stop else 0.0
         rest_stop = preload > 0.0 and not smooth_stop
         f_c = ep[E_FRIC_C] if ep[E_FRIC_ON] != 0.0 else 0.0
@@ -350,8 +353,10 @@ def _make_integrate(block: int, linear: bool, power: bool = False, hysteresis: b
                         # The key's spring is preloaded against its rest stop: the down-weight always
                         # acts, and the stop (below) holds the key at rest until the finger pushes harder
                         # (a smooth stop instead hands the down-weight over within its width).
-                        f2 = fc - w[K2, jj] * x2_j - w[C2, jj] * v2e
-                        f2 -= preload * math.tanh(x2_j * inv_w_pre) if smooth_stop else preload
+                        if smooth_stop:  # a compile-time constant
+                            f2 = fc - w[K2, jj] * x2_j - w[C2, jj] * v2e - preload * math.tanh(x2_j * inv_w_pre)
+                        else:
+                            f2 = fc - w[K2, jj] * x2_j - w[C2, jj] * v2e - preload
                         # Keybed: a felt stop, linear spring-damper or Hunt–Crossley (force and damping
                         # grow with indentation, so there is no force jump on impact); it never pulls.
                         pen_bed = max(x2_j - x_bed, 0.0)
@@ -424,3 +429,9 @@ integrate_power = {b: _make_integrate(b, linear=False, power=True) for b in (SMA
 integrate_hysteresis = {b: _make_integrate(b, linear=False, hysteresis=True) for b in (SMALL_BLOCK, BLOCK)}
 integrate_hysteresis_power = {b: _make_integrate(b, linear=False, power=True, hysteresis=True)
                               for b in (SMALL_BLOCK, BLOCK)}
+# A smooth rest stop, alone or with the power-law finger and the yielding body: (power, hysteresis).
+integrate_smooth_stop = {
+    (power, hysteresis): {b: _make_integrate(b, linear=False, power=power, hysteresis=hysteresis, smooth_stop=True)
+                          for b in (SMALL_BLOCK, BLOCK)}
+    for power in (False, True) for hysteresis in (False, True)
+}

@@ -196,11 +196,13 @@ def body_set_m(ep: FloatArray) -> float:
 
 def _kernels(ep: FloatArray) -> dict[int, Any]:
     """The compiled kernel family for these effects: a model pays only for what it has (a
-    power-law finger, a yielding body), and a model without them runs exactly the code it ran
-    before they existed."""
+    power-law finger, a yielding body, a smooth rest stop), and a model without them runs
+    exactly the code it ran before they existed."""
     if _is_linear(ep):
         return K.integrate_linear
     power = ep[K.E_STIFF_FORM] == K.STIFF_POWER
+    if ep[K.E_PRELOAD] > 0.0 and ep[K.E_PRELOAD_W] > 0.0:
+        return K.integrate_smooth_stop[(bool(power), bool(ep[K.E_HYST_SHARE] > 0.0))]
     if ep[K.E_HYST_SHARE] > 0.0:
         return K.integrate_hysteresis_power if power else K.integrate_hysteresis
     return K.integrate_power if power else K.integrate
@@ -224,7 +226,7 @@ def _run(
     n = kp.shape[0]
     outs = [np.empty((n, n_out)) for _ in range(5)]
     kernels = _kernels(ep)
-    if kernels is K.integrate_hysteresis or kernels is K.integrate_hysteresis_power:
+    if ep[K.E_HYST_SHARE] > 0.0 and kernels is not K.integrate_linear:  # a yielding body's kernels
         kp = kp.copy()
         kp[:, K.DIST] += body_set_m(ep)  # the fingertip hangs that much higher above the key
     # Two compiled block sizes: a few keystrokes should not pay for 16 SIMD lanes.
