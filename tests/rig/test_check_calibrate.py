@@ -10,7 +10,7 @@ from fake_midi import FakeMidiBackend
 from fake_rtde import FakeClock, FakeController, sdk_factories
 
 from pianobot.rig.calibrate import calibrate_reference_pose, note_name
-from pianobot.rig.check import check_rig
+from pianobot.rig.check import check_rig, measured_rate_hz
 from pianobot.rig.errors import DeviceUnavailable, RigError
 from pianobot.spec import load_rig
 from pianobot.spec.rig import RigSpec
@@ -182,3 +182,24 @@ def test_calibrate_without_a_terminal_fails_before_connecting(
 
 def test_note_names() -> None:
     assert [note_name(n) for n in (59, 60, 61, 21, 108)] == ["B3", "C4", "C#4", "A0", "C8"]
+
+
+class _BusyHostStream:
+    """An RTDE stream at 500 Hz read by a host too busy to see two packages in a row: each
+    read returns a later package, 2, 3, 2 or 4 control cycles on (the receive interface's
+    `getTimestamp` only)."""
+
+    def __init__(self) -> None:
+        self.cycle = 0
+        self.calls = 0
+
+    def getTimestamp(self) -> float:  # noqa: N802
+        self.cycle += (2, 3, 2, 4)[self.calls % 4]
+        self.calls += 1
+        return self.cycle * 0.002
+
+
+def test_the_measured_stream_rate_survives_a_busy_host() -> None:
+    """Timestamps step by whole control cycles, so the rate is read from their common divisor,
+    not from the smallest step (which here is two cycles: 250 Hz)."""
+    assert measured_rate_hz(_BusyHostStream(), window_s=0.02) == 500.0
