@@ -88,6 +88,14 @@ def drift_factor(block_key: str, drift_fraction: float) -> float:
     return 1.0 + drift_fraction * u
 
 
+def smooth_stop_width_m(effects: Effects) -> float:
+    """The width a smooth rest stop lets go over (`key_preload` form smooth); 0 for a rigid stop
+    or none (the width parameter is held by every form, used by the smooth one only)."""
+    if "key_preload" not in effects or effects.form("key_preload") != "smooth":
+        return 0.0
+    return effects.params("key_preload")["preload_width_m"]
+
+
 def effect_vector(effects: Effects) -> FloatArray:
     """The kernel's effect switches and values for a set of effects."""
     ep = np.zeros(K.N_EP)
@@ -100,8 +108,7 @@ def effect_vector(effects: Effects) -> FloatArray:
         ep[K.E_BED_K] = p["bed_stiffness_npm"]
         ep[K.E_BED_C] = p["bed_damping_nspm"]
     ep[K.E_PRELOAD] = effects.value("key_preload", "preload_n", 0.0)
-    if "key_preload" in effects and effects.form("key_preload") == "smooth":
-        ep[K.E_PRELOAD_W] = effects.params("key_preload")["preload_width_m"]
+    ep[K.E_PRELOAD_W] = smooth_stop_width_m(effects)
     if "key_friction" in effects:
         p = effects.params("key_friction")
         ep[K.E_FRIC_C] = p["friction_n"]
@@ -226,7 +233,7 @@ def _run(
     n = kp.shape[0]
     outs = [np.empty((n, n_out)) for _ in range(5)]
     kernels = _kernels(ep)
-    if ep[K.E_HYST_SHARE] > 0.0 and kernels is not K.integrate_linear:  # a yielding body's kernels
+    if ep[K.E_HYST_SHARE] > 0.0:  # a yielding body's kernels
         kp = kp.copy()
         kp[:, K.DIST] += body_set_m(ep)  # the fingertip hangs that much higher above the key
     # Two compiled block sizes: a few keystrokes should not pay for 16 SIMD lanes.

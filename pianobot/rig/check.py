@@ -106,8 +106,7 @@ def measured_rate_hz(receive: Any, window_s: float = 0.1, max_wait_s: float = 1.
         if not seen or ts != seen[-1]:
             seen.append(ts)
         time.sleep(0.0005)
-    ticks = [round((b - a) / RATE_TICK_S) for a, b in zip(seen, seen[1:], strict=False) if b > a]
-    ticks = [t for t in ticks if t > 0]
+    ticks = [t for a, b in zip(seen, seen[1:], strict=False) if (t := round((b - a) / RATE_TICK_S)) > 0]
     return round(1.0 / (functools.reduce(math.gcd, ticks) * RATE_TICK_S), 1) if ticks else None
 
 

@@ -16,7 +16,7 @@ import numpy as np
 import numpy.typing as npt
 
 from pianobot.physics.model import KeystrokeModel
-from pianobot.physics.simulate import BATCH_LANES, SMALL_LANES
+from pianobot.physics.simulate import BATCH_LANES, SMALL_LANES, smooth_stop_width_m
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -116,8 +116,7 @@ def integration_step_s(model: KeystrokeModel, vacuum_kpa: FloatArray, largest_s:
     c_bed = fx.value("keybed", "bed_damping_nspm", 0.0)
     width = fx.value("letoff", "letoff_width_m", 1.0)
     k_let = fx.value("letoff", "letoff_force_n", 0.0) / max(width, 1e-6)
-    smooth = "key_preload" in fx and fx.form("key_preload") == "smooth"
-    pre_w = fx.value("key_preload", "preload_width_m", 0.0) if smooth else 0.0
+    pre_w = smooth_stop_width_m(fx)
     k_pre = fx.value("key_preload", "preload_n", 0.0) / pre_w if pre_w > 0 else 0.0
     beta = fx.value("finger_stiffening", "stiffening_per_m", 0.0)
     grow = 1.0
