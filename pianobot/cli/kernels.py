@@ -8,7 +8,7 @@ this step the first simulated sweep of an installation spends ~6 s compiling, an
 `pianobot identify` or `discover` ~50 s (measured: the quickstart sweep 7.6 s cold, 1.5 s
 warm; a 24-keystroke discovery 134 s cold, 82 s warm). Each kernel is called here with tiny
 inputs of the types the commands pass, so every specialisation they use is compiled and
-cached: the integrator in each of its nine model classes and both block sizes, the simulated
+cached: the integrator in each of its 17 model classes and both block sizes, the simulated
 world's observation loops, the MIDI readout of the grey-box fitter and the keystroke-log
 importer's assignment.
 """
@@ -28,18 +28,21 @@ if TYPE_CHECKING:
 
 
 def _models() -> list[KeystrokeModel]:
-    """One model of each compiled class of the integrator (see `physics.simulate._kernels`)."""
+    """One model of each compiled class of the integrator (see `physics.simulate._kernels`): the
+    linear one, and the full step with each combination of its four flags."""
+    from pianobot.physics._kernel import FULL_FLAGS
     from pianobot.physics.effects import Effects
     from pianobot.physics.model import KeystrokeModel
     from pianobot.physics.msd import MSDParams
 
     full = Effects.default_world()
-    power = full.with_effect("finger_stiffening", form="power")
-    hysteresis = full.with_effect("finger_hysteresis")
-    both = power.with_effect("finger_hysteresis")
-    classes = [full, power, hysteresis, both]
-    smooth = [fx.with_effect("key_preload", form="smooth") for fx in classes]
-    return [KeystrokeModel(msd=MSDParams(), effects=fx) for fx in (Effects.none(), *classes, *smooth)]
+    classes = []
+    for power, hysteresis, smooth_stop, cohesive in FULL_FLAGS:
+        fx = full.with_effect("finger_stiffening", form="power") if power else full
+        fx = fx.with_effect("finger_hysteresis") if hysteresis else fx
+        fx = fx.with_effect("key_preload", form="smooth") if smooth_stop else fx
+        classes.append(fx.with_effect("adhesion", form="cohesive") if cohesive else fx)
+    return [KeystrokeModel(msd=MSDParams(), effects=fx) for fx in (Effects.none(), *classes)]
 
 
 def compile_physics() -> int:

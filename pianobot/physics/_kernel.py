@@ -78,8 +78,9 @@ N_KP = 32
     E_HYST_YIELD,
     E_HYST_SET,
     E_PRELOAD_W,
-) = range(24)
-N_EP = 24
+    E_ADH_RANGE,
+) = range(25)
+N_EP = 25
 
 # Rows of the per-block work array: the constants above, then the state of each keystroke.
 # One array (keystroke index last) instead of many keeps the compiler free of aliasing doubts,
@@ -212,7 +213,7 @@ def _record(w: FloatArray, b0: int, nb: int, k: int, outs: tuple[FloatArray, ...
 
 
 def _make_integrate(block: int, linear: bool, power: bool = False, hysteresis: bool = False,
-                    smooth_stop: bool = False) -> Any:
+                    smooth_stop: bool = False, cohesive: bool = False) -> Any:
     """The kernel compiled for blocks of `block` keystrokes and one model class.
 
     Both arguments are compile-time constants: numba freezes a closure's values into the
@@ -239,6 +240,9 @@ def _make_integrate(block: int, linear: bool, power: bool = False, hysteresis: b
     smooth_stop=True is for a rest stop that lets go over a width (`key_preload` form smooth: a
     net −P·tanh(x/w)). A tanh in the vectorised step is evaluated whether a lane needs it or not
     (it cost every model with key-side effects 45 %), so only models with that form pay for it.
+    cohesive=True is for a skin whose pull fades over a separation range (`adhesion` form
+    cohesive); a few multiply-adds, but for every lane of every step (5–10 % measured), so it
+    too is a flag.
     """
 
     @njit(cache=True, fastmath=True, error_model="numpy")
@@ -286,8 +290,13 @@ def _make_integrate(block: int, linear: bool, power: bool = False, hysteresis: b
         cubic_on = 1.0 if ep[E_STIFF_FORM] == STIFF_CUBIC and beta > 0.0 else 0.0
         q = ep[E_STIFF_Q]
         inv_beta = 1.0 / beta if exp_on > 0.0 else 0.0
-        pull_off = ep[E_ADHESION]
+        # Adhesion: a pull-off skin (holds until the pull reaches the force), or (cohesive
+        # kernels) one whose pull is a function of the separation s = −pen/range alone,
+        # (27/4)·F·s·(1 − s)² for 0 < s < 1 (peak F at s = 1/3, gone at the range).
+        pull_off = 0.0 if cohesive else ep[E_ADHESION]
         glued = 1.0 if pull_off > 0.0 else 0.0
+        coh_peak = 6.75 * ep[E_ADHESION]
+        inv_range = 1.0 / ep[E_ADH_RANGE] if cohesive else 0.0
         f_let, x_let = ep[E_LETOFF_F], ep[E_LETOFF_X]
         inv_w_let = 1.0 / ep[E_LETOFF_W] if f_let > 0.0 else 0.0
         delay, alpha = arm_lag(ep[E_LAG_FORM], ep[E_LAG_S], h)
@@ -347,6 +356,9 @@ def _make_integrate(block: int, linear: bool, power: bool = False, hysteresis: b
                         touching = pen > 0.0
                         holds = min(w[S_ATT, jj], 1.0 if raw >= -pull_off else 0.0)
                         fc_uni = max(raw, -pull_off) if touching else holds * raw
+                        if cohesive:  # a compile-time constant
+                            sep = min(max(-pen * inv_range, 0.0), 1.0)
+                            fc_uni -= coh_peak * sep * (1.0 - sep) * (1.0 - sep)
                         w[S_ATT, jj] = glued if touching else holds
                         fc = fc_uni if contact else eng * raw
 
@@ -422,16 +434,14 @@ def arm_lag(form: float, lag_s: float, h: float) -> tuple[float, float]:
 
 
 # One compiled kernel per block size and model class (numba caches each on disk; a kernel is
-# compiled, or loaded from the cache, on its first call only).
-integrate = {b: _make_integrate(b, linear=False) for b in (SMALL_BLOCK, BLOCK)}
-integrate_linear = {b: _make_integrate(b, linear=True) for b in (SMALL_BLOCK, BLOCK)}
-integrate_power = {b: _make_integrate(b, linear=False, power=True) for b in (SMALL_BLOCK, BLOCK)}
-integrate_hysteresis = {b: _make_integrate(b, linear=False, hysteresis=True) for b in (SMALL_BLOCK, BLOCK)}
-integrate_hysteresis_power = {b: _make_integrate(b, linear=False, power=True, hysteresis=True)
-                              for b in (SMALL_BLOCK, BLOCK)}
-# A smooth rest stop, alone or with the power-law finger and the yielding body: (power, hysteresis).
-integrate_smooth_stop = {
-    (power, hysteresis): {b: _make_integrate(b, linear=False, power=power, hysteresis=hysteresis, smooth_stop=True)
-                          for b in (SMALL_BLOCK, BLOCK)}
+# compiled, or loaded from the cache, on its first call only): the linear step, and the full
+# step with the flags (power, hysteresis, smooth_stop, cohesive) of `_make_integrate`.
+FULL_FLAGS: tuple[tuple[bool, bool, bool, bool], ...] = tuple(
+    (power, hysteresis, smooth_stop, cohesive)
     for power in (False, True) for hysteresis in (False, True)
+    for smooth_stop in (False, True) for cohesive in (False, True)
+)
+integrate_linear = {b: _make_integrate(b, linear=True) for b in (SMALL_BLOCK, BLOCK)}
+integrate_full = {
+    flags: {b: _make_integrate(b, False, *flags) for b in (SMALL_BLOCK, BLOCK)} for flags in FULL_FLAGS
 }

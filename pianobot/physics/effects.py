@@ -112,10 +112,19 @@ _SPECS: tuple[EffectSpec, ...] = (
         ),
         ("cubic", "exponential", "power"),
     ),
+    # The skin sticks on release. The default form holds the key like the finger's spring
+    # until the pull reaches the pull-off force, then lets go at once; a soft skin lets go
+    # gradually (`cohesive`: its pull grows, peaks and fades to nothing over a separation range).
     EffectSpec(
         "adhesion",
-        "The silicone skin sticks to the key on release up to a pull-off force (needs contact).",
-        (ParamSpec("pull_off_force_n", 0.05, 0.0, 0.5, 0.0, "N", "largest pull before the skin lets go"),),
+        "The silicone skin sticks to the key on release up to a pull-off force (needs contact; "
+        "default: it lets go at once; cohesive: the pull fades over a separation range).",
+        (
+            ParamSpec("pull_off_force_n", 0.05, 0.0, 0.5, 0.0, "N", "largest pull before the skin lets go"),
+            ParamSpec("adhesion_range_m", 1e-3, 1e-4, 5e-3, None, "m",
+                      "separation at which the skin's pull is gone", ("cohesive",)),
+        ),
+        ("default", "cohesive"),
     ),
     EffectSpec(
         "letoff",

@@ -96,6 +96,14 @@ def smooth_stop_width_m(effects: Effects) -> float:
     return effects.params("key_preload")["preload_width_m"]
 
 
+def cohesive_range_m(effects: Effects) -> float:
+    """The separation over which a cohesive skin's pull fades (`adhesion` form cohesive); 0 for
+    the default pull-off skin or none."""
+    if "adhesion" not in effects or effects.form("adhesion") != "cohesive":
+        return 0.0
+    return effects.params("adhesion")["adhesion_range_m"]
+
+
 def effect_vector(effects: Effects) -> FloatArray:
     """The kernel's effect switches and values for a set of effects."""
     ep = np.zeros(K.N_EP)
@@ -123,6 +131,7 @@ def effect_vector(effects: Effects) -> FloatArray:
         ep[K.E_STIFF_Q] = effects.value("finger_stiffening", "stiffening_exponent", 2.0)
     if "contact" in effects:  # adhesion acts only where the contact can open at all
         ep[K.E_ADHESION] = effects.value("adhesion", "pull_off_force_n", 0.0)
+        ep[K.E_ADH_RANGE] = cohesive_range_m(effects)
     if "letoff" in effects:
         p = effects.params("letoff")
         ep[K.E_LETOFF_F] = p["letoff_force_n"]
@@ -203,16 +212,15 @@ def body_set_m(ep: FloatArray) -> float:
 
 def _kernels(ep: FloatArray) -> dict[int, Any]:
     """The compiled kernel family for these effects: a model pays only for what it has (a
-    power-law finger, a yielding body, a smooth rest stop), and a model without them runs
-    exactly the code it ran before they existed."""
+    power-law finger, a yielding body, a smooth rest stop, a cohesive skin), and a model without
+    them runs exactly the code it ran before they existed."""
     if _is_linear(ep):
         return K.integrate_linear
-    power = ep[K.E_STIFF_FORM] == K.STIFF_POWER
-    if ep[K.E_PRELOAD] > 0.0 and ep[K.E_PRELOAD_W] > 0.0:
-        return K.integrate_smooth_stop[(bool(power), bool(ep[K.E_HYST_SHARE] > 0.0))]
-    if ep[K.E_HYST_SHARE] > 0.0:
-        return K.integrate_hysteresis_power if power else K.integrate_hysteresis
-    return K.integrate_power if power else K.integrate
+    power = bool(ep[K.E_STIFF_FORM] == K.STIFF_POWER)
+    hysteresis = bool(ep[K.E_HYST_SHARE] > 0.0)
+    smooth_stop = bool(ep[K.E_PRELOAD] > 0.0 and ep[K.E_PRELOAD_W] > 0.0)
+    cohesive = bool(ep[K.E_ADHESION] > 0.0 and ep[K.E_ADH_RANGE] > 0.0)
+    return K.integrate_full[(power, hysteresis, smooth_stop, cohesive)]
 
 
 def output_count(duration_s: float, out_dt_s: float) -> int:

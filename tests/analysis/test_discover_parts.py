@@ -142,6 +142,11 @@ def test_arm_side_effects_are_not_key_candidates_when_the_arm_is_measured() -> N
     midi_forms = {c.label for c in candidates(KeystrokeModel.study(), midi)}
     assert {"key_preload", "key_preload/smooth"} <= forms
     assert "key_preload" in midi_forms and "key_preload/smooth" not in midi_forms
+    # A skin whose pull fades over a range, likewise (adhesion needs contact in the model).
+    touching = KeystrokeModel.study().with_effect("contact")
+    adhesion = {c.label for c in candidates(touching, traj)}, {c.label for c in candidates(touching, midi)}
+    assert {"adhesion", "adhesion/cohesive"} <= adhesion[0]
+    assert "adhesion" in adhesion[1] and "adhesion/cohesive" not in adhesion[1]
     assert family_of("finger_hysteresis") == family_of("finger_stiffening") == "finger"
 
 

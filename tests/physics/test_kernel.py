@@ -30,6 +30,10 @@ from pianobot.physics.trajectory import Press, press_timing
 
 AGREE = 1e-12
 STEP_S = 1e-4
+# The full step's classes (flags power, hysteresis, smooth_stop, cohesive): with every effect,
+# and with a yielding finger body.
+PLAIN = (False, False, False, False)
+HYSTERESIS = (False, True, False, False)
 OUT_EVERY = 10  # 1 ms outputs
 N_STEPS = 6000  # 0.6 s, unless a test needs longer
 
@@ -68,7 +72,7 @@ def _assert_agree(kp: np.ndarray, ep: np.ndarray, mode: int, trace_t: np.ndarray
     n = kp.shape[0]
     t = np.zeros(1) if trace_t is None else trace_t
     x = np.zeros((1, n)) if trace_x0 is None else trace_x0
-    full = _run(K.integrate, kp, ep, mode, t, x, n_steps)
+    full = _run(K.integrate_full[PLAIN], kp, ep, mode, t, x, n_steps)
     linear = _run(K.integrate_linear, kp, ep, mode, t, x, n_steps)
     for name, a, b in zip(("x0", "x1", "x2", "v2", "contact force"), full, linear, strict=True):
         assert np.all(np.isfinite(a)) and np.all(np.isfinite(b)), name
@@ -125,7 +129,7 @@ def test_the_full_kernel_differs_once_an_effect_acts() -> None:
     presses = _presses(3, rng)
     kp = _constants(presses, rng.uniform(-80.0, 0.0, 3), "ramp")
     ep = effect_vector(Effects().with_effect("key_friction", friction_n=0.05))
-    full = _run(K.integrate, kp, ep, 0, np.zeros(1), np.zeros((1, 3)))
+    full = _run(K.integrate_full[PLAIN], kp, ep, 0, np.zeros(1), np.zeros((1, 3)))
     linear = _run(K.integrate_linear, kp, ep, 0, np.zeros(1), np.zeros((1, 3)))
     assert np.max(np.abs(full[2] - linear[2])) > 1e-5
 
@@ -145,10 +149,11 @@ models += [KeystrokeModel(effects=fx.with_effect("finger_hysteresis")) for fx in
 for model in models:
     for n in (1, K.BLOCK + 1):  # both block sizes
         simulate_presses(presses * n, -40.0, model, duration_s=0.02)
+kinds = {"full": (False, False, False, False), "power": (True, False, False, False),
+         "hysteresis": (False, True, False, False), "hysteresis_power": (True, True, False, False)}
 print(json.dumps({f"{name}-{b}": [sum(f.stats.cache_hits.values()), sum(f.stats.cache_misses.values())]
-                  for name, kernels in (("full", K.integrate), ("linear", K.integrate_linear),
-                                        ("power", K.integrate_power), ("hysteresis", K.integrate_hysteresis),
-                                        ("hysteresis_power", K.integrate_hysteresis_power))
+                  for name, kernels in (("linear", K.integrate_linear),
+                                        *((kind, K.integrate_full[flags]) for kind, flags in kinds.items()))
                   for b, f in kernels.items()}))
 """
 
@@ -273,7 +278,7 @@ def test_the_hysteresis_kernel_with_nothing_yielding_agrees_with_the_full_kernel
         t = np.arange(0.0, 0.7, 2e-3) if mode else np.zeros(1)
         x = (0.01 * np.sin(np.pi * np.clip(t, 0.0, 0.6) / 0.6)[:, None] * np.ones((1, 5)) if mode
              else np.zeros((1, 5)))
-        full = _run(K.integrate, kp, ep, mode, t, np.ascontiguousarray(x))
-        hyst = _run(K.integrate_hysteresis, kp, ep, mode, t, np.ascontiguousarray(x))
+        full = _run(K.integrate_full[PLAIN], kp, ep, mode, t, np.ascontiguousarray(x))
+        hyst = _run(K.integrate_full[HYSTERESIS], kp, ep, mode, t, np.ascontiguousarray(x))
         for a, b in zip(full, hyst, strict=True):
             assert np.all(np.isfinite(a)) and np.max(np.abs(a - b)) <= AGREE

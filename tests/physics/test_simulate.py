@@ -127,6 +127,26 @@ def test_a_smooth_rest_stop_lets_go_over_its_width_and_is_the_rigid_one_when_nar
     assert abs(felt.x2_m.max() - rigid.x2_m.max()) < 0.1 * rigid.x2_m.max()
 
 
+def test_a_cohesive_skin_pulls_as_the_law_says_and_lets_go_at_its_range() -> None:
+    """adhesion `cohesive`: once the fingertip has left the key, the skin pulls with
+    (27/4)·F·s·(1 − s)² of the separation s (in ranges): peak F at a third of the range, nothing
+    beyond it. The contact force at each sample is that law at the sample's positions."""
+    press = [Press(0.0, 0.03, 0.05, 0.7, 5.0, 0.3)]
+    peak, reach = 0.1, 1e-3
+    skin = STUDY.with_effect("arm_acceleration").with_effect("contact").with_effect(
+        "adhesion", form="cohesive", pull_off_force_n=peak, adhesion_range_m=reach)
+    b = simulate_presses(press, -60, skin, step_s=2e-5)
+    gap = b.x2_m[0] - b.x1_m[0]  # the fingertip starts on the key (distance 0)
+    s = np.clip(gap / reach, 0.0, 1.0)
+    law = -6.75 * peak * s * (1.0 - s) ** 2
+    parted = gap > 0.0
+    assert parted.sum() > 20 and np.any(gap > 1.5 * reach)
+    assert np.max(np.abs(b.contact_force_n[0][parted] - law[parted])) < 1e-9
+    assert -peak - 1e-9 <= b.contact_force_n.min() < -0.9 * peak
+    # The pull draws the key up after the retracting finger: above a key no skin holds.
+    free = simulate_presses(press, -60, STUDY.with_effect("arm_acceleration").with_effect("contact"), step_s=2e-5)
+    assert np.min(b.x2_m - free.x2_m) < -5e-5
+
 def test_contact_lets_the_key_lag_a_fast_retracting_finger() -> None:
     press = [Press(0.0, 0.03, 0.05, 0.7, 5.0, 0.3)]
     glued = simulate_presses(press, -60, STUDY.with_effect("arm_acceleration"))

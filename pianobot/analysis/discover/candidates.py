@@ -21,8 +21,8 @@ What the data can judge decides the list:
 - a yielding finger body (`finger_hysteresis`) is tried only where the fingertip and the arm are
   tracked: its deflection is what it acts on, and with MIDI only it is a softer finger on the
   way down and a later release, which the stiffnesses and readout already trade against;
-- a rest stop that lets go smoothly (`key_preload/smooth`) likewise only with trajectories
-  (`TRACKED_ONLY`).
+- a rest stop that lets go smoothly (`key_preload/smooth`) and a skin whose pull fades over a
+  separation range (`adhesion/cohesive`) likewise only with trajectories (`TRACKED_ONLY`).
 """
 
 from __future__ import annotations
@@ -77,7 +77,10 @@ SUBSUMED: frozenset[tuple[str, str]] = frozenset({("finger_stiffening", "cubic")
 #: sensor depths (docs/architecture.md), and how its stop lets go acts only in the short
 #: transient before break-away, which no outcome shows apart (tried there, it took an
 #: independent 135-keystroke log 1.42x the time, with the same findings).
-TRACKED_ONLY: frozenset[tuple[str, str]] = frozenset({("key_preload", "smooth")})
+#: Likewise a skin that lets go gradually (`adhesion/cohesive`): with MIDI only, adhesion shows
+#: as a later note-off, which the pull-off skin already gives; how the pull fades with
+#: separation shows in no outcome apart.
+TRACKED_ONLY: frozenset[tuple[str, str]] = frozenset({("key_preload", "smooth"), ("adhesion", "cohesive")})
 
 
 def family_of(effect: str | None) -> str | None:

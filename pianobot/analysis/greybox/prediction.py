@@ -16,7 +16,12 @@ import numpy as np
 import numpy.typing as npt
 
 from pianobot.physics.model import KeystrokeModel
-from pianobot.physics.simulate import BATCH_LANES, SMALL_LANES, smooth_stop_width_m
+from pianobot.physics.simulate import (
+    BATCH_LANES,
+    SMALL_LANES,
+    cohesive_range_m,
+    smooth_stop_width_m,
+)
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -104,7 +109,8 @@ def integration_step_s(model: KeystrokeModel, vacuum_kpa: FloatArray, largest_s:
     reach (a sharp power of the compression is stiff only where it is reached).
 
     The time scales are those of the 2-DoF system with every spring and damper it may engage at
-    once (the arm coupling k0, c0 on the fingertip, the finger k1, c1 between fingertip and key,
+    once (the arm coupling k0, c0 on the fingertip, the finger k1, c1 between fingertip and key
+    or a cohesive skin's pull at its steepest where that is larger,
     the key's k2, c2 and the stiffest effect: an end stop, a let-off bump's slope, a smooth rest
     stop's slope at rest (P/w), a stiffening finger at `compression_m`), from the exact
     eigenvalues of M⁻¹K and M⁻¹C. A fit may try
@@ -118,6 +124,9 @@ def integration_step_s(model: KeystrokeModel, vacuum_kpa: FloatArray, largest_s:
     k_let = fx.value("letoff", "letoff_force_n", 0.0) / max(width, 1e-6)
     pre_w = smooth_stop_width_m(fx)
     k_pre = fx.value("key_preload", "preload_n", 0.0) / pre_w if pre_w > 0 else 0.0
+    # A cohesive skin's pull, between fingertip and key, is steepest as they part: 27/4·F/range.
+    adh_range = cohesive_range_m(fx)
+    k_adh = 6.75 * fx.value("adhesion", "pull_off_force_n", 0.0) / adh_range if adh_range > 0 else 0.0
     beta = fx.value("finger_stiffening", "stiffening_per_m", 0.0)
     grow = 1.0
     if beta > 0:
@@ -129,7 +138,8 @@ def integration_step_s(model: KeystrokeModel, vacuum_kpa: FloatArray, largest_s:
     step = largest_s
     for p in np.unique(vacuum_kpa):
         lp = model.msd.at(float(p))
-        k1, c1 = lp.k1_npm * grow, lp.c1_nspm
+        # The skin pulls only once the finger has left the key, where the finger's spring is off.
+        k1, c1 = max(lp.k1_npm * grow, k_adh), lp.c1_nspm
         m1, m2 = lp.m1_kg, lp.m2_kg
         omega = math.sqrt(max(_largest_eigenvalue((lp.k0_npm + k1) / m1, -k1 / m1, -k1 / m2,
                                                   (k1 + lp.k2_npm + k_bed + k_let + k_pre) / m2), 0.0))
