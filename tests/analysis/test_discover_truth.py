@@ -151,7 +151,7 @@ def test_a_pad_that_sticks_is_named_from_the_release(
     release = [it for it in payload["iterations"] if it["window"] == "release"]
     adhesion = next(c for it in release for c in it["candidates"] if c["status"] == "accepted")
     assert (adhesion["effect"], adhesion["form"]) == ("adhesion", form) and adhesion["ratio"] >= least_ratio
-    assert "adhesion (seen after lift-off)" in payload["verdict"]
+    assert f"{adhesion['label']} (seen after lift-off)" in payload["verdict"]
 
 
 def test_a_finger_that_leaves_a_clean_key_is_not_read_as_adhesion(
