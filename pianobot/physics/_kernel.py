@@ -216,10 +216,10 @@ def _make_integrate(block: int, linear: bool, power: bool = False, hysteresis: b
                     smooth_stop: bool = False, cohesive: bool = False) -> Any:
     """The kernel compiled for blocks of `block` keystrokes and one model class.
 
-    Both arguments are compile-time constants: numba freezes a closure's values into the
-    compiled code, so `if linear:` below is settled at compile time and each (block, linear)
-    pair runs a loop with no trace of the other branch; its disk cache keys each compiled kernel
-    on those values (the closure's cell contents), so the four kernels are cached side by side.
+    Every argument is a compile-time constant: numba freezes a closure's values into the
+    compiled code, so `if linear:` below is settled at compile time and each combination runs a
+    loop with no trace of the branches it does not take; its disk cache keys each compiled kernel
+    on those values (the closure's cell contents), so all the kernels are cached side by side.
 
     linear=True is for models without finger- or key-side effects (the study's bilateral spring):
     the same scheme, arm input and outputs, but the key's step is a handful of multiply-adds and
@@ -295,7 +295,7 @@ def _make_integrate(block: int, linear: bool, power: bool = False, hysteresis: b
         # (27/4)·F·s·(1 − s)² for 0 < s < 1 (peak F at s = 1/3, gone at the range).
         pull_off = 0.0 if cohesive else ep[E_ADHESION]
         glued = 1.0 if pull_off > 0.0 else 0.0
-        coh_peak = 6.75 * ep[E_ADHESION]
+        coh_peak = 6.75 * ep[E_ADHESION] if cohesive else 0.0
         inv_range = 1.0 / ep[E_ADH_RANGE] if cohesive else 0.0
         f_let, x_let = ep[E_LETOFF_F], ep[E_LETOFF_X]
         inv_w_let = 1.0 / ep[E_LETOFF_W] if f_let > 0.0 else 0.0

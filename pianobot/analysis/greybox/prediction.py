@@ -110,12 +110,12 @@ def integration_step_s(model: KeystrokeModel, vacuum_kpa: FloatArray, largest_s:
 
     The time scales are those of the 2-DoF system with every spring and damper it may engage at
     once (the arm coupling k0, c0 on the fingertip, the finger k1, c1 between fingertip and key
-    or a cohesive skin's pull at its steepest where that is larger,
-    the key's k2, c2 and the stiffest effect: an end stop, a let-off bump's slope, a smooth rest
-    stop's slope at rest (P/w), a stiffening finger at `compression_m`), from the exact
-    eigenvalues of M⁻¹K and M⁻¹C. A fit may try
-    stiff, heavily damped or strongly stiffening parameters; a bound on the diagonal alone would
-    either miss the coupled mode or (as before) take a step several times smaller than needed.
+    (or a cohesive skin's pull at its steepest, where that is steeper), the key's k2, c2 and the
+    stiffest effect: an end stop, a let-off bump's slope, a smooth rest stop's slope at rest
+    (P/w), a stiffening finger at `compression_m`), from the exact eigenvalues of M⁻¹K and M⁻¹C.
+    A fit may try stiff, heavily damped or strongly stiffening parameters; a bound on the
+    diagonal alone would either miss the coupled mode or (as before) take a step several times
+    smaller than needed.
     """
     fx = model.effects
     k_bed = fx.value("keybed", "bed_stiffness_npm", 0.0)
