@@ -295,10 +295,11 @@ class Effects:
         """The form of enabled effect `name`."""
         return self._get(name).form
 
-    def value(self, name: str, param: str, default: float = 0.0) -> float:
-        """One parameter of an effect, or `default` when the effect is off."""
+    def value(self, name: str, param: str, default: float = 0.0, form: str | None = None) -> float:
+        """One parameter of an effect, or `default` when the effect is off (or, with `form`, in
+        another form: a parameter only that form uses, such as a smooth rest stop's width)."""
         enabled = self._enabled.get(name)
-        if enabled is None:
+        if enabled is None or (form is not None and enabled.form != form):
             effect_spec(name).param(param)
             return default
         return dict(enabled.values)[effect_spec(name).param(param).name]

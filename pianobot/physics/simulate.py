@@ -88,22 +88,6 @@ def drift_factor(block_key: str, drift_fraction: float) -> float:
     return 1.0 + drift_fraction * u
 
 
-def smooth_stop_width_m(effects: Effects) -> float:
-    """The width a smooth rest stop lets go over (`key_preload` form smooth); 0 for a rigid stop
-    or none (the width parameter is held by every form, used by the smooth one only)."""
-    if "key_preload" not in effects or effects.form("key_preload") != "smooth":
-        return 0.0
-    return effects.params("key_preload")["preload_width_m"]
-
-
-def cohesive_range_m(effects: Effects) -> float:
-    """The separation over which a cohesive skin's pull fades (`adhesion` form cohesive); 0 for
-    the default pull-off skin or none."""
-    if "adhesion" not in effects or effects.form("adhesion") != "cohesive":
-        return 0.0
-    return effects.params("adhesion")["adhesion_range_m"]
-
-
 def effect_vector(effects: Effects) -> FloatArray:
     """The kernel's effect switches and values for a set of effects."""
     ep = np.zeros(K.N_EP)
@@ -116,7 +100,7 @@ def effect_vector(effects: Effects) -> FloatArray:
         ep[K.E_BED_K] = p["bed_stiffness_npm"]
         ep[K.E_BED_C] = p["bed_damping_nspm"]
     ep[K.E_PRELOAD] = effects.value("key_preload", "preload_n", 0.0)
-    ep[K.E_PRELOAD_W] = smooth_stop_width_m(effects)
+    ep[K.E_PRELOAD_W] = effects.value("key_preload", "preload_width_m", 0.0, form="smooth")
     if "key_friction" in effects:
         p = effects.params("key_friction")
         ep[K.E_FRIC_C] = p["friction_n"]
@@ -131,7 +115,7 @@ def effect_vector(effects: Effects) -> FloatArray:
         ep[K.E_STIFF_Q] = effects.value("finger_stiffening", "stiffening_exponent", 2.0)
     if "contact" in effects:  # adhesion acts only where the contact can open at all
         ep[K.E_ADHESION] = effects.value("adhesion", "pull_off_force_n", 0.0)
-        ep[K.E_ADH_RANGE] = cohesive_range_m(effects)
+        ep[K.E_ADH_RANGE] = effects.value("adhesion", "adhesion_range_m", 0.0, form="cohesive")
     if "letoff" in effects:
         p = effects.params("letoff")
         ep[K.E_LETOFF_F] = p["letoff_force_n"]

@@ -68,3 +68,15 @@ def test_round_trip_and_order() -> None:
     assert Effects.from_dict({"contact": None}).names == ("contact",)
     assert e.value("keybed", "bed_depth_m") == e.params("keybed")["bed_depth_m"]
     assert Effects.none().value("keybed", "bed_depth_m", 1.0) == 1.0
+
+
+def test_a_form_only_parameter_reads_as_its_default_in_another_form() -> None:
+    """`value(..., form=)`: a smooth rest stop's width is read only from a smooth stop (the rigid
+    stop holds the parameter too, at its default, but does not use it)."""
+    rigid = Effects.none().with_effect("key_preload", preload_n=0.4)
+    smooth = Effects.none().with_effect("key_preload", form="smooth", preload_n=0.4, preload_width_m=5e-4)
+    assert rigid.value("key_preload", "preload_width_m", 0.0, form="smooth") == 0.0
+    assert smooth.value("key_preload", "preload_width_m", 0.0, form="smooth") == 5e-4
+    assert Effects.none().value("adhesion", "adhesion_range_m", 0.0, form="cohesive") == 0.0
+    with pytest.raises(ValueError):
+        rigid.value("key_preload", "no_such_parameter", 0.0, form="smooth")

@@ -16,12 +16,7 @@ import numpy as np
 import numpy.typing as npt
 
 from pianobot.physics.model import KeystrokeModel
-from pianobot.physics.simulate import (
-    BATCH_LANES,
-    SMALL_LANES,
-    cohesive_range_m,
-    smooth_stop_width_m,
-)
+from pianobot.physics.simulate import BATCH_LANES, SMALL_LANES
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -122,10 +117,10 @@ def integration_step_s(model: KeystrokeModel, vacuum_kpa: FloatArray, largest_s:
     c_bed = fx.value("keybed", "bed_damping_nspm", 0.0)
     width = fx.value("letoff", "letoff_width_m", 1.0)
     k_let = fx.value("letoff", "letoff_force_n", 0.0) / max(width, 1e-6)
-    pre_w = smooth_stop_width_m(fx)
+    pre_w = fx.value("key_preload", "preload_width_m", 0.0, form="smooth")
     k_pre = fx.value("key_preload", "preload_n", 0.0) / pre_w if pre_w > 0 else 0.0
     # A cohesive skin's pull, between fingertip and key, is steepest as they part: 27/4·F/range.
-    adh_range = cohesive_range_m(fx)
+    adh_range = fx.value("adhesion", "adhesion_range_m", 0.0, form="cohesive")
     k_adh = 6.75 * fx.value("adhesion", "pull_off_force_n", 0.0) / adh_range if adh_range > 0 else 0.0
     beta = fx.value("finger_stiffening", "stiffening_per_m", 0.0)
     grow = 1.0
