@@ -8,7 +8,8 @@ this step the first simulated sweep of an installation spends ~6 s compiling, an
 `pianobot identify` or `discover` ~50 s (measured: the quickstart sweep 7.6 s cold, 1.5 s
 warm; a 24-keystroke discovery 134 s cold, 82 s warm). Each kernel is called here with tiny
 inputs of the types the commands pass, so every specialisation they use is compiled and
-cached: the integrator in each of its 17 model classes and both block sizes, the simulated
+cached: the integrator in each of its 33 model classes (the linear step; the full step in 16, each with
+explicit and implicit dampers) and both block sizes, the simulated
 world's observation loops, the MIDI readout of the grey-box fitter and the keystroke-log
 importer's assignment.
 """
@@ -37,7 +38,9 @@ def _models() -> list[KeystrokeModel]:
 
     full = Effects.default_world()
     classes = []
-    for power, hysteresis, smooth_stop, cohesive in FULL_FLAGS:
+    for power, hysteresis, smooth_stop, cohesive, implicit in FULL_FLAGS:
+        if implicit:  # not an effect: the same models, simulated with implicit dampers
+            continue
         fx = full.with_effect("finger_stiffening", form="power") if power else full
         fx = fx.with_effect("finger_hysteresis") if hysteresis else fx
         fx = fx.with_effect("key_preload", form="smooth") if smooth_stop else fx
@@ -61,8 +64,9 @@ def compile_physics() -> int:
         for n in (1, 5):
             simulate_presses([press] * n, np.full(n, -40.0), model, duration_s=0.01)
             arm = np.tile(np.minimum(t, 0.02)[None, :] * 0.5, (n, 1))
-            simulate_arm(t, arm, np.full(n, -40.0), model, duration_s=0.01)
-            calls += 2
+            for implicit in (False, True):
+                simulate_arm(t, arm, np.full(n, -40.0), model, duration_s=0.01, implicit_damping=implicit)
+            calls += 3
     World(seed=0).keystroke(press, -40.0, key="warm")
     last_beyond(np.zeros(3), 1e-3, True)
     return calls + 2

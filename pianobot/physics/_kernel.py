@@ -4,7 +4,8 @@ Scheme: semi-implicit (symplectic) Euler — velocities first from the forces at
 positions, then positions from the new velocities. Positions live on the integer steps and the
 stored velocities on the half steps, so the spring forces are second-order accurate; damping
 forces use the half-step velocity pushed forward half a step with the last acceleration, which
-keeps them second-order too (plain symplectic Euler would lag the damping by h/2). Dry friction
+keeps them second-order too (plain symplectic Euler would lag the damping by h/2); heavily
+damped models take the dampers implicitly instead (`implicit` in `_make_integrate`). Dry friction
 and the key's rest stop are applied as velocity/position projections, which is exact for a
 stick-slip contact and needs no regularisation (a tanh friction law would need a tiny step).
 
@@ -79,8 +80,9 @@ N_KP = 32
     E_HYST_SET,
     E_PRELOAD_W,
     E_ADH_RANGE,
-) = range(25)
-N_EP = 25
+    E_IMPLICIT,
+) = range(26)
+N_EP = 26
 
 # Rows of the per-block work array: the constants above, then the state of each keystroke.
 # One array (keystroke index last) instead of many keeps the compiler free of aliasing doubts,
@@ -213,7 +215,7 @@ def _record(w: FloatArray, b0: int, nb: int, k: int, outs: tuple[FloatArray, ...
 
 
 def _make_integrate(block: int, linear: bool, power: bool = False, hysteresis: bool = False,
-                    smooth_stop: bool = False, cohesive: bool = False) -> Any:
+                    smooth_stop: bool = False, cohesive: bool = False, implicit: bool = False) -> Any:
     """The kernel compiled for blocks of `block` keystrokes and one model class.
 
     Every argument is a compile-time constant: numba freezes a closure's values into the
@@ -243,6 +245,17 @@ def _make_integrate(block: int, linear: bool, power: bool = False, hysteresis: b
     cohesive=True is for a skin whose pull fades over a separation range (`adhesion` form
     cohesive); a few multiply-adds, but for every lane of every step (5–10 % measured), so it
     too is a flag.
+    implicit=True takes the dampers c0, c1 and c2 at the step's mean speeds (v_old + v_new)/2,
+    one 2x2 solve per keystroke and step, instead of at the extrapolated speed. The dampers are
+    then stable at any step, so a heavily damped model (a fit bent into dampers hundreds of
+    times the finger's) steps at what its springs allow instead of below 1/λ of M⁻¹C. Whether
+    the finger's damper is engaged is decided on the solve itself (a unilateral contact
+    transmits only what does not pull beyond the skin's hold); dry friction is bounded by the
+    solve's response to a force on the key (the fingertip it drags along included); and the
+    fingertip is solved again against the key's speed after friction and the rest stop. A felt
+    bed's damper stays explicit. The step costs more, so `greybox.prediction.integration_step`
+    takes it only where the step grows at least 2x. A run-time switch instead of a flag made
+    every explicit step 35 % slower and changed its last bits.
     """
 
     @njit(cache=True, fastmath=True, error_model="numpy")
@@ -334,6 +347,8 @@ def _make_integrate(block: int, linear: bool, power: bool = False, hysteresis: b
                     eng = max(w[S_ENG, jj], 1.0 if pen >= 0.0 else 0.0)
                     w[S_ENG, jj] = eng
 
+                    # The implicit dampers' terms (set by the full step when `implicit`).
+                    c1s, fc0, g1, b1, d11, fric_gain = 0.0, 0.0, 0.0, 0.0, 1.0, 0.0
                     if linear:
                         fc = eng * (w[K1, jj] * pen + w[C1, jj] * (v1e - v2e))
                         a2_j = (fc - w[K2, jj] * x2_j - w[C2, jj] * v2e) * w[M2, jj]
@@ -354,11 +369,14 @@ def _make_integrate(block: int, linear: bool, power: bool = False, hysteresis: b
                         # Unilateral (pushes only; an adhesive skin pulls until the pull-off force)
                         # or the bilateral spring.
                         touching = pen > 0.0
-                        holds = min(w[S_ATT, jj], 1.0 if raw >= -pull_off else 0.0)
+                        attached = w[S_ATT, jj]
+                        holds = min(attached, 1.0 if raw >= -pull_off else 0.0)
                         fc_uni = max(raw, -pull_off) if touching else holds * raw
+                        pull = 0.0
                         if cohesive:  # a compile-time constant
                             sep = min(max(-pen * inv_range, 0.0), 1.0)
-                            fc_uni -= coh_peak * sep * (1.0 - sep) * (1.0 - sep)
+                            pull = coh_peak * sep * (1.0 - sep) * (1.0 - sep)
+                            fc_uni -= pull
                         w[S_ATT, jj] = glued if touching else holds
                         fc = fc_uni if contact else eng * raw
 
@@ -380,11 +398,51 @@ def _make_integrate(block: int, linear: bool, power: bool = False, hysteresis: b
                         f2 -= f_let * _exp(-z * z) if v2e > 0.0 else 0.0
 
                         v2_free = v2_j + h * f2 * w[M2, jj]
+                        if implicit:  # a compile-time constant
+                            # The dampers at the step's mean speeds u = (v_old + v_new)/2: the
+                            # arm's c0, the key's c2 and the finger's c1 (where it transmits force
+                            # this step) in one 2x2 solve; every other force as above.
+                            g1 = half_h * w[M1, jj]
+                            g2 = half_h * w[M2, jj]
+                            if hysteresis:
+                                u_b = x0_j - x1_j
+                                b1 = w[K0, jj] * (u_b - share * (u_b - w[S_ZH, jj])) + w[C0, jj] * v0
+                            else:
+                                b1 = w[K0, jj] * (x0_j - x1_j) + w[C0, jj] * v0
+                            f2r = f2 - fc + w[C2, jj] * v2e  # the key's forces but the finger's and c2
+                            # Is the finger's damper engaged? Solve as if it were: a unilateral
+                            # contact transmits only what does not pull beyond the skin's hold.
+                            c1f = w[C1, jj]
+                            fc0 = spring - pull
+                            r1 = w[S_V1, jj] + g1 * (b1 - fc0)
+                            r2 = v2_j + g2 * (f2r + fc0)
+                            d11 = 1.0 + g1 * (w[C0, jj] + c1f)
+                            d22 = 1.0 + g2 * (w[C2, jj] + c1f)
+                            u2 = (d11 * r2 + g2 * c1f * r1) / (d11 * d22 - g1 * g2 * c1f * c1f)
+                            raw_i = spring + c1f * ((r1 + g1 * c1f * u2) / d11 - u2)
+                            grip = 1.0 if touching else attached
+                            cpl = (grip if raw_i >= -pull_off else 0.0) if contact else eng
+                            if contact:
+                                w[S_ATT, jj] = glued if touching else cpl
+                            # The engaged finger's elastic force, or a released contact's hold.
+                            fc0 = cpl * spring + (1.0 - cpl) * (-pull_off if touching else 0.0) - pull
+                            c1s = cpl * c1f
+                            r1 = w[S_V1, jj] + g1 * (b1 - fc0)
+                            r2 = v2_j + g2 * (f2r + fc0)
+                            d11 = 1.0 + g1 * (w[C0, jj] + c1s)
+                            d22 = 1.0 + g2 * (w[C2, jj] + c1s)
+                            det = d11 * d22 - g1 * g2 * c1s * c1s
+                            v2_free = 2.0 * (d11 * r2 + g2 * c1s * r1) / det - v2_j
+                            # A force f on the key changes its new speed by f·(h/m2)·d11/det in
+                            # this solve (the finger it drags along included): friction's bound.
+                            fric_gain = 2.0 * g2 * d11 / det
                         # Dry friction as an impulse bounded by h·F/m: if it can stop the key within
                         # the step the key sticks (exact Coulomb), else it slides against the motion.
                         r = v2_j * inv_vs
                         f_fric = f_c + (f_s - f_c) * _exp(-r * r)
                         dv = h * f_fric * w[M2, jj]
+                        if implicit:  # a compile-time constant
+                            dv = f_fric * fric_gain
                         v2_new = math.copysign(max(abs(v2_free) - dv, 0.0), v2_free)
                         x2_new = x2_j + h * v2_new
                         # A preloaded key cannot rise above its rest stop (a plastic felt rail).
@@ -400,6 +458,13 @@ def _make_integrate(block: int, linear: bool, power: bool = False, hysteresis: b
                         a1_j = (body + w[C0, jj] * (v0 - v1e) - fc) * w[M1, jj]
                     else:
                         a1_j = (w[K0, jj] * (x0_j - x1_j) + w[C0, jj] * (v0 - v1e) - fc) * w[M1, jj]
+                    if implicit and not linear:
+                        # The fingertip against the key's actual mean speed (after friction and
+                        # the rest stop): the first row of the solve again, then its force.
+                        v2e = 0.5 * (v2_j + v2_new)
+                        u1 = (w[S_V1, jj] + g1 * (b1 - fc0 + c1s * v2e)) / d11
+                        fc = fc0 + c1s * (u1 - v2e)
+                        a1_j = (b1 - fc - w[C0, jj] * u1) * w[M1, jj]
                     v1_j = w[S_V1, jj] + h * a1_j
                     w[S_FC, jj] = fc
                     w[S_V2E, jj] = v2e
@@ -436,10 +501,10 @@ def arm_lag(form: float, lag_s: float, h: float) -> tuple[float, float]:
 # One compiled kernel per block size and model class (numba caches each on disk; a kernel is
 # compiled, or loaded from the cache, on its first call only): the linear step, and the full
 # step with the flags (power, hysteresis, smooth_stop, cohesive) of `_make_integrate`.
-FULL_FLAGS: tuple[tuple[bool, bool, bool, bool], ...] = tuple(
-    (power, hysteresis, smooth_stop, cohesive)
+FULL_FLAGS: tuple[tuple[bool, bool, bool, bool, bool], ...] = tuple(
+    (power, hysteresis, smooth_stop, cohesive, implicit)
     for power in (False, True) for hysteresis in (False, True)
-    for smooth_stop in (False, True) for cohesive in (False, True)
+    for smooth_stop in (False, True) for cohesive in (False, True) for implicit in (False, True)
 )
 integrate_linear = {b: _make_integrate(b, linear=True) for b in (SMALL_BLOCK, BLOCK)}
 integrate_full = {

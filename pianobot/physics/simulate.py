@@ -198,13 +198,14 @@ def _kernels(ep: FloatArray) -> dict[int, Any]:
     """The compiled kernel family for these effects: a model pays only for what it has (a
     power-law finger, a yielding body, a smooth rest stop, a cohesive skin), and a model without
     them runs exactly the code it ran before they existed."""
-    if _is_linear(ep):
+    implicit = bool(ep[K.E_IMPLICIT] != 0.0)
+    if _is_linear(ep) and not implicit:
         return K.integrate_linear
     power = bool(ep[K.E_STIFF_FORM] == K.STIFF_POWER)
     hysteresis = bool(ep[K.E_HYST_SHARE] > 0.0)
     smooth_stop = bool(ep[K.E_PRELOAD] > 0.0 and ep[K.E_PRELOAD_W] > 0.0)
     cohesive = bool(ep[K.E_ADHESION] > 0.0 and ep[K.E_ADH_RANGE] > 0.0)
-    return K.integrate_full[(power, hysteresis, smooth_stop, cohesive)]
+    return K.integrate_full[(power, hysteresis, smooth_stop, cohesive, implicit)]
 
 
 def output_count(duration_s: float, out_dt_s: float) -> int:
@@ -217,9 +218,12 @@ def output_count(duration_s: float, out_dt_s: float) -> int:
 
 def _run(
     kp: FloatArray, ep: FloatArray, mode: int, trace_t: FloatArray, trace_x0: FloatArray,
-    t_start: float, duration_s: float, out_dt_s: float, step_s: float,
+    t_start: float, duration_s: float, out_dt_s: float, step_s: float, implicit_damping: bool = False,
 ) -> SimBatch:
     h, every = _grid(out_dt_s, step_s)
+    if implicit_damping:
+        ep = ep.copy()
+        ep[K.E_IMPLICIT] = 1.0
     n_out = output_count(duration_s, out_dt_s)
     n_steps = (n_out - 1) * every
     n = kp.shape[0]
@@ -379,6 +383,7 @@ def simulate_arm(
     duration_s: float | None = None,
     step_s: float = 1e-4,
     block_keys: Sequence[str] | None = None,
+    implicit_damping: bool = False,
 ) -> SimBatch:
     """Simulate keystrokes driven by given arm traces (e.g. measured TCP z, downward positive).
 
@@ -399,6 +404,9 @@ def simulate_arm(
             is loaded from the start, and the fingertip starts that much farther above it.
             Key positions stay measured from the rest position.
         duration_s: simulated time from t_s[0] (default: to the last sample).
+        implicit_damping: take the dampers c0, c1, c2 implicitly (the full step's variant for
+            heavily damped parameters, whose explicit step would be tiny: see
+            `physics._kernel._make_integrate`).
     """
     t = np.asarray(t_s, dtype=np.float64)
     x = np.atleast_2d(np.asarray(x0_m, dtype=np.float64))
@@ -438,4 +446,4 @@ def simulate_arm(
     if duration_s is None:
         duration_s = float(t[-1] - t[0])
     return _run(kp, ep, 1, np.ascontiguousarray(t), np.ascontiguousarray(x.T), float(t[0]),
-                float(duration_s), out_dt_s, step_s)
+                float(duration_s), out_dt_s, step_s, implicit_damping)

@@ -30,10 +30,10 @@ from pianobot.physics.trajectory import Press, press_timing
 
 AGREE = 1e-12
 STEP_S = 1e-4
-# The full step's classes (flags power, hysteresis, smooth_stop, cohesive): with every effect,
-# and with a yielding finger body.
-PLAIN = (False, False, False, False)
-HYSTERESIS = (False, True, False, False)
+# The full step's classes (flags power, hysteresis, smooth_stop, cohesive, implicit): with every
+# effect, and with a yielding finger body.
+PLAIN = (False, False, False, False, False)
+HYSTERESIS = (False, True, False, False, False)
 OUT_EVERY = 10  # 1 ms outputs
 N_STEPS = 6000  # 0.6 s, unless a test needs longer
 
@@ -149,8 +149,8 @@ models += [KeystrokeModel(effects=fx.with_effect("finger_hysteresis")) for fx in
 for model in models:
     for n in (1, K.BLOCK + 1):  # both block sizes
         simulate_presses(presses * n, -40.0, model, duration_s=0.02)
-kinds = {"full": (False, False, False, False), "power": (True, False, False, False),
-         "hysteresis": (False, True, False, False), "hysteresis_power": (True, True, False, False)}
+kinds = {"full": (False, False, False, False, False), "power": (True, False, False, False, False),
+         "hysteresis": (False, True, False, False, False), "hysteresis_power": (True, True, False, False, False)}
 print(json.dumps({f"{name}-{b}": [sum(f.stats.cache_hits.values()), sum(f.stats.cache_misses.values())]
                   for name, kernels in (("linear", K.integrate_linear),
                                         *((kind, K.integrate_full[flags]) for kind, flags in kinds.items()))

@@ -48,7 +48,7 @@ from pianobot.analysis.greybox.prediction import (
     TRACE_BLOCK_STEP_COST,
     TYPICAL_COMPRESSION_M,
     Prediction,
-    integration_step_s,
+    integration_step,
     length_groups,
 )
 from pianobot.analysis.greybox.stages import KEY_MOTION_THRESHOLD_M, fill_gaps
@@ -150,8 +150,8 @@ class MeasuredArm:
         Arm-side effects (`arm_lag`, `arm_acceleration`) do not apply: the arm is measured."""
         if isinstance(model, MSDParams):
             model = KeystrokeModel(msd=model, effects=Effects.none())
-        step_s = integration_step_s(model, self.batch.vacuum_kpa, SIM_STEP_S, self.compression_m)
-        return self._simulate([model], step_s, input_x0_m, states)[0]
+        step = integration_step(model, self.batch.vacuum_kpa, SIM_STEP_S, self.compression_m)
+        return self._simulate([model], step, input_x0_m, states)[0]
 
     def simulate_many(self, models: Sequence[KeystrokeModel], *, states: bool = False) -> list[tuple[FloatArray, ...]]:
         """`simulate` for several models at once (a fit's Jacobian: one model per perturbed
@@ -161,26 +161,29 @@ class MeasuredArm:
         Each model's outputs are bit for bit those of `simulate` (a row never depends on its
         companions, nor on the block it runs in)."""
         batch = self.batch
-        together: dict[tuple[float, bytes], list[int]] = {}
+        together: dict[tuple[tuple[float, bool], bytes], list[int]] = {}
         for j, model in enumerate(models):
-            step_s = integration_step_s(model, batch.vacuum_kpa, SIM_STEP_S, self.compression_m)
-            together.setdefault((step_s, effect_vector(model.effects).tobytes()), []).append(j)
+            step = integration_step(model, batch.vacuum_kpa, SIM_STEP_S, self.compression_m)
+            together.setdefault((step, effect_vector(model.effects).tobytes()), []).append(j)
         results: list[tuple[FloatArray, ...]] = [() for _ in models]
-        for (step_s, _), members in together.items():
-            for j, out in zip(members, self._simulate([models[j] for j in members], step_s, None, states), strict=True):
+        for (step, _), members in together.items():
+            for j, out in zip(members, self._simulate([models[j] for j in members], step, None, states), strict=True):
                 results[j] = out
         return results
 
-    def _simulate(self, models: Sequence[KeystrokeModel], step_s: float, input_x0_m: FloatArray | None,
+    def _simulate(self, models: Sequence[KeystrokeModel], step: tuple[float, bool], input_x0_m: FloatArray | None,
                   states: bool) -> list[tuple[FloatArray, ...]]:
-        """Each model's outputs (see `simulate`); the models share their effects and step."""
+        """Each model's outputs (see `simulate`); the models share their effects and their step
+        (length, implicit dampers: `integration_step`)."""
+        step_s, implicit = step
         batch = self.batch
         arm = self.arm_m(input_x0_m)
         dt = batch.dt_s
         n = batch.n
         outs = [[np.full(batch.x1_m.shape, np.nan) for _ in range(4 if states else 2)] for _ in models]
         lengths = np.tile((self.lead + self.last + 1) * (dt / step_s), len(models))
-        cost = BLOCK_STEP_COST if runs_linear_kernel(models[0].effects) else TRACE_BLOCK_STEP_COST
+        linear = runs_linear_kernel(models[0].effects) and not implicit
+        cost = BLOCK_STEP_COST if linear else TRACE_BLOCK_STEP_COST
         for pairs in length_groups(lengths, cost):
             which, rows = np.divmod(pairs, n)
             n_out = self.lead + int(self.last[rows].max()) + 1
@@ -190,7 +193,8 @@ class MeasuredArm:
             with np.errstate(over="ignore", invalid="ignore"):  # trial parameters may be unstable
                 sim = simulate_arm(self.t_sim_s[:n_in], arm[rows, :n_in], batch.vacuum_kpa[rows], model,
                                    distance_m=batch.distance_m[rows], key_start_m=batch.key_start_m[rows],
-                                   out_dt_s=dt, duration_s=(n_out - 1) * dt, step_s=step_s)
+                                   out_dt_s=dt, duration_s=(n_out - 1) * dt, step_s=step_s,
+                                   implicit_damping=implicit)
             # The key is measured from its own level before the keystroke (where it started).
             sims = (sim.x1_m, sim.x2_m - batch.key_start_m[rows, None], sim.v2_mps, sim.contact_force_n)
             for j in np.unique(which):
