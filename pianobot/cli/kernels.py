@@ -8,8 +8,8 @@ this step the first simulated sweep of an installation spends ~6 s compiling, an
 `pianobot identify` or `discover` ~50 s (measured: the quickstart sweep 7.6 s cold, 1.5 s
 warm; a 24-keystroke discovery 134 s cold, 82 s warm). Each kernel is called here with tiny
 inputs of the types the commands pass, so every specialisation they use is compiled and
-cached: the integrator in each of its 33 model classes (the linear step; the full step in 16, each with
-explicit and implicit dampers) and both block sizes, the simulated
+cached: the integrator in each of its 33 model classes (the linear step; the full step in 16
+classes, each with explicit and with implicit dampers) and both block sizes, the simulated
 world's observation loops, the MIDI readout of the grey-box fitter and the keystroke-log
 importer's assignment.
 """

@@ -53,7 +53,8 @@ X2S = 28
 U1S, V1S, A1S = 29, 30, 31
 N_KP = 32
 
-# Entries of the effect vector `ep` (N_EP,): switches (0/1, or a form index) and values.
+# Entries of the effect vector `ep` (N_EP,): switches (0/1, or a form index) and values; the
+# last, E_IMPLICIT, is the scheme `simulate` chose (implicit dampers), not an effect.
 (
     E_CONTACT,
     E_BED_ON,
@@ -500,7 +501,7 @@ def arm_lag(form: float, lag_s: float, h: float) -> tuple[float, float]:
 
 # One compiled kernel per block size and model class (numba caches each on disk; a kernel is
 # compiled, or loaded from the cache, on its first call only): the linear step, and the full
-# step with the flags (power, hysteresis, smooth_stop, cohesive) of `_make_integrate`.
+# step with the flags (power, hysteresis, smooth_stop, cohesive, implicit) of `_make_integrate`.
 FULL_FLAGS: tuple[tuple[bool, bool, bool, bool, bool], ...] = tuple(
     (power, hysteresis, smooth_stop, cohesive, implicit)
     for power in (False, True) for hysteresis in (False, True)

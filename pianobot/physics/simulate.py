@@ -196,8 +196,9 @@ def body_set_m(ep: FloatArray) -> float:
 
 def _kernels(ep: FloatArray) -> dict[int, Any]:
     """The compiled kernel family for these effects: a model pays only for what it has (a
-    power-law finger, a yielding body, a smooth rest stop, a cohesive skin), and a model without
-    them runs exactly the code it ran before they existed."""
+    power-law finger, a yielding body, a smooth rest stop, a cohesive skin, implicit dampers),
+    and a model without them runs exactly the code it ran before they existed. Implicit dampers
+    (E_IMPLICIT, set by `_run`, not an effect) take the full step even without effects."""
     implicit = bool(ep[K.E_IMPLICIT] != 0.0)
     if _is_linear(ep) and not implicit:
         return K.integrate_linear
