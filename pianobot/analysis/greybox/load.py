@@ -201,6 +201,16 @@ HOVER_M = 1e-3
 UNLOADED_M = 5e-4
 
 
+#: A take's measured hovers are read as one hover, their median, when their spread (10th to 90th
+#: percentile) is within this share of it. Each keystroke's travel reads long by the pad's
+#: compression when the key starts to move, more at higher speed (0.2-0.7 mm over a 5 mm hover
+#: on independent takes), and a skin that pulls the key before touch shifts it further (4.7-6.5
+#: mm for 5 mm); the model compresses the pad itself, so those keystrokes were modelled with the
+#: compression counted twice. Hovers that differ by more (a hover swept within a take) are kept
+#: per keystroke.
+ONE_HOVER_SPREAD = 0.5
+
+
 def _median(values: np.ndarray) -> float:
     """Median of the finite values (0 when there are none)."""
     finite = values[np.isfinite(values)]
@@ -270,7 +280,9 @@ def _left_by_presses(before: FloatArray, after: FloatArray) -> bool:
 def _measured_distance(batch: KeystrokeBatch, rows: pd.DataFrame, notes: set[str]) -> KeystrokeBatch:
     """Where the distance was not recorded: 0 (the finger starts on the key, as in the study's
     takes), unless the tracked fingertips clearly travelled before the key moved; then that
-    travel, measured per keystroke (`features.approach_distance_m`), and the note says so."""
+    travel, measured per keystroke (`features.approach_distance_m`): their median for every
+    keystroke where they agree on one hover (`ONE_HOVER_SPREAD`), else each its own. The note
+    says which."""
     recorded = _column(rows, "distance_m")
     # A key left part-way down starts that much farther from the fingertip (not a hover).
     travel = approach_distance_m(batch) - batch.key_start_m if batch.has_motion else np.full(batch.n, np.nan)
@@ -285,9 +297,12 @@ def _measured_distance(batch: KeystrokeBatch, rows: pd.DataFrame, notes: set[str
     if not typical > HOVER_M:
         notes.add("distance 0 assumed where not recorded (the finger starts on the key)")
         return batch
-    measured = np.where(np.isfinite(travel), travel, typical)
+    found = travel[unknown & np.isfinite(travel)]
+    one = found.size == 0 or float(np.percentile(found, 90) - np.percentile(found, 10)) <= ONE_HOVER_SPREAD * typical
+    measured = np.full(batch.n, typical) if one else np.where(np.isfinite(travel), travel, typical)
+    how = "one hover for the take, their median" if one else "per keystroke, median"
     notes.add(f"distance not recorded: measured from the take as the fingertip's travel before the key moved "
-              f"(median {1e3 * typical:.2f} mm; reads about 0.3 mm long: give the lab's presses for the commanded one)")
+              f"({how} {1e3 * typical:.2f} mm; reads about 0.3 mm long: give the lab's presses for the commanded one)")
     return replace(batch, distance_m=np.where(unknown, measured, batch.distance_m))
 
 
