@@ -87,3 +87,39 @@ def test_a_batch_press_follows_the_parameter_table_and_the_drive_reuses_it() -> 
     assert all(a is b for a, b in zip(drive.presses(0.5), first, strict=True))  # reused
     other = drive.presses(0.8)
     assert other[1].acceleration_mps2 == 0.8 and other[0] == first[0] and other[1] is not first[1]
+
+
+def _hover_take(data_dir: Path, hovers_m: list[float]) -> str:
+    """A take without its distances: the fingertip moves with the arm until it has travelled
+    each keystroke's hover, then the key moves and the finger compresses."""
+    ids = [f"k{i}" for i in range(len(hovers_m))]
+    trials = pd.DataFrame({"trial_id": ids, "index": range(len(ids)), "attempt": 1, "status": "ok",
+                           "vacuum_kpa": -40.0, "down_velocity_mps": np.nan, "arm_speed_mps": 0.01,
+                           "arm_travel_m": 0.014})
+    t = np.arange(-0.1, 1.6, 1 / 120)
+    ramp = np.clip(0.01 * t, 0, 0.014)
+    samples = pd.concat(pd.DataFrame({"trial_id": tid, "source": "mocap", "t_s": t, "x0_m": 0.5 + ramp,
+                                      "x1_m": 0.4 + ramp - 0.2 * np.maximum(ramp - h, 0.0),
+                                      "x2_m": 0.3 + 0.8 * np.maximum(ramp - h, 0.0)})
+                        for tid, h in zip(ids, hovers_m, strict=True))
+    writer = RunWriter.create(data_dir, name="hover", kind="import", meta={}, plan=None)
+    writer.append(trials, samples)
+    writer.finish("completed")
+    return writer.run_id
+
+
+@pytest.mark.parametrize(("hovers_mm", "one"), [([4.8, 5.0, 5.2, 5.4, 5.7, 6.1], True),
+                                                 ([2.0, 3.0, 5.0, 7.0, 9.0, 11.0], False)])
+def test_a_take_without_its_distances_gets_one_hover_where_its_travels_agree(
+        data_dir: Path, hovers_mm: list[float], one: bool) -> None:
+    """Travels that differ by the pad's compression at key onset (more at speed) are one hover,
+    their median; a hover swept within the take stays per keystroke."""
+    loaded = load_keystrokes([_hover_take(data_dir, [1e-3 * h for h in hovers_mm])], data_dir)
+    distance = loaded.batch.distance_m
+    travel = np.asarray(hovers_mm) * 1e-3
+    if one:
+        assert np.all(distance == distance[0]) and abs(distance[0] - np.median(travel)) < 1e-4
+        assert any("one hover for the take" in note for note in loaded.notes)
+    else:
+        assert np.all(np.abs(distance - travel) < 1e-4)
+        assert any("per keystroke" in note for note in loaded.notes)
