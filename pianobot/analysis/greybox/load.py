@@ -297,8 +297,8 @@ def _measured_distance(batch: KeystrokeBatch, rows: pd.DataFrame, notes: set[str
     if not typical > HOVER_M:
         notes.add("distance 0 assumed where not recorded (the finger starts on the key)")
         return batch
-    found = travel[unknown & np.isfinite(travel)]
-    one = found.size == 0 or float(np.percentile(found, 90) - np.percentile(found, 10)) <= ONE_HOVER_SPREAD * typical
+    found = travel[unknown & np.isfinite(travel)]  # not empty: their median is a hover
+    one = float(np.percentile(found, 90) - np.percentile(found, 10)) <= ONE_HOVER_SPREAD * typical
     measured = np.full(batch.n, typical) if one else np.where(np.isfinite(travel), travel, typical)
     how = "one hover for the take, their median" if one else "per keystroke, median"
     notes.add(f"distance not recorded: measured from the take as the fingertip's travel before the key moved "
