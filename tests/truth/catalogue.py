@@ -237,8 +237,9 @@ OTHER_GRID = {"accelerations_mps2": (0.2, 0.6, 1.2), "speeds_mps": tuple(float(v
 
 #: Sessions recorded otherwise than the suite's: (what, suite scenario, changes). Changes set the
 #: frame rate (OptiTrack's 100 and 240 Hz), the take's schedule (`take`: 10 keystrokes, faster
-#: presses, hovering) or a MIDI-only grid (`grid`: 40 keystrokes, other accelerations, speeds and
-#: depths). Each variant gets a seed of its own.
+#: presses, hovering), a MIDI-only grid (`grid`: 40 keystrokes, other accelerations, speeds and
+#: depths) or the lab (`base`, `vacuum_kpa`: the hidden effect on another finger and key). Each
+#: variant gets a seed of its own.
 VARIANTS: tuple[tuple[str, str, dict[str, Any]], ...] = (
     ("clean-240hz", "mocap-clean-light-finger-shallow-0", {"frame_rate_hz": 240.0}),
     ("clean-100hz", "mocap-clean-light-finger-shallow-0", {"frame_rate_hz": 100.0}),
@@ -252,6 +253,7 @@ VARIANTS: tuple[tuple[str, str, dict[str, Any]], ...] = (
     ("stiffening-exponential-weak-240hz-10-keystrokes", "mocap-finger_stiffening-exponential-weak",
      {"frame_rate_hz": 240.0, "take": FEW_SPEEDS}),
     ("keybed-power_law-strong-fast", "mocap-keybed-power_law-strong", {"take": FAST_SPEEDS}),
+    ("friction-stribeck-strong-stiff-key", "mocap-key_friction-stribeck-strong", {"base": "stiff-key", "vacuum_kpa": -60.0}),
     ("midi-clean-40-keystrokes", "midi-clean-light-finger-0", {"grid": SMALL_GRID}),
     ("midi-clean-other-grid", "midi-clean-stiff-key-1", {"grid": OTHER_GRID}),
     ("midi-velocity_curve-tanh-strong-40-keystrokes", "midi-velocity_curve-tanh-strong", {"grid": SMALL_GRID}),
@@ -260,8 +262,8 @@ VARIANTS: tuple[tuple[str, str, dict[str, Any]], ...] = (
 
 
 def variant_suite() -> list[Scenario]:
-    """Suite sessions recorded otherwise (`VARIANTS`), named `variant-<what>`; the hidden effect,
-    base set and vacuum are the suite scenario's."""
+    """Suite sessions recorded otherwise (`VARIANTS`), named `variant-<what>`; the hidden effect
+    is the suite scenario's, and so are the base set and vacuum unless the variant changes them."""
     by_name = {s.name: s for s in full_suite()}
     out = []
     for what, source, changes in VARIANTS:
@@ -270,7 +272,8 @@ def variant_suite() -> list[Scenario]:
         out.append(replace(s, name=name, seed=_seed(name), description=f"{s.description}; recorded as {what}",
                            take=replace(s.take, **changes.get("take", {})),
                            grid=replace(s.grid, **changes.get("grid", {})),
-                           frame_rate_hz=changes.get("frame_rate_hz", s.frame_rate_hz)))
+                           frame_rate_hz=changes.get("frame_rate_hz", s.frame_rate_hz),
+                           base=changes.get("base", s.base), vacuum_kpa=changes.get("vacuum_kpa", s.vacuum_kpa)))
     return out
 
 

@@ -224,10 +224,12 @@ def _write_mocap(scenario: Scenario, folder: Path) -> tuple[dict[str, Path], dic
 
 
 def _trajectory_change(on: Trajectory, off: Trajectory) -> dict[str, float]:
-    """How much the hidden effect moves each signal (RMS and max over all frames, metres)."""
+    """How much the hidden effect moves each signal (RMS and max over the frames both takes
+    have, metres: a mocap clock effect can move the last frame past the take's end)."""
     out = {}
     for name, key in (("key", "x2_m"), ("fingertip", "x1_m"), ("arm", "x0_m")):
-        d = on[key] - off[key]
+        n = min(on[key].size, off[key].size)
+        d = on[key][:n] - off[key][:n]
         out[f"{name}_rms_m"] = float(np.sqrt(np.mean(d**2)))
         out[f"{name}_max_m"] = float(np.max(np.abs(d)))
     return out

@@ -138,13 +138,28 @@ def test_a_take_captured_at_240_hz_says_so_and_imports_at_that_rate(tmp_path: Pa
 def test_variants_are_suite_takes_recorded_otherwise() -> None:
     by_name = {s.name: s for s in full_suite()}
     variants = variant_suite()
-    assert len(variants) == len({v.name for v in variants}) == 14
+    assert len(variants) == len({v.name for v in variants}) == 15
     assert {v.frame_rate_hz for v in variants} == {100.0, 120.0, 240.0}
     assert sum(v.effect is None for v in variants) == 7
+    # One moves its hidden effect to another finger and key.
+    source = by_name["mocap-key_friction-stribeck-strong"]
+    moved = next(v for v in variants if v.name == "variant-friction-stribeck-strong-stiff-key")
+    assert (moved.effect, moved.take) == (source.effect, source.take)
+    assert (source.base, source.vacuum_kpa) != (moved.base, moved.vacuum_kpa) == ("stiff-key", -60.0)
     assert {v.kind for v in variants} == {"mocap", "midi"}
     assert all(v.name not in by_name and v.seed not in {s.seed for s in by_name.values()} for v in variants)
     with pytest.raises(ValueError, match="does not divide"):
         replace(variants[0], frame_rate_hz=180.0)
+
+
+def test_a_mocap_clock_effect_measures_its_size_when_it_moves_the_last_frame(tmp_path: Path) -> None:
+    """A clock offset shifts which true instant each frame shows: on this base and seed the take
+    without the effect has one frame more than the take with it. The effect's size is measured
+    over the frames both have (it raised a shape mismatch before)."""
+    s = scenario("mocap-mocap_delay-offset-weak")
+    made = materialise(replace(s, base="soft-key", vacuum_kpa=-40.0, seed=560_409_910), tmp_path / "files")
+    size = made.truth["effect_size"]
+    assert all(math.isfinite(v) for v in size.values()) and 0.0 < size["key_rms_m"] < 1e-3
 
 
 def test_logs_import_with_every_outcome_on_its_line(
