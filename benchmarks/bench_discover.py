@@ -6,7 +6,7 @@ Suites, reported apart:
   other functional forms, other base numbers; they write Motive CSV takes and ctrl_midi-style
   keystroke logs). The acceptance table, split by "form equals a candidate" / "form differs".
   `--truth-subset variants`: suite takes recorded otherwise (other frame rates, fewer keystrokes,
-  faster presses), a check that nothing is tuned to the suite's recording. `--files take`: each
+  faster presses, an effect on another base), a check that nothing is tuned to the suite's recording. `--files take`: each
   take alone, as Motive wrote it (no presses, no arm log); an arm lag or a mocap clock offset
   then leaves nothing to find, and those rows are counted apart (`not_observable_from_files`).
 - `own`: pianobot's own simulated world (tests/analysis/own_world.py). An inverse crime by
