@@ -11,7 +11,11 @@ candidates and how to settle it):
   ARM_SEPARATION_M;
 - the key moves least of the rest (its travel stops at the key bed, ≤ KEY_MAX_TRAVEL_M), by a
   clear margin (at most KEY_MOTION_RATIO of the next); inferred only when at least two moving
-  markers remain besides the arm (with one, there is no piano in view);
+  markers remain besides the arm (with one, there is no piano in view). Where three or more
+  remain, the finger is in view with a marker of its own besides the fingertip, and the margin
+  is KEY_CHAIN_RATIO: the markers of a finger that presses a key travel at least as far as the
+  key does, so the least moving of a chain is the key unless the two travel alike (the study's
+  zzz40: 0.67 of the fingertip; a stiffer finger or a softer key comes closer to 1);
 - the fingertip is the lowest of the rest (markers higher up the finger are ignored), by at least
   TIP_SEPARATION_M.
 """
@@ -30,6 +34,7 @@ ROLES = ("arm", "fingertip", "key")
 STATIC_MOTION_M = 0.0005
 ARM_SEPARATION_M = 0.02
 KEY_MOTION_RATIO = 0.75
+KEY_CHAIN_RATIO = 0.9
 KEY_MAX_TRAVEL_M = 0.015
 TIP_SEPARATION_M = 0.004
 NOT_IN_VIEW = "none"
@@ -78,8 +83,9 @@ def assign_roles(
     rest = [n for n in moving if n not in roles.values()]
     if "key" not in roles and "key" not in absent and len(rest) >= 2:
         ranked = sorted(rest, key=lambda n: motion[n])
+        margin = KEY_CHAIN_RATIO if len(rest) >= 3 else KEY_MOTION_RATIO
         clear = (
-            motion[ranked[0]] <= KEY_MOTION_RATIO * motion[ranked[1]]
+            motion[ranked[0]] <= margin * motion[ranked[1]]
             and motion[ranked[0]] <= KEY_MAX_TRAVEL_M
         )
         if not clear:
