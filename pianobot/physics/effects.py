@@ -71,7 +71,7 @@ _SPECS: tuple[EffectSpec, ...] = (
         "keybed",
         "End of key travel: a stiff, damped stop (felt) at depth bed_depth_m.",
         (
-            ParamSpec("bed_depth_m", 0.010, 0.005, 0.015, None, "m", "key travel where the stop begins"),
+            ParamSpec("bed_depth_m", 0.010, 0.0005, 0.015, None, "m", "key travel where the stop begins"),
             ParamSpec("bed_stiffness_npm", 3.0e4, 2.0e3, 2.0e5, 0.0, "N/m", "stop stiffness (at 1 mm for hunt_crossley)"),
             ParamSpec("bed_damping_nspm", 15.0, 0.0, 100.0, None, "N*s/m", "stop damping (at 1 mm for hunt_crossley)"),
         ),

@@ -338,6 +338,19 @@ def _discover_lab(name: str, tmp_path: Path, cli: Run) -> tuple[dict[str, Any], 
     return _discover([run_id, "--data", str(data), "--presses", str(made.files["presses"])], cli), made.truth
 
 
+def test_an_end_stop_a_resting_finger_reaches_within_a_millimetre_is_named(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """A zzz-style take (finger resting on the key, 8 mm of arm travel) whose stiff key meets a
+    Hunt–Crossley stop 0.8 mm down, of about 1 mm it travels. The stop's depth was bounded to a
+    piano key's dip (5-15 mm): discovery found nothing and left 0.068 mm unexplained."""
+    payload, truth = _discover_lab("variant-keybed-hunt_crossley-strong-resting", tmp_path, (capsys, monkeypatch))
+    assert truth["outcome"]["max_key_travel_m"] < 1.5e-3
+    named = [e for e in payload["accepted_effects"] if e not in truth["always_present"]]
+    assert named and family_of(named[0]) == truth["family"], payload["verdict"]
+    first = next(c for c in payload["iterations"][0]["candidates"] if c["status"] == "accepted")
+    assert first["ratio"] >= 3.0, first
+
+
 @pytest.mark.parametrize("name", ["variant-clean-240hz", "variant-clean-100hz", "variant-clean-10-keystrokes"])
 def test_a_clean_take_recorded_otherwise_accepts_nothing(
         name: str, tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:

@@ -237,9 +237,10 @@ OTHER_GRID = {"accelerations_mps2": (0.2, 0.6, 1.2), "speeds_mps": tuple(float(v
 
 #: Sessions recorded otherwise than the suite's: (what, suite scenario, changes). Changes set the
 #: frame rate (OptiTrack's 100 and 240 Hz), the take's schedule (`take`: 10 keystrokes, faster
-#: presses, hovering), a MIDI-only grid (`grid`: 40 keystrokes, other accelerations, speeds and
-#: depths) or the lab (`base`, `vacuum_kpa`: the hidden effect on another finger and key). Each
-#: variant gets a seed of its own.
+#: presses, hovering, the finger resting on the key), a MIDI-only grid (`grid`: 40 keystrokes,
+#: other accelerations, speeds and depths), the lab (`base`, `vacuum_kpa`: the hidden effect on
+#: another finger and key) or the effect's parameters (`effect`: a stop a resting finger reaches
+#: within a millimetre). Each variant gets a seed of its own.
 VARIANTS: tuple[tuple[str, str, dict[str, Any]], ...] = (
     ("clean-240hz", "mocap-clean-light-finger-shallow-0", {"frame_rate_hz": 240.0}),
     ("clean-100hz", "mocap-clean-light-finger-shallow-0", {"frame_rate_hz": 100.0}),
@@ -254,6 +255,8 @@ VARIANTS: tuple[tuple[str, str, dict[str, Any]], ...] = (
      {"frame_rate_hz": 240.0, "take": FEW_SPEEDS}),
     ("keybed-power_law-strong-fast", "mocap-keybed-power_law-strong", {"take": FAST_SPEEDS}),
     ("friction-stribeck-strong-stiff-key", "mocap-key_friction-stribeck-strong", {"base": "stiff-key", "vacuum_kpa": -60.0}),
+    ("keybed-hunt_crossley-strong-resting", "mocap-keybed-hunt_crossley-strong",
+     {"take": {"key_target_m": None, "depth_m": SHALLOW.depth_m}, "effect": {"depth_m": 0.0008}}),
     ("midi-clean-40-keystrokes", "midi-clean-light-finger-0", {"grid": SMALL_GRID}),
     ("midi-clean-other-grid", "midi-clean-stiff-key-1", {"grid": OTHER_GRID}),
     ("midi-velocity_curve-tanh-strong-40-keystrokes", "midi-velocity_curve-tanh-strong", {"grid": SMALL_GRID}),
@@ -269,6 +272,8 @@ def variant_suite() -> list[Scenario]:
     for what, source, changes in VARIANTS:
         s = by_name[source]
         name = f"variant-{what}"
+        if "effect" in changes and s.effect is not None:
+            s = replace(s, effect=replace(s.effect, params={**s.effect.params, **changes["effect"]}))
         out.append(replace(s, name=name, seed=_seed(name), description=f"{s.description}; recorded as {what}",
                            take=replace(s.take, **changes.get("take", {})),
                            grid=replace(s.grid, **changes.get("grid", {})),

@@ -138,7 +138,7 @@ def test_a_take_captured_at_240_hz_says_so_and_imports_at_that_rate(tmp_path: Pa
 def test_variants_are_suite_takes_recorded_otherwise() -> None:
     by_name = {s.name: s for s in full_suite()}
     variants = variant_suite()
-    assert len(variants) == len({v.name for v in variants}) == 15
+    assert len(variants) == len({v.name for v in variants}) == 16
     assert {v.frame_rate_hz for v in variants} == {100.0, 120.0, 240.0}
     assert sum(v.effect is None for v in variants) == 7
     # One moves its hidden effect to another finger and key.
@@ -146,6 +146,10 @@ def test_variants_are_suite_takes_recorded_otherwise() -> None:
     moved = next(v for v in variants if v.name == "variant-friction-stribeck-strong-stiff-key")
     assert (moved.effect, moved.take) == (source.effect, source.take)
     assert (source.base, source.vacuum_kpa) != (moved.base, moved.vacuum_kpa) == ("stiff-key", -60.0)
+    # One moves an effect's parameter: a stop within a resting finger's reach.
+    reached = next(v for v in variants if v.name == "variant-keybed-hunt_crossley-strong-resting")
+    assert reached.effect is not None and reached.effect.params["depth_m"] == 0.0008
+    assert reached.take.key_target_m is None and reached.take.distance_m == 0.0
     assert {v.kind for v in variants} == {"mocap", "midi"}
     assert all(v.name not in by_name and v.seed not in {s.seed for s in by_name.values()} for v in variants)
     with pytest.raises(ValueError, match="does not divide"):

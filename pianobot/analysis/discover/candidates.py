@@ -68,6 +68,11 @@ STIFFENING_REACH = 1.5
 YIELD_START = 0.5
 YIELD_FRACTIONS = (0.25, 0.5, 0.8)
 
+#: Where no key travel is measured (MIDI only), an end stop's depth is started across a piano
+#: key's dip, from here to its upper bound: the part of its bounds below is for stops a tracked
+#: key shows within a shallower travel (a finger resting on a stiff key moves it a millimetre).
+UNTRACKED_STOP_FROM_M = 0.005
+
 #: Forms that another form of the same effect holds as a special case are not tried on their own:
 #: the power form at exponent 2 is the cubic (its fits start there).
 SUBSUMED: frozenset[tuple[str, str]] = frozenset({("finger_stiffening", "cubic")})
@@ -186,7 +191,8 @@ def start_points(layout: Layout, spec: CandidateSpec, batch: KeystrokeBatch) -> 
         return sizes
     travel = _travel_m(batch)
     depths = ([f * travel for f in (0.5, 0.7, 0.85, 0.97)] if travel is not None
-              else list(np.linspace(depth.lower, depth.upper, 6)[1:-1]))
+              else list(np.linspace(UNTRACKED_STOP_FROM_M if depth.name.endswith("bed_depth_m") else depth.lower,
+                                    depth.upper, 6)[1:-1]))
     return [{depth.name: min(max(d, depth.lower), depth.upper), **s} for d in depths for s in sizes]
 
 
