@@ -82,6 +82,27 @@ def test_intervals_cover_the_truth_over_sweeps_with_hover(hover_sweep: tuple[Pat
     assert len(covered) == 36 and np.mean(covered) >= 0.9
 
 
+def test_a_fingertip_that_rises_clear_of_a_key_held_down_has_let_go_of_it() -> None:
+    """A key left 0.8 mm down by dry friction that the next press does not move: the fingertip
+    closes its 0.8 mm gap, compresses against the key and rises back to where it started. The
+    model describes the keystroke until the fingertip is 0.5 mm clear of the key (before, with
+    the key never moving, the whole trace, where the study's bilateral coupling pulls the key up
+    with the finger); a finger resting on a key that never moves never lets go of it."""
+    from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
+
+    t = np.arange(240) / 120.0
+    tip = 4e-3 * np.clip(np.sin(np.pi * t / t[-1] * 1.25), 0.0, None)  # down 4 mm and back up to 0
+    n = 2
+    batch = KeystrokeBatch(("a", "b"), np.full(n, -40.0), t, np.tile(1.5 * tip, (n, 1)), np.tile(tip, (n, 1)),
+                           np.zeros((n, t.size)), distance_m=np.zeros(n), key_start_m=np.array([8e-4, 0.0]))
+    window = model_window(batch)
+    touch = int(np.flatnonzero(tip >= 8e-4)[0])  # the gap closed
+    let_go = int(np.flatnonzero((np.arange(t.size) > np.argmax(tip)) & (tip < tip[touch] - 5e-4))[0]) - 1
+    assert window[0] == let_go  # the held key's keystroke ends where the fingertip left it
+    assert window[1] == t.size - 1  # a resting finger on a key that never moved: the whole trace
+    assert not lifts_off(batch).any()  # 0.8 mm clear is not the 1 mm a release is judged from
+
+
 def test_identify_a_finger_that_lets_go_of_the_key(data_dir: Path) -> None:
     """A real finger pushes and never pulls: after lift-off the key returns on its own while the
     study's bilateral spring would drag it up. Identification fits up to lift-off only."""

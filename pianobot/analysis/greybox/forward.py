@@ -13,7 +13,9 @@ the way up it pulls the key above its rest position and stretches the finger bet
 arm. A real finger lets go of the key (and a real key rests on its stop), so the model says
 nothing true after lift-off; `model_window` ends each keystroke there (measured: after the key's
 deepest point, when the fingertip-key gap has reopened by `LIFT_OFF_M` beyond the gap at which
-the key started to move, or the key is back at rest), and outputs are NaN after it.
+the key started to move, or the key is back at rest; for a key that never moved, as one dry
+friction holds down, after the finger's deepest compression, once the gap has reopened by
+`LIFT_OFF_M` beyond the gap at which the fingertip closed it), and outputs are NaN after it.
 
 A model with unilateral `contact` does describe what follows: the key returns on its own while
 the finger hangs from the arm, and a pad that sticks (`adhesion`) pulls the key above rest until
@@ -252,31 +254,46 @@ def largest_deflection_m(batch: KeystrokeBatch) -> float | None:
 
 def model_window(batch: KeystrokeBatch) -> npt.NDArray[np.intp]:
     """Per keystroke, the last output sample the model describes: before the fingertip lifts
-    off the key (see the module docstring); the whole trace when the key never moved."""
+    off the key (see the module docstring); the whole trace when the fingertip never reached
+    the key or never left it."""
     out = np.full(batch.n, batch.t_s.size - 1, dtype=np.intp)
     for i in range(batch.n):
         press = _press(batch, i)
         if press is None:
             continue
-        x2, gap, touch, peak = press
+        x2, gap, touch, peak, moved = press
         after = np.arange(x2.size) > peak
-        off = np.flatnonzero(after & ((gap < gap[touch] - LIFT_OFF_M) | (x2 < KEY_MOTION_THRESHOLD_M)))
+        back = (x2 < KEY_MOTION_THRESHOLD_M) if moved else np.zeros(x2.size, dtype=bool)
+        off = np.flatnonzero(after & ((gap < gap[touch] - LIFT_OFF_M) | back))
         if off.size:
             out[i] = int(off[0]) - 1
     return out
 
 
-def _press(batch: KeystrokeBatch, i: int) -> tuple[FloatArray, FloatArray, int, int] | None:
-    """Keystroke i's key travel and fingertip-key gap (gaps filled), the sample where the key
-    started to move and its deepest one after that; None when the key never moved or the
-    fingertip was not measured."""
+def _press(batch: KeystrokeBatch, i: int) -> tuple[FloatArray, FloatArray, int, int, bool] | None:
+    """Keystroke i's key travel and fingertip-key gap (gaps filled), the sample where the
+    finger took hold of the key and the deepest one after that, and whether the key moved.
+
+    Where the key moved, the finger took hold where it started to move, and the press was
+    deepest at its deepest point. A key that never moved (held down by dry friction, or a press
+    too light to move it) was touched where the fingertip closed its starting gap, and pressed
+    deepest where the finger was most compressed: a fingertip that then rises clear of a key
+    held down has let go of it, which the study's bilateral coupling cannot do. None when the
+    fingertip was not measured or never reached the key."""
     t = batch.row_times_s(i)
-    x2 = fill_gaps(t, batch.x2_m[i])
-    moved = np.flatnonzero(x2 > KEY_MOTION_THRESHOLD_M)
-    if moved.size == 0 or not np.isfinite(batch.x1_m[i]).any():
+    if not np.isfinite(batch.x1_m[i]).any():
         return None
-    touch = int(moved[0])
-    return x2, fill_gaps(t, batch.x1_m[i]) - x2, touch, touch + int(np.nanargmax(x2[touch:]))
+    x2 = fill_gaps(t, batch.x2_m[i])
+    gap = fill_gaps(t, batch.x1_m[i]) - x2
+    moved = np.flatnonzero(x2 > KEY_MOTION_THRESHOLD_M)
+    if moved.size:
+        touch = int(moved[0])
+        return x2, gap, touch, touch + int(np.nanargmax(x2[touch:])), True
+    held = np.flatnonzero(gap >= batch.start_gap_m[i])
+    if held.size == 0:
+        return None
+    touch = int(held[0])
+    return x2, gap, touch, touch + int(np.nanargmax(gap[touch:])), False
 
 
 def release_window(batch: KeystrokeBatch) -> npt.NDArray[np.intp]:
@@ -303,7 +320,7 @@ def lifts_off(batch: KeystrokeBatch) -> npt.NDArray[np.bool_]:
     for i in range(batch.n):
         press = _press(batch, i)
         if press is not None:
-            _, gap, touch, peak = press
+            _, gap, touch, peak, _ = press
             out[i] = bool(np.nanmin(gap[peak:]) < gap[touch] - CLEAR_OF_KEY_M)
     return out
 
