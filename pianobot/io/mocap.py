@@ -17,8 +17,10 @@ after joining are ghosts and dropped.
 
 Marker roles (arm, fingertip, key) come from a mapping (a rig file's `mocap.markers`, `--marker`)
 or are inferred from the persistent markers only where the evidence is clear (`mocap_roles`):
-the arm is the highest marker, the key the least moving of the rest, the fingertip the lowest
-remaining one; when two markers fit a role about equally, the import stops and names them.
+the arm is the highest marker, the key the least moving of the rest (or, where that is unclear,
+the one marker that barely moves but does so with the arm: a key a preload holds up), the
+fingertip the lowest remaining one; when two markers fit a role about equally, the import stops
+and names them.
 """
 
 from __future__ import annotations

@@ -16,6 +16,11 @@ candidates and how to settle it):
   is KEY_CHAIN_RATIO: the markers of a finger that presses a key travel at least as far as the
   key does, so the least moving of a chain is the key unless the two travel alike (the study's
   zzz40: 0.67 of the fingertip; a stiffer finger or a softer key comes closer to 1);
+- where that leaves the key unclear or missing, a marker that barely moves but does so with the
+  arm (at least HELD_KEY_MOTION_M, its height correlated with the arm's by PRESS_LOCKED or more)
+  is the key, if it is the only one: a key that a break-away preload holds up against a resting
+  finger moves a fraction of a millimetre, with every press (a marker on the piano body or the
+  room moves with none);
 - the fingertip is the lowest of the rest (markers higher up the finger are ignored), by at least
   TIP_SEPARATION_M.
 """
@@ -23,6 +28,7 @@ candidates and how to settle it):
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import NoReturn
 
 import numpy as np
 import numpy.typing as npt
@@ -37,6 +43,8 @@ KEY_MOTION_RATIO = 0.75
 KEY_CHAIN_RATIO = 0.9
 KEY_MAX_TRAVEL_M = 0.015
 TIP_SEPARATION_M = 0.004
+HELD_KEY_MOTION_M = 5e-5
+PRESS_LOCKED = 0.5
 NOT_IN_VIEW = "none"
 
 
@@ -81,16 +89,23 @@ def assign_roles(
             _unclear("arm", "highest", ranked[:2], height, where)
         roles["arm"] = ranked[0]
     rest = [n for n in moving if n not in roles.values()]
-    if "key" not in roles and "key" not in absent and len(rest) >= 2:
-        ranked = sorted(rest, key=lambda n: motion[n])
-        margin = KEY_CHAIN_RATIO if len(rest) >= 3 else KEY_MOTION_RATIO
-        clear = (
-            motion[ranked[0]] <= margin * motion[ranked[1]]
-            and motion[ranked[0]] <= KEY_MAX_TRAVEL_M
-        )
-        if not clear:
-            _unclear("key", "least moving", ranked[:2], motion, where)
-        roles["key"] = ranked[0]
+    if "key" not in roles and "key" not in absent:
+        held = _held_key(free, motion, up_m, roles.get("arm"))
+        if len(rest) >= 2:
+            ranked = sorted(rest, key=lambda n: motion[n])
+            margin = KEY_CHAIN_RATIO if len(rest) >= 3 else KEY_MOTION_RATIO
+            clear = (
+                motion[ranked[0]] <= margin * motion[ranked[1]]
+                and motion[ranked[0]] <= KEY_MAX_TRAVEL_M
+            )
+            if clear:
+                roles["key"] = ranked[0]
+            elif held is not None:
+                roles["key"] = held
+            else:
+                _unclear("key", "least moving", ranked[:2], motion, where)
+        elif held is not None:
+            roles["key"] = held
     rest = [n for n in moving if n not in roles.values()]
     if "fingertip" not in roles and "fingertip" not in absent and rest:
         ranked = sorted(rest, key=lambda n: height[n])
@@ -100,9 +115,26 @@ def assign_roles(
     return {role: roles[role] for role in ROLES if role in roles}
 
 
+def _held_key(free: list[str], motion: dict[str, float], up_m: Callable[[str], FloatArray],
+              arm: str | None) -> str | None:
+    """The one marker that barely moves but moves with the arm (module docstring), or None."""
+    if arm is None:
+        return None
+    a = up_m(arm)
+    locked = []
+    for n in free:
+        if not HELD_KEY_MOTION_M <= motion[n] < STATIC_MOTION_M:
+            continue
+        y = up_m(n)
+        both = np.isfinite(y) & np.isfinite(a)
+        if both.sum() > 2 and np.std(y[both]) > 0 and np.corrcoef(y[both], a[both])[0, 1] >= PRESS_LOCKED:
+            locked.append(n)
+    return locked[0] if len(locked) == 1 else None
+
+
 def _unclear(
     role: str, rule: str, candidates: list[str], value: dict[str, float], where: str
-) -> None:
+) -> NoReturn:
     what = "height" if rule != "least moving" else "travel"
     listed = " or ".join(f"{n} ({what} {value[n] * 1000:.1f} mm)" for n in candidates)
     raise InputError(

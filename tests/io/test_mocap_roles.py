@@ -48,3 +48,37 @@ def test_a_chain_whose_two_least_moving_markers_travel_alike_is_refused() -> Non
     with pytest.raises(InputError, match="cannot tell which marker is the key") as error:
         _roles({"arm": 8.0, "middle": 7.0, "tip": 6.3, "key": 6.0})
     assert "tip" in str(error.value) and "key" in str(error.value) and "--marker key=" in str(error.value)
+
+
+def _roles_with(travel_mm: dict[str, float], still: dict[str, tuple[float, float]]) -> dict[str, str]:
+    """`still` markers barely move: (travel in mm with the presses, drift in mm of their own)."""
+    press = np.clip(np.sin(np.pi * T), 0.0, None)
+    drift = np.cos(2 * np.pi * 3.0 * T)
+    heights = {**HEIGHT, "piano": -0.05, "room": 0.4}
+
+    def up_m(name: str) -> np.ndarray:
+        if name in still:
+            locked, own = still[name]
+            return heights[name] - 1e-3 * (locked * press + own * drift)
+        return heights[name] - 1e-3 * travel_mm[name] * press
+
+    names = [*travel_mm, *still]
+    return assign_roles(names, up_m, {}, lambda n: n if n in names else None, "take.csv")
+
+
+def test_a_key_a_preload_holds_up_against_a_resting_finger_is_found_though_it_barely_moves() -> None:
+    # An independent take: a 0.3 N rest stop under a light finger lets the key move 0.46 mm, with
+    # the presses; the finger's two markers travel alike (5.0 and 6.4 mm). Before: refused.
+    roles = _roles_with({"arm": 8.1, "middle": 6.4, "tip": 5.0}, {"key": (0.4, 0.05), "room": (0.0, 0.1)})
+    assert roles == {"arm": "arm", "fingertip": "tip", "key": "key"}
+
+
+def test_markers_that_barely_move_without_the_arm_are_never_the_key() -> None:
+    roles = _roles_with({"arm": 8.1, "tip": 5.0}, {"piano": (0.0, 0.1), "room": (0.0, 0.2)})
+    assert roles == {"arm": "arm", "fingertip": "tip"}  # no piano in view: no key
+    assert _roles_with({"arm": 8.1, "tip": 5.0}, {"piano": (0.02, 0.0)}) == roles  # 20 µm: too little to be a press
+
+
+def test_two_markers_that_barely_move_with_the_arm_leave_the_key_unclear() -> None:
+    with pytest.raises(InputError, match="cannot tell which marker is the key"):
+        _roles_with({"arm": 8.1, "middle": 6.4, "tip": 5.0}, {"key": (0.4, 0.05), "piano": (0.2, 0.0)})
