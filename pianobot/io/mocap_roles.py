@@ -90,22 +90,20 @@ def assign_roles(
         roles["arm"] = ranked[0]
     rest = [n for n in moving if n not in roles.values()]
     if "key" not in roles and "key" not in absent:
-        held = _held_key(free, motion, up_m, roles.get("arm"))
-        if len(rest) >= 2:
-            ranked = sorted(rest, key=lambda n: motion[n])
-            margin = KEY_CHAIN_RATIO if len(rest) >= 3 else KEY_MOTION_RATIO
-            clear = (
-                motion[ranked[0]] <= margin * motion[ranked[1]]
-                and motion[ranked[0]] <= KEY_MAX_TRAVEL_M
-            )
-            if clear:
-                roles["key"] = ranked[0]
-            elif held is not None:
-                roles["key"] = held
-            else:
-                _unclear("key", "least moving", ranked[:2], motion, where)
+        ranked = sorted(rest, key=lambda n: motion[n])
+        margin = KEY_CHAIN_RATIO if len(rest) >= 3 else KEY_MOTION_RATIO
+        clear = (
+            len(ranked) >= 2
+            and motion[ranked[0]] <= margin * motion[ranked[1]]
+            and motion[ranked[0]] <= KEY_MAX_TRAVEL_M
+        )
+        held = None if clear else _held_key(free, motion, up_m, roles.get("arm"))
+        if clear:
+            roles["key"] = ranked[0]
         elif held is not None:
             roles["key"] = held
+        elif len(ranked) >= 2:
+            _unclear("key", "least moving", ranked[:2], motion, where)
     rest = [n for n in moving if n not in roles.values()]
     if "fingertip" not in roles and "fingertip" not in absent and rest:
         ranked = sorted(rest, key=lambda n: height[n])
