@@ -17,8 +17,8 @@ candidates and how to settle it):
   key does, so the least moving of a chain is the key unless the two travel alike (the study's
   zzz40: 0.67 of the fingertip; a stiffer finger or a softer key comes closer to 1);
 - where that leaves the key unclear or missing, a marker that barely moves but does so with the
-  arm (at least HELD_KEY_MOTION_M, its height correlated with the arm's by PRESS_LOCKED or more)
-  is the key, if it is the only one: a key that a break-away preload holds up against a resting
+  arm (at least HELD_KEY_MOTION_M, its height, drift removed, correlated with the arm's by
+  PRESS_LOCKED or more) is the key, if it is the only one: a key that a break-away preload holds up against a resting
   finger moves a fraction of a millimetre, with every press (a marker on the piano body or the
   room moves with none);
 - the fingertip is the lowest of the rest (markers higher up the finger are ignored), by at least
@@ -45,6 +45,7 @@ KEY_MAX_TRAVEL_M = 0.015
 TIP_SEPARATION_M = 0.004
 HELD_KEY_MOTION_M = 5e-5
 PRESS_LOCKED = 0.5
+ARM_UP_SHARE = 0.2
 NOT_IN_VIEW = "none"
 
 
@@ -123,11 +124,30 @@ def _held_key(free: list[str], motion: dict[str, float], up_m: Callable[[str], F
     for n in free:
         if not HELD_KEY_MOTION_M <= motion[n] < STATIC_MOTION_M:
             continue
-        y = up_m(n)
-        both = np.isfinite(y) & np.isfinite(a)
-        if both.sum() > 2 and np.std(y[both]) > 0 and np.corrcoef(y[both], a[both])[0, 1] >= PRESS_LOCKED:
+        if _locked_to_arm(up_m(n), a) >= PRESS_LOCKED:
             locked.append(n)
     return locked[0] if len(locked) == 1 else None
+
+
+def _locked_to_arm(y: FloatArray, arm: FloatArray) -> float:
+    """How closely a marker's height follows the arm's: their correlation, with the marker's
+    drift taken out. The capture volume drifts by a tenth of a millimetre or more, as much as a
+    held key moves; where the arm is up (within `ARM_UP_SHARE` of its range from the top, between
+    presses) the key is at rest, so the marker's height there, interpolated in time, is its
+    drift (measured on an independent take: a 0.4 N rest stop under a resting finger, the key
+    moving 0.14 mm only at the bottom of each press: 0.19 with the drift, 0.67 without)."""
+    both = np.flatnonzero(np.isfinite(y) & np.isfinite(arm))
+    if both.size < 3:
+        return 0.0
+    y, a = y[both], arm[both]
+    lo, hi = np.percentile(a, [1, 99])
+    up = a >= hi - ARM_UP_SHARE * (hi - lo)
+    if up.sum() < 2 or up.all():
+        return 0.0
+    pressed = y - np.interp(both, both[up], y[up])
+    if not np.std(pressed) > 0:
+        return 0.0
+    return float(np.corrcoef(pressed, a)[0, 1])
 
 
 def _unclear(

@@ -82,3 +82,17 @@ def test_markers_that_barely_move_without_the_arm_are_never_the_key() -> None:
 def test_two_markers_that_barely_move_with_the_arm_leave_the_key_unclear() -> None:
     with pytest.raises(InputError, match="cannot tell which marker is the key"):
         _roles_with({"arm": 8.1, "middle": 6.4, "tip": 5.0}, {"key": (0.4, 0.05), "piano": (0.2, 0.0)})
+
+
+def test_a_key_that_moves_only_at_the_bottom_of_each_press_is_found_through_the_drift() -> None:
+    # An independent take: a 0.4 N rest stop holds the key still but at the bottom of each press
+    # (0.14 mm), while the whole capture volume drifts by 0.1 mm. Before: refused.
+    t = np.linspace(0.0, 80.0, 9600)
+    press = np.clip(np.sin(2 * np.pi * t / 3.3), 0.0, None)  # 24 presses
+    drift = 1e-4 * np.sin(2 * np.pi * t / 70.0 + 0.4)
+    travel = {"arm": 8.1e-3 * press, "middle": 6.3e-3 * press, "tip": 4.8e-3 * press,
+              "key": 1.4e-4 * np.clip(press - 0.8, 0.0, None) / 0.2}
+    names = list(travel)
+    roles = assign_roles(names, lambda n: HEIGHT[n] + drift - travel[n], {}, lambda n: n if n in names else None,
+                         "take.csv")
+    assert roles == {"arm": "arm", "fingertip": "tip", "key": "key"}
