@@ -366,6 +366,19 @@ def test_friction_that_holds_the_key_down_for_good_is_named(
     assert "at the noise level" in payload["verdict"]
 
 
+def test_a_key_a_rest_stop_holds_still_but_at_the_bottom_of_each_press_is_found_and_named(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """A 0.4 N rest stop under a resting light finger: the key moves 0.14 mm, only at the bottom
+    of each press, while the capture volume drifts by 0.1 mm. The import could not tell the key
+    from the finger's markers and stopped; the key is now the marker locked to the arm once its
+    drift is taken out, and the preload is named."""
+    payload, truth = _discover_lab("variant-preload-rest_stop-strong-resting", tmp_path, (capsys, monkeypatch))
+    assert truth["outcome"]["max_key_travel_m"] < 2e-4
+    named = [e for e in payload["accepted_effects"] if e not in truth["always_present"]]
+    assert named and family_of(named[-1]) == truth["family"], payload["verdict"]
+    assert "at the noise level" in payload["verdict"]
+
+
 @pytest.mark.parametrize("name", ["variant-clean-240hz", "variant-clean-100hz", "variant-clean-10-keystrokes"])
 def test_a_clean_take_recorded_otherwise_accepts_nothing(
         name: str, tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
