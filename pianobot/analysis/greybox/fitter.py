@@ -157,6 +157,7 @@ class GreyBoxFit:
         inside = np.arange(y.shape[2])[None, :] <= last[:, None]
         use = np.array([c in channels for c in TRAJECTORY_CHANNELS])
         self.mask = np.isfinite(y) & inside[:, None, :] & use[None, :, None]
+        self._where = np.nonzero(self.mask)  # (keystroke, signal, frame) of each masked sample
         self._last: tuple[FloatArray, FloatArray] | None = None
         self.converged_ = False  # set by `fit` (an `evaluate`d model was not fitted)
         self.nfev_ = 0  # residual evaluations of `fit` (the Jacobians' are not counted)
@@ -171,7 +172,7 @@ class GreyBoxFit:
 
     def _by_channel(self, masked: FloatArray) -> tuple[FloatArray, ...]:
         """A vector in mask order (row-major over keystroke, signal, frame) split by signal."""
-        signal = np.nonzero(self.mask)[1]
+        signal = self._where[1]
         return tuple(masked[signal == c] for c in range(len(TRAJECTORY_CHANNELS)))
 
     def predict(self, theta: FloatArray) -> Prediction:
@@ -189,7 +190,7 @@ class GreyBoxFit:
             y = np.stack([batch.x1_m, batch.x2_m], axis=1)
             with np.errstate(over="ignore", invalid="ignore"):
                 r = self.profiled(sim - y)
-            idx = np.nonzero(self.mask)
+            idx = self._where
             for name, part in zip(TRAJECTORY_CHANNELS, self._by_channel(r), strict=True):
                 sel = idx[1] == TRAJECTORY_CHANNELS.index(name)
                 values[name], rows[name], frames[name] = part, idx[0][sel], idx[2][sel]

@@ -35,6 +35,7 @@ that the piecewise-linear arm trace the simulator interpolates is unchanged.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -203,13 +204,23 @@ class MeasuredArm:
                 mine = which == j
                 for out, values in zip(outs[j], sims, strict=False):
                     out[rows[mine], : n_out - self.lead] = values[mine, self.lead :]
-        after = np.arange(batch.t_s.size)[None, :] > self.last[:, None]
+        after = self._after_last
         results = []
         for model_outs in outs:
             for out in model_outs:
                 out[after] = np.nan
-            results.append(tuple(out[self.rows] for out in model_outs))
+            results.append(tuple(model_outs) if self._rows_distinct else tuple(out[self.rows] for out in model_outs))
         return results
+
+    @functools.cached_property
+    def _after_last(self) -> npt.NDArray[np.bool_]:
+        """(n, T): the samples after each distinct keystroke's last modelled one."""
+        return np.asarray(np.arange(self.batch.t_s.size)[None, :] > self.last[:, None])
+
+    @functools.cached_property
+    def _rows_distinct(self) -> bool:
+        """The caller's rows are the distinct keystrokes, in order (no bootstrap repeats)."""
+        return bool(np.array_equal(self.rows, np.arange(self.batch.n)))
 
     def predict(self, model: KeystrokeModel, drive: dict[str, float] | None = None) -> Prediction:
         """The model's trajectories (and key states) at the batch's frames."""
