@@ -9,18 +9,21 @@ candidates and how to settle it):
 - markers that barely move (< STATIC_MOTION_M) are fixed to the piano body or the room: no role;
 - the arm marker sits on the end effector above the finger: the highest, by at least
   ARM_SEPARATION_M;
-- the key moves least of the rest (its travel stops at the key bed, ≤ KEY_MAX_TRAVEL_M), by a
-  clear margin (at most KEY_MOTION_RATIO of the next); inferred only when at least two moving
-  markers remain besides the arm (with one, there is no piano in view). Where three or more
-  remain, the finger is in view with a marker of its own besides the fingertip, and the margin
-  is KEY_CHAIN_RATIO: the markers of a finger that presses a key travel at least as far as the
-  key does, so the least moving of a chain is the key unless the two travel alike (the study's
-  zzz40: 0.67 of the fingertip; a stiffer finger or a softer key comes closer to 1);
-- where that leaves the key unclear or missing, a marker that barely moves but does so with the
-  arm (at least HELD_KEY_MOTION_M, its height, drift removed, correlated with the arm's by
-  PRESS_LOCKED or more) is the key, if it is the only one: a key that a break-away preload holds up against a resting
-  finger moves a fraction of a millimetre, with every press (a marker on the piano body or the
-  room moves with none);
+- the key is the one marker that barely moves but does so with the arm (at least
+  HELD_KEY_MOTION_M, its height, drift removed, correlated with the arm's by PRESS_LOCKED or
+  more), if there is one: a key that a break-away preload holds up against a resting finger
+  moves a fraction of a millimetre, with every press, while a marker on the piano body or the
+  room moves with none. Such a key is looked for first: the finger's own two markers would
+  otherwise pass the travel rule below, and the fingertip was taken for the key (an independent
+  take, a 0.4 N rest stop on a stiff key: key 0.26 mm, fingertip 3.7 mm, finger 5.6 mm);
+- otherwise the key moves least of the rest (its travel stops at the key bed, ≤
+  KEY_MAX_TRAVEL_M), by a clear margin (at most KEY_MOTION_RATIO of the next); inferred only
+  when at least two moving markers remain besides the arm (with one, there is no piano in view).
+  Where three or more remain, the finger is in view with a marker of its own besides the
+  fingertip, and the margin is KEY_CHAIN_RATIO: the markers of a finger that presses a key travel
+  at least as far as the key does, so the least moving of a chain is the key unless the two
+  travel alike (the study's zzz40: 0.67 of the fingertip; a stiffer finger or a softer key comes
+  closer to 1);
 - the fingertip is the lowest of the rest (markers higher up the finger are ignored), by at least
   TIP_SEPARATION_M.
 """
@@ -98,11 +101,11 @@ def assign_roles(
             and motion[ranked[0]] <= margin * motion[ranked[1]]
             and motion[ranked[0]] <= KEY_MAX_TRAVEL_M
         )
-        held = None if clear else _held_key(free, motion, up_m, roles.get("arm"))
-        if clear:
-            roles["key"] = ranked[0]
-        elif held is not None:
+        held = _held_key(free, motion, up_m, roles.get("arm"))
+        if held is not None:
             roles["key"] = held
+        elif clear:
+            roles["key"] = ranked[0]
         elif len(ranked) >= 2:
             _unclear("key", "least moving", ranked[:2], motion, where)
     rest = [n for n in moving if n not in roles.values()]

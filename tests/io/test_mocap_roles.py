@@ -96,3 +96,11 @@ def test_a_key_that_moves_only_at_the_bottom_of_each_press_is_found_through_the_
     roles = assign_roles(names, lambda n: HEIGHT[n] + drift - travel[n], {}, lambda n: n if n in names else None,
                          "take.csv")
     assert roles == {"arm": "arm", "fingertip": "tip", "key": "key"}
+
+
+def test_a_key_that_barely_moves_is_not_mistaken_for_the_fingertip_of_a_two_marker_finger() -> None:
+    # An independent take: a 0.4 N rest stop on a stiff key, the finger resting on it. The key
+    # moves 0.26 mm; the finger's two markers (5.6 and 3.7 mm) pass the travel rule on their own,
+    # and the fingertip was silently taken for the key (the finger's middle for the fingertip).
+    roles = _roles_with({"arm": 8.0, "middle": 5.6, "tip": 3.7}, {"key": (0.26, 0.05), "room": (0.0, 0.1)})
+    assert roles == {"arm": "arm", "fingertip": "tip", "key": "key"}
