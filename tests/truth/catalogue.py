@@ -241,7 +241,8 @@ OTHER_GRID = {"accelerations_mps2": (0.2, 0.6, 1.2), "speeds_mps": tuple(float(v
 #: other accelerations, speeds and depths), the lab (`base`, `vacuum_kpa`: the hidden effect on
 #: another finger and key) or the effect's parameters (`effect`: a stop a resting finger reaches
 #: within a millimetre; friction that holds the key down after the first press, for good; a rest
-#: stop that a resting finger barely overcomes, so the key moves only at the bottom of a press). Each
+#: stop that a resting finger barely overcomes, so the key moves only at the bottom of a press, or
+#: a fraction of a millimetre on a stiff key). Each
 #: variant gets a seed of its own.
 VARIANTS: tuple[tuple[str, str, dict[str, Any]], ...] = (
     ("clean-240hz", "mocap-clean-light-finger-shallow-0", {"frame_rate_hz": 240.0}),
@@ -262,6 +263,8 @@ VARIANTS: tuple[tuple[str, str, dict[str, Any]], ...] = (
     ("friction-stribeck-stuck-light-key", "mocap-key_friction-stribeck-strong",
      {"base": "light-key", "effect": {"friction_n": 0.25, "static_friction_n": 0.3, "stribeck_velocity_mps": 0.01}}),
     ("preload-rest_stop-strong-resting", "mocap-key_preload-rest_stop-strong", {"take": asdict(SHALLOW)}),
+    ("preload-rest_stop-strong-resting-stiff-key", "mocap-key_preload-rest_stop-strong",
+     {"take": asdict(SHALLOW), "base": "stiff-key"}),
     ("midi-clean-40-keystrokes", "midi-clean-light-finger-0", {"grid": SMALL_GRID}),
     ("midi-clean-other-grid", "midi-clean-stiff-key-1", {"grid": OTHER_GRID}),
     ("midi-velocity_curve-tanh-strong-40-keystrokes", "midi-velocity_curve-tanh-strong", {"grid": SMALL_GRID}),
