@@ -103,6 +103,14 @@ def _evidence(v: Verdict, rule: Rule) -> bool:
     return v.delta_ic > rule.ic_margin and v.shrink >= rule.min_shrink
 
 
+def _bent_base(setting: Setting, reference: Evaluated, fits: Sequence[Evaluated], index: int, rule: Rule) -> bool:
+    """The first round of a take's trajectories, a base misfit over `BENT_BASE_SIGMAS` of the
+    noise, and no candidate with evidence of its own."""
+    gap = reference.gap
+    return (index == 0 and setting.mode == "trajectories" and gap.position_m > BENT_BASE_SIGMAS * gap.sigma_m
+            and not any(_evidence(_verdict(e, reference, rule, False), rule) for e in fits))
+
+
 def _promising(v: Verdict, rule: Rule) -> bool:
     return v.delta_ic > rule.ic_margin and v.shrink >= rule.min_shrink and v.consistency >= rule.min_consistency
 
@@ -137,22 +145,13 @@ def _iterate(setting: Setting, current: GreyBoxFit, start: KeystrokeModel, setti
         for e in mapper(screen_one, specs):  # progress advances here, as results come back
             evaluated.append(e)
             task.advance(note=e.label)
-        refits = settings.joint_refits
-        gap = reference.gap
-        if index == 0 and setting.mode == "trajectories" and gap.position_m > BENT_BASE_SIGMAS * gap.sigma_m \
-                and not any(_evidence(_verdict(e, reference, rule, False), rule) for e in evaluated):
-            # A misfit well above the noise, and no screened candidate has evidence of its own:
-            # the base fit may have bent to imitate the missing effect, so far that no effect
-            # helps on top of it (a rest stop read as a finger 9x softer than it is, where the
-            # preload screened last). Every candidate is then refitted with the base parameters.
-            refits = len(evaluated)
-            task.update(total=2 * len(evaluated))
-        ranked = {e.label: e for e in sorted(evaluated, key=lambda e: e.ic)[:refits]}
+        order = [e.label for e in sorted(evaluated, key=lambda e: e.ic)]
+        by_label = {e.label: e for e in evaluated}
 
         # The screened fits travel inside the function (sent to each worker once), the tasks
         # carry only their labels: a fit holds the keystrokes (tens of MB).
         def refit(label: str) -> Evaluated:
-            e = ranked[label]
+            e = by_label[label]
             assert e.spec is not None
             # The screened values are a start of their own only where screening saw the effect,
             # in trajectories (a base fit bent to imitate friction there); on MIDI logs they
@@ -162,10 +161,20 @@ def _iterate(setting: Setting, current: GreyBoxFit, start: KeystrokeModel, setti
             joint = search.evaluate(setting, fit, criterion, sigma_m, e.label, e.spec)
             return joint if joint.ic <= e.ic else e
 
-        refitted = {}
-        for e in mapper(refit, list(ranked)):
+        refitted: dict[str, Evaluated] = {}
+        for e in mapper(refit, order[: settings.joint_refits]):
             refitted[e.label] = e
             task.advance(note=f"{e.label} (joint)")
+        rest = order[settings.joint_refits :]
+        if rest and _bent_base(setting, reference, list(refitted.values()) + [by_label[k] for k in rest], index, rule):
+            # A misfit well above the noise, and no candidate has evidence of its own, screened or
+            # refitted: the base fit may have bent to imitate the missing effect, so far that no
+            # effect helps on top of it (a rest stop read as a finger 9x softer than it is, where
+            # the preload screened last). The other candidates are then refitted too.
+            task.update(total=total + len(rest))
+            for e in mapper(refit, rest):
+                refitted[e.label] = e
+                task.advance(note=f"{e.label} (joint)")
     final = [refitted.get(e.label, e) for e in evaluated]
     verdicts = [_verdict(e, reference, rule, False) for e in final]
     # A candidate with evidence of its own (ΔIC and held-out shrink) that was not accepted keeps
@@ -196,7 +205,7 @@ def _iterate(setting: Setting, current: GreyBoxFit, start: KeystrokeModel, setti
 
 
 #: The base fit's held-out systematic error, in noise σ, above which a first round in which no
-#: screened candidate has evidence refits every candidate jointly (see `_iterate`). Smaller
+#: candidate has evidence after the usual joint refits refits the others too (`_bent_base`). Smaller
 #: misfits (clean deep takes of the independent suite: 1.6-3.2 σ) cannot hide an effect that
 #: bent the base far, and every joint fit costs a fit of the whole model.
 BENT_BASE_SIGMAS = 5.0
