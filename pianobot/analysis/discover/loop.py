@@ -112,7 +112,7 @@ def _bent_base(setting: Setting, reference: Evaluated, fits: Sequence[Evaluated]
 
 
 def _promising(v: Verdict, rule: Rule) -> bool:
-    return v.delta_ic > rule.ic_margin and v.shrink >= rule.min_shrink and v.consistency >= rule.min_consistency
+    return _evidence(v, rule) and v.consistency >= rule.min_consistency
 
 
 def _iterate(setting: Setting, current: GreyBoxFit, start: KeystrokeModel, settings: Settings, sigma_m: float,
