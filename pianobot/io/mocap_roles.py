@@ -93,18 +93,13 @@ def assign_roles(
             _unclear("arm", "highest", ranked[:2], height, where)
         roles["arm"] = ranked[0]
     rest = [n for n in moving if n not in roles.values()]
-    if "key" not in roles and "key" not in absent:
+    held = None if "key" in roles or "key" in absent else _held_key(free, motion, up_m, roles.get("arm"))
+    if held is not None:
+        roles["key"] = held
+    elif "key" not in roles and "key" not in absent:
         ranked = sorted(rest, key=lambda n: motion[n])
         margin = KEY_CHAIN_RATIO if len(rest) >= 3 else KEY_MOTION_RATIO
-        clear = (
-            len(ranked) >= 2
-            and motion[ranked[0]] <= margin * motion[ranked[1]]
-            and motion[ranked[0]] <= KEY_MAX_TRAVEL_M
-        )
-        held = _held_key(free, motion, up_m, roles.get("arm"))
-        if held is not None:
-            roles["key"] = held
-        elif clear:
+        if len(ranked) >= 2 and motion[ranked[0]] <= margin * motion[ranked[1]] and motion[ranked[0]] <= KEY_MAX_TRAVEL_M:
             roles["key"] = ranked[0]
         elif len(ranked) >= 2:
             _unclear("key", "least moving", ranked[:2], motion, where)

@@ -376,8 +376,9 @@ def test_a_key_a_rest_stop_holds_nearly_still_is_found_and_the_preload_named(
     drifts by 0.1 mm. Before, the first take's import stopped (it could not tell the key from
     the finger's two markers), and the second's took the fingertip for the key, silently. The
     key is the marker locked to the arm once its drift is taken out; on the stiff key the base
-    fit then reads the stop as a finger 9x softer than it is, no screened candidate helps on top
-    of it, and every candidate is refitted with the base parameters."""
+    fit then reads the stop as a finger 9x softer than it is, none of the three best candidates
+    helps on top of it, screened or refitted, and the others are refitted with the base
+    parameters too."""
     payload, truth = _discover_lab(name, tmp_path, (capsys, monkeypatch))
     assert truth["outcome"]["max_key_travel_m"] < STATIC_MOTION_M
     named = [e for e in payload["accepted_effects"] if e not in truth["always_present"]]
