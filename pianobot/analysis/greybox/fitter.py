@@ -28,7 +28,9 @@ holds a parameter the data hardly see, crawls along a flat valley for a hundred 
 more, each a simulation of every keystroke, for a few hundredths of a percent of its error.
 
 Derivatives are forward differences in the fit (the direction of a step needs less accuracy)
-and central ones for the covariance, with a step of 1 % in internal units: the simulator
+and central ones for the covariance and for a fit asked to finish (`central=True`: near an
+optimum the forward difference's first-order error, at this step, points the trust region a
+little off the valley and the fit crawls along it), with a step of 1 % in internal units: the simulator
 switches the coupling on at the first integration step after touch, so trajectories move in
 tiny steps as the touch instant crosses a step boundary; a 1 % change moves the touch by many
 steps, which averages those out, while the curvature error of a central difference stays ~1e-4.
@@ -141,12 +143,14 @@ class GreyBoxFit:
     """Output-error least squares of a layout's parameters under one drive (module docstring)."""
 
     def __init__(self, drive: Drive, layout: Layout, *, channels: tuple[str, ...] | None = None,
-                 sigma: Mapping[str, float] | None = None, max_nfev: int = 200, tol: float = 1e-6) -> None:
+                 sigma: Mapping[str, float] | None = None, max_nfev: int = 200, tol: float = 1e-6,
+                 central: bool = False) -> None:
         self.drive = drive
         self.batch = drive.observed
         self.layout = layout
         self.max_nfev = max_nfev
         self.tol = tol
+        self.central = central
         batch = self.batch
         if channels is None:
             channels = TRAJECTORY_CHANNELS if batch.has_motion else MIDI_CHANNELS
@@ -302,7 +306,7 @@ class GreyBoxFit:
             if not fixed_sigma:
                 self.sigma = self.error_levels(self.raw(self.predict(theta)))
             if theta.size:
-                result = least_squares(self.residuals, theta, jac=lambda th: self.jacobian(th, central=False),
+                result = least_squares(self.residuals, theta, jac=lambda th: self.jacobian(th, central=self.central),
                                        loss="soft_l1", f_scale=LOSS_SCALE_SIGMAS, x_scale=1.0, method="trf",
                                        max_nfev=self.max_nfev, bounds=(lo, hi), ftol=self.tol, xtol=self.tol,
                                        callback=Stall(STALL_ITERATIONS, STALL_RTOL))
