@@ -96,6 +96,12 @@ class EmulatedUR:
     def program_running(self) -> bool:
         return self.get("runtime") == 2
 
+    def script_waiting(self) -> bool:
+        """ur_rtde's control script waits for a new command. Until then it takes the command in
+        its register for the one it is still answering (a synchronous move that a protective
+        stop paused, say), and ignores a new one: a `stopScript` then waits 300 s in ur_rtde."""
+        return bool(self.call("script_waiting"))
+
     # -- calls -------------------------------------------------------------------------------
     def call(self, name: str, *args: Any, **kwargs: Any) -> Any:
         if self._process is None:

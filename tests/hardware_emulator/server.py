@@ -325,6 +325,12 @@ class ControllerServer:
     def paused(self) -> bool:
         return self.controller.runtime == PAUSED
 
+    def script_waiting(self) -> bool:
+        """The control script has answered its last command and seen the register cleared."""
+        with self.controller.lock:
+            script = self.controller.script
+            return script is not None and script.blocking is None and not script.executing
+
     def pose(self) -> tuple[float, ...]:
         with self.controller.lock:
             return self.controller.pose

@@ -145,6 +145,9 @@ def test_a_protective_stop_refuses_motion_until_unlocked(ur_emulator: EmulatorFa
         assert wait_for(lambda: control.isProgramRunning())
         assert wait_for(lambda: not control.getAsyncOperationProgressEx().isAsyncOperationRunning()
                         and abs(receive.getActualTCPPose()[2] - (start[2] - 0.02)) < 1e-9)
+        # The script answers the resumed move a cycle after the arm arrives. The clean-up's
+        # stopScript waits for that: sent earlier, it was ignored 1 run in 4 (a 300 s hang).
+        assert wait_for(ur.script_waiting)
 
 
 def test_input_registers_have_one_writer(ur_emulator: EmulatorFactory) -> None:
