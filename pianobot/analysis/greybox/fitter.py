@@ -27,13 +27,13 @@ it has stalled (`Stall`): its cost fell by less than `STALL_RTOL` of itself over
 holds a parameter the data hardly see, crawls along a flat valley for a hundred evaluations or
 more, each a simulation of every keystroke, for a few hundredths of a percent of its error.
 
-Derivatives are forward differences in the fit (the direction of a step needs less accuracy)
-and central ones for the covariance and for a fit asked to finish (`central=True`: near an
-optimum the forward difference's first-order error, at this step, points the trust region a
-little off the valley and the fit crawls along it), with a step of 1 % in internal units: the simulator
-switches the coupling on at the first integration step after touch, so trajectories move in
-tiny steps as the touch instant crosses a step boundary; a 1 % change moves the touch by many
-steps, which averages those out, while the curvature error of a central difference stays ~1e-4.
+Derivatives are differences with a step of 1 % in internal units: the simulator switches the
+coupling on at the first integration step after touch, so trajectories move in tiny steps as
+the touch instant crosses a step boundary; a 1 % change moves the touch by many steps, which
+averages those out, while the curvature error of a central difference stays ~1e-4. A fit steps
+on forward differences (the direction of a step needs less accuracy); the covariance, and a fit
+asked to finish (`central=True`), use central ones: near an optimum the forward difference's
+first-order error at this step points each step a little off the valley, and the fit crawls.
 
 Linear algebra runs on one BLAS thread: the Jacobians are tall and thin (tens of thousands of
 frames × about ten parameters), where threads gain nothing, and on a shared machine (or in an
