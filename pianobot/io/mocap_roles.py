@@ -93,16 +93,12 @@ def assign_roles(
             _unclear("arm", "highest", ranked[:2], height, where)
         roles["arm"] = ranked[0]
     rest = [n for n in moving if n not in roles.values()]
-    held = None if "key" in roles or "key" in absent else _held_key(free, motion, up_m, roles.get("arm"))
-    if held is not None:
-        roles["key"] = held
-    elif "key" not in roles and "key" not in absent:
-        ranked = sorted(rest, key=lambda n: motion[n])
-        margin = KEY_CHAIN_RATIO if len(rest) >= 3 else KEY_MOTION_RATIO
-        if len(ranked) >= 2 and motion[ranked[0]] <= margin * motion[ranked[1]] and motion[ranked[0]] <= KEY_MAX_TRAVEL_M:
-            roles["key"] = ranked[0]
-        elif len(ranked) >= 2:
-            _unclear("key", "least moving", ranked[:2], motion, where)
+    if "key" not in roles and "key" not in absent:
+        # A key a preload holds nearly still first: the travel rule would take a two-marker
+        # finger's fingertip for it.
+        key = _held_key(free, motion, up_m, roles.get("arm")) or _least_moving(rest, motion, where)
+        if key is not None:
+            roles["key"] = key
     rest = [n for n in moving if n not in roles.values()]
     if "fingertip" not in roles and "fingertip" not in absent and rest:
         ranked = sorted(rest, key=lambda n: height[n])
@@ -110,6 +106,18 @@ def assign_roles(
             _unclear("fingertip", "lowest", ranked[:2], height, where)
         roles["fingertip"] = ranked[0]
     return {role: roles[role] for role in ROLES if role in roles}
+
+
+def _least_moving(rest: list[str], motion: dict[str, float], where: str) -> str | None:
+    """The travel rule: the key is the moving marker that travels clearly least (None: fewer
+    than two markers left to tell apart)."""
+    ranked = sorted(rest, key=lambda n: motion[n])
+    if len(ranked) < 2:
+        return None
+    margin = KEY_CHAIN_RATIO if len(rest) >= 3 else KEY_MOTION_RATIO
+    if motion[ranked[0]] <= margin * motion[ranked[1]] and motion[ranked[0]] <= KEY_MAX_TRAVEL_M:
+        return ranked[0]
+    _unclear("key", "least moving", ranked[:2], motion, where)
 
 
 def _held_key(free: list[str], motion: dict[str, float], up_m: Callable[[str], FloatArray],

@@ -16,6 +16,7 @@ from pathlib import Path
 import pytest
 from scipy.optimize import OptimizeResult
 
+from pianobot.analysis.discover import search
 from pianobot.analysis.discover.search import Setting
 from pianobot.analysis.greybox import fitter
 from pianobot.analysis.greybox.fitter import FloatArray, GreyBoxFit, Stall
@@ -86,8 +87,6 @@ def test_a_crawling_base_fit_stops_at_the_same_error(tmp_path: Path, monkeypatch
 def test_a_fit_asked_to_finish_steps_on_central_differences(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A fit steps on forward differences; discovery carries a fit that ran out of budget on to
     its optimum on central ones, and gets no worse for it."""
-    from pianobot.analysis.discover import search
-
     setting, layout = _rest_stop_take(tmp_path)
     kinds: list[bool] = []
     jacobian = GreyBoxFit.jacobian
