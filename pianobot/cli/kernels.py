@@ -9,7 +9,7 @@ this step the first simulated sweep of an installation spends ~6 s compiling, an
 warm; a 24-keystroke discovery 134 s cold, 82 s warm). Each kernel is called here with tiny
 inputs of the types the commands pass, so every specialisation they use is compiled and
 cached: the integrator in each of its 33 model classes (the linear step; the full step in 16
-classes, each with explicit and with implicit dampers) and both block sizes, the simulated
+classes, each with explicit and with implicit dampers) and its three block sizes, the simulated
 world's observation loops, the MIDI readout of the grey-box fitter and the keystroke-log
 importer's assignment.
 """
@@ -49,8 +49,8 @@ def _models() -> list[KeystrokeModel]:
 
 
 def compile_physics() -> int:
-    """The integrator (commanded presses and measured arm traces, 1 and 5 keystrokes: both
-    block sizes), the world's observation and the rig's rest check. Returns the calls made."""
+    """The integrator (commanded presses and measured arm traces, 1, 5 and 9 keystrokes: its
+    three block sizes), the world's observation and the rig's rest check. Returns the calls made."""
     from pianobot.physics._observe_kernel import last_beyond
     from pianobot.physics.simulate import simulate_arm, simulate_presses
     from pianobot.physics.world import World
@@ -61,7 +61,7 @@ def compile_physics() -> int:
     calls = 0
     t = np.linspace(0.0, 0.05, 51)
     for model in _models():
-        for n in (1, 5):
+        for n in (1, 5, 9):
             simulate_presses([press] * n, np.full(n, -40.0), model, duration_s=0.01)
             arm = np.tile(np.minimum(t, 0.02)[None, :] * 0.5, (n, 1))
             for implicit in (False, True):

@@ -99,6 +99,10 @@ LAG_NONE, LAG_FIRST_ORDER, LAG_DELAY = 0.0, 1.0, 2.0
 
 BLOCK = 16  # keystrokes advanced side by side
 SMALL_BLOCK = 4  # the block for a single keystroke (the world's per-trial call)
+#: The compiled block sizes: a call runs the smallest that holds its keystrokes (more than
+#: `BLOCK` run in blocks of `BLOCK`). What a wider block costs against a narrower one depends on
+#: the CPU's vector width (`physics.lanes` measures it); 8 fills one AVX-512 register.
+BLOCKS = (SMALL_BLOCK, 8, BLOCK)
 _HC_REF_M = 1e-3  # Hunt–Crossley reference indentation: stiffness and damping are quoted at 1 mm
 
 
@@ -507,7 +511,5 @@ FULL_FLAGS: tuple[tuple[bool, bool, bool, bool, bool], ...] = tuple(
     for power in (False, True) for hysteresis in (False, True)
     for smooth_stop in (False, True) for cohesive in (False, True) for implicit in (False, True)
 )
-integrate_linear = {b: _make_integrate(b, linear=True) for b in (SMALL_BLOCK, BLOCK)}
-integrate_full = {
-    flags: {b: _make_integrate(b, False, *flags) for b in (SMALL_BLOCK, BLOCK)} for flags in FULL_FLAGS
-}
+integrate_linear = {b: _make_integrate(b, linear=True) for b in BLOCKS}
+integrate_full = {flags: {b: _make_integrate(b, False, *flags) for b in BLOCKS} for flags in FULL_FLAGS}

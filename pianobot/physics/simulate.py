@@ -43,6 +43,7 @@ FloatArray = npt.NDArray[np.float64]
 # lanes, 140 at 64; the same 3,840 presses sorted as a whole: 57 against 85-97).
 BATCH_LANES = K.BLOCK
 SMALL_LANES = K.SMALL_BLOCK  # a call with at most this many keystrokes runs the small kernel
+LANE_BLOCKS = K.BLOCKS  # a call runs the smallest of these that holds its keystrokes
 MAX_STEP_S = 2e-4  # impacts on the keybed (≈ 150 Hz) need at least ~30 steps per period
 SETTLE_S = 0.3  # simulated after the arm is back up, so the key can come to rest
 
@@ -194,7 +195,7 @@ def body_set_m(ep: FloatArray) -> float:
     return share * float(ep[K.E_HYST_SET]) * float(ep[K.E_HYST_YIELD]) / (1.0 - share) if share < 1.0 else 0.0
 
 
-def _kernels(ep: FloatArray) -> dict[int, Any]:
+def kernel_family(ep: FloatArray) -> dict[int, Any]:
     """The compiled kernel family for these effects: a model pays only for what it has (a
     power-law finger, a yielding body, a smooth rest stop, a cohesive skin, implicit dampers),
     and a model without them runs exactly the code it ran before they existed. Implicit dampers
@@ -229,15 +230,20 @@ def _run(
     n_steps = (n_out - 1) * every
     n = kp.shape[0]
     outs = [np.empty((n, n_out)) for _ in range(5)]
-    kernels = _kernels(ep)
+    kernels = kernel_family(ep)
     if ep[K.E_HYST_SHARE] > 0.0:  # a yielding body's kernels
         kp = kp.copy()
         kp[:, K.DIST] += body_set_m(ep)  # the fingertip hangs that much higher above the key
-    # Two compiled block sizes: a few keystrokes should not pay for 16 SIMD lanes.
-    kernel = kernels[K.SMALL_BLOCK if n <= K.SMALL_BLOCK else K.BLOCK]
+    kernel = kernels[block_for(n)]
     kernel(kp, ep, mode, trace_t, trace_x0, t_start, h, n_steps, every, *outs)
     t = np.asarray(t_start + np.arange(n_out) * out_dt_s, dtype=np.float64)
     return SimBatch(t, *outs)
+
+
+def block_for(n: int) -> int:
+    """The compiled block a call of `n` keystrokes runs: the smallest that holds them (a few
+    keystrokes should not pay for 16 SIMD lanes), `BATCH_LANES` beyond."""
+    return next((b for b in K.BLOCKS if n <= b), K.BLOCK)
 
 
 def _vacuum(vacuum_kpa: npt.ArrayLike, n: int) -> FloatArray:

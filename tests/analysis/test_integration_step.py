@@ -138,11 +138,10 @@ def test_a_sharply_stiffening_finger_is_judged_where_it_is_compressed(per_m: flo
 
 
 def _cost(groups: list[np.ndarray], lengths: np.ndarray) -> float:
-    from pianobot.analysis.greybox.prediction import BLOCK_STEP_COST, CALL_COST_STEPS
-    from pianobot.physics.simulate import SMALL_LANES
+    from pianobot.analysis.greybox.prediction import CALL_COST_STEPS, PROPORTIONAL_COSTS
+    from pianobot.physics.simulate import block_for
 
-    return sum((1.0 if g.size <= SMALL_LANES else BLOCK_STEP_COST) * float(lengths[g].max()) + CALL_COST_STEPS
-               for g in groups)
+    return sum(PROPORTIONAL_COSTS[block_for(g.size)] * float(lengths[g].max()) + CALL_COST_STEPS for g in groups)
 
 
 @settings(max_examples=60, deadline=None)

@@ -69,3 +69,24 @@ def test_models_side_by_side_need_the_same_effects() -> None:
     t = np.arange(0.0, 0.2, 1e-3)
     with pytest.raises(ValueError, match="same effects"):
         simulate_arm(t, np.zeros((2, t.size)), -40.0, [study, study.replace(effects=study.effects.with_effect("contact"))])
+
+
+@pytest.mark.parametrize("costs", [{4: 1.0, 8: 8.0, 16: 16.0}, {4: 4.0, 8: 1.0, 16: 16.0}, {4: 4.0, 8: 8.0, 16: 1.0}])
+def test_predictions_do_not_depend_on_the_block_costs_that_group_the_keystrokes(
+        drive: MeasuredArm, costs: dict[int, float], monkeypatch: pytest.MonkeyPatch) -> None:
+    """Costs that make the 4-, the 8- and then the 16-lane block the cheapest group the rows
+    differently (`length_groups`); what this machine measures (`physics.lanes`) may do either."""
+    import pianobot.analysis.greybox.forward as forward
+    from pianobot.analysis.greybox.prediction import length_groups
+    from pianobot.physics.simulate import block_for
+
+    study = KeystrokeModel.study()
+    models = [study, study.replace(msd=dataclasses.replace(study.msd, c1_nspm=study.msd.c1_nspm * 1.01))]
+    reference = drive.predict_many(models)
+    monkeypatch.setattr(forward, "block_costs", lambda *args, **kwargs: costs)
+    cheapest = min(costs, key=lambda block: costs[block])
+    lengths = np.tile(np.arange(1.0, drive.batch.n + 1.0) * 1e4, len(models))
+    assert {block_for(rows.size) for rows in length_groups(lengths, costs)} == {cheapest}
+    for model, prediction, again in zip(models, reference, drive.predict_many(models), strict=True):
+        _same(prediction, again)
+        _same(prediction, drive.predict(model))

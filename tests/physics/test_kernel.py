@@ -81,7 +81,7 @@ def _assert_agree(kp: np.ndarray, ep: np.ndarray, mode: int, trace_t: np.ndarray
     assert np.max(full[2]) > 2e-4 and np.max(np.abs(full[4])) > 0.05
 
 
-@pytest.mark.parametrize("n", [1, 3, 21])  # one small block; two full blocks, one partial
+@pytest.mark.parametrize("n", [1, 3, 6, 21])  # a 4-lane block; an 8-lane one; two 16-lane blocks, one partial
 @pytest.mark.parametrize("profile", ["ramp", "trapezoid"])
 def test_linear_and_full_kernels_agree_on_analytic_presses(n: int, profile: str) -> None:
     rng = np.random.default_rng(n)
@@ -147,7 +147,7 @@ power = full.with_effect("finger_stiffening", form="power")
 models = [KeystrokeModel.study()] + [KeystrokeModel(effects=fx) for fx in (full, power)]
 models += [KeystrokeModel(effects=fx.with_effect("finger_hysteresis")) for fx in (full, power)]
 for model in models:
-    for n in (1, K.BLOCK + 1):  # both block sizes
+    for n in (1, K.SMALL_BLOCK + 1, K.BLOCK + 1):  # every block size (4, 8, 16)
         simulate_presses(presses * n, -40.0, model, duration_s=0.02)
 kinds = {"full": (False, False, False, False, False), "power": (True, False, False, False, False),
          "hysteresis": (False, True, False, False, False), "hysteresis_power": (True, True, False, False, False)}
@@ -159,11 +159,11 @@ print(json.dumps({f"{name}-{b}": [sum(f.stats.cache_hits.values()), sum(f.stats.
 
 
 def test_every_kernel_comes_from_numbas_disk_cache() -> None:
-    """The ten kernels (two block sizes × linear/full/full with a power-law finger/full with a
-    yielding body/both) share one factory; each must be cached.
+    """The fifteen kernels (three block sizes × linear/full/full with a power-law finger/full
+    with a yielding body/both) share one factory; each must be cached.
 
     numba keys a closure's cache entry on its frozen values, so a fresh process (the second
-    run; the first fills the cache if this source changed) loads all ten from disk instead of
+    run; the first fills the cache if this source changed) loads all fifteen from disk instead of
     compiling them, which is what keeps `pianobot` start-up and every test worker fast.
     """
     for _ in range(2):
@@ -171,7 +171,7 @@ def test_every_kernel_comes_from_numbas_disk_cache() -> None:
                               check=True, timeout=600)
     stats = json.loads(done.stdout.strip().splitlines()[-1])
     kinds = ("full", "linear", "power", "hysteresis", "hysteresis_power")
-    assert stats == {f"{kind}-{b}": [1, 0] for kind in kinds for b in (K.SMALL_BLOCK, K.BLOCK)}
+    assert stats == {f"{kind}-{b}": [1, 0] for kind in kinds for b in K.BLOCKS}
 
 
 # A yielding finger body (finger_hysteresis): its own kernel, the others untouched.

@@ -39,6 +39,7 @@ from pianobot.analysis.greybox.prediction import (
     integration_step_s,
     length_groups,
 )
+from pianobot.physics.lanes import block_costs
 from pianobot.physics.model import KeystrokeModel
 from pianobot.physics.piano import PianoParams, on_velocity_from_speed
 from pianobot.physics.simulate import flight_starts, simulate_presses
@@ -160,7 +161,7 @@ class Commanded:
         starts = flight.start_s
         spans = np.maximum(cuts - starts, 0.0)
         traces = []
-        for rows in length_groups(spans / step_s):
+        for rows in length_groups(spans / step_s, block_costs(model, trace=False)):
             duration = float(spans[rows].max())
             with np.errstate(over="ignore", invalid="ignore"):
                 sim = simulate_presses([presses[i] for i in rows], batch.vacuum_kpa[rows], model,

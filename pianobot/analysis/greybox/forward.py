@@ -46,9 +46,7 @@ import numpy.typing as npt
 
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
 from pianobot.analysis.greybox.prediction import (
-    BLOCK_STEP_COST,
     SIM_STEP_S,
-    TRACE_BLOCK_STEP_COST,
     TYPICAL_COMPRESSION_M,
     Prediction,
     integration_step,
@@ -56,9 +54,10 @@ from pianobot.analysis.greybox.prediction import (
 )
 from pianobot.analysis.greybox.stages import KEY_MOTION_THRESHOLD_M, fill_gaps
 from pianobot.physics.effects import Effects
+from pianobot.physics.lanes import block_costs
 from pianobot.physics.model import KeystrokeModel
 from pianobot.physics.msd import MSDParams
-from pianobot.physics.simulate import effect_vector, runs_linear_kernel, simulate_arm
+from pianobot.physics.simulate import effect_vector, simulate_arm
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -185,9 +184,7 @@ class MeasuredArm:
         n = batch.n
         outs = [[np.full(batch.x1_m.shape, np.nan) for _ in range(4 if states else 2)] for _ in models]
         lengths = np.tile((self.lead + self.last + 1) * (dt / step_s), len(models))
-        linear = runs_linear_kernel(models[0].effects) and not implicit
-        cost = BLOCK_STEP_COST if linear else TRACE_BLOCK_STEP_COST
-        for pairs in length_groups(lengths, cost):
+        for pairs in length_groups(lengths, block_costs(models[0], trace=True, implicit=implicit)):
             which, rows = np.divmod(pairs, n)
             n_out = self.lead + int(self.last[rows].max()) + 1
             n_in = min(self.t_sim_s.size, int(math.ceil(n_out * dt / (self.t_sim_s[1] - self.t_sim_s[0]))) + 2)

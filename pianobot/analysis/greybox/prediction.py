@@ -10,13 +10,14 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
 from pianobot.physics.model import KeystrokeModel
-from pianobot.physics.simulate import BATCH_LANES, SMALL_LANES
+from pianobot.physics.simulate import BATCH_LANES, LANE_BLOCKS, SMALL_LANES, block_for
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -69,14 +70,11 @@ SIM_STEP_S = 2e-4
 #: Keystrokes simulated side by side at most (the simulator's SIMD block): rows are grouped by
 #: length (`length_groups`), so short keystrokes are not integrated through the long ones' rest.
 GROUP = BATCH_LANES
-#: What a step of the 16-lane kernel costs against one of the 4-lane kernel, and the cost of a
-#: call of its own, in 4-lane steps. Commanded presses (the arm's profile computed in the lanes):
-#: 1.8x for the linear model, 2.8x with effects; a measured arm trace, the linear model: 2.4x.
-#: A measured arm trace (read per lane from the trace) with effects on the finger or key:
-#: 3.4-5.0x, no cheaper per keystroke than four 4-lane calls, so such a model runs a take's
-#: keystrokes in groups of four of similar length (`TRACE_BLOCK_STEP_COST`).
-BLOCK_STEP_COST = 2.4
-TRACE_BLOCK_STEP_COST = 4.0
+#: What a step of each block costs against one of the 4-lane block when nothing was measured:
+#: proportional to the lanes (no gain from running them side by side). Fits pass the costs
+#: `physics.lanes.block_costs` measures for their kernel on this machine.
+PROPORTIONAL_COSTS: dict[int, float] = {block: block / SMALL_LANES for block in LANE_BLOCKS}
+#: The cost of a call of its own, in 4-lane steps.
 CALL_COST_STEPS = 1000.0
 
 #: The step is kept below these fractions of the model's fastest time scales. Oscillation
@@ -171,26 +169,30 @@ def _steps(model: KeystrokeModel, vacuum_kpa: FloatArray, largest_s: float,
     return explicit, implicit
 
 
-def length_groups(lengths: npt.ArrayLike, block_step_cost: float = BLOCK_STEP_COST) -> list[npt.NDArray[np.intp]]:
+def length_groups(lengths: npt.ArrayLike, block_costs: Mapping[int, float] | None = None) -> list[npt.NDArray[np.intp]]:
     """Rows to simulate together, longest first: every row of a group is integrated as long as
     its longest one, so the rows are split where that costs least.
 
-    `lengths` are the rows' simulated lengths in steps. A group of up to `SMALL_LANES` rows runs
-    the 4-lane kernel, a larger one (up to `GROUP`) the 16-lane kernel at `block_step_cost` per
-    step; each call costs `CALL_COST_STEPS` more. The split is exact (dynamic programming over
-    the rows sorted by length), and a row's samples do not depend on its companions, so only
-    the time changes. A take whose slowest presses last five times its fastest simulates its
-    16 training keystrokes as four groups of four instead of one block of 16 as long as the
-    slowest: 1.3× less time per evaluation on the independent suite's takes.
+    `lengths` are the rows' simulated lengths in steps. A group runs the smallest compiled block
+    that holds it (`physics.simulate.block_for`: 4, 8 or 16 lanes), a step of which costs
+    `block_costs[block]` 4-lane steps (`physics.lanes.block_costs` measures them; default
+    `PROPORTIONAL_COSTS`); each call costs `CALL_COST_STEPS` more. The split is exact (dynamic
+    programming over the rows sorted by length), and a row's samples do not depend on its
+    companions, so only the time changes. A take whose slowest presses last five times its
+    fastest simulates its 16 training keystrokes as four groups of four instead of one block
+    of 16 as long as the slowest: 1.3x less time per evaluation on the independent suite's
+    takes (with the proportional costs).
     """
     n_steps = np.ascontiguousarray(lengths, dtype=np.float64)
+    costs = PROPORTIONAL_COSTS if block_costs is None else block_costs
+    per_size = tuple(float(costs[block_for(size)]) for size in range(1, GROUP + 1))
     # A fit asks again with the same lengths at every evaluation (they change only with the
     # step): the split of 135 rows costs ~1.4 ms, as much as a tenth of an evaluation.
-    return [rows.copy() for rows in _length_groups(n_steps.tobytes(), float(block_step_cost))]
+    return [rows.copy() for rows in _length_groups(n_steps.tobytes(), per_size)]
 
 
 @functools.lru_cache(maxsize=64)
-def _length_groups(lengths: bytes, block_step_cost: float) -> tuple[npt.NDArray[np.intp], ...]:
+def _length_groups(lengths: bytes, per_size: tuple[float, ...]) -> tuple[npt.NDArray[np.intp], ...]:
     n_steps = np.frombuffer(lengths, dtype=np.float64)
     order = np.argsort(-n_steps, kind="stable")
     longest = n_steps[order]
@@ -201,8 +203,7 @@ def _length_groups(lengths: bytes, block_step_cost: float) -> tuple[npt.NDArray[
     for end in range(1, n + 1):
         for size in range(1, min(GROUP, end) + 1):
             start = end - size
-            per_step = 1.0 if size <= SMALL_LANES else block_step_cost
-            cost = best[start] + per_step * longest[start] + CALL_COST_STEPS
+            cost = best[start] + per_size[size - 1] * longest[start] + CALL_COST_STEPS
             if cost < best[end]:
                 best[end], cut[end] = cost, start
     groups = []
