@@ -26,7 +26,7 @@ from pianobot.physics.simulate import effect_vector, kernel_family, simulate_arm
 from pianobot.physics.trajectory import Press
 
 #: The timed run: long enough that a call's fixed cost (~50 µs) is small beside its steps, short
-#: enough that measuring the three blocks, best of `REPEATS`, costs ~10 ms per kernel.
+#: enough that measuring the three blocks, best of `REPEATS`, costs 10-50 ms per kernel.
 DURATION_S = 2.0
 STEP_S = 2e-4
 REPEATS = 5
@@ -50,6 +50,8 @@ def block_costs(model: KeystrokeModel, *, trace: bool, implicit: bool = False) -
 
 
 def _measure(model: KeystrokeModel, trace: bool, implicit: bool) -> dict[int, float]:
+    """Each block's best time over the 4-lane block's, on one press of the finger into the key,
+    made non-decreasing with the lanes and capped at proportional."""
     t = np.arange(0.0, DURATION_S, 1e-3)
     arm = np.clip(0.02 * (t - 0.1), 0.0, 0.018) - np.clip(0.02 * (t - 1.2), 0.0, 0.018)
 
@@ -69,9 +71,8 @@ def _measure(model: KeystrokeModel, trace: bool, implicit: bool) -> dict[int, fl
             start = time.perf_counter()
             run(block)
             best[block] = min(best[block], time.perf_counter() - start)
-    costs, floor = {}, 1.0
+    costs, last = {}, 1.0
     for block in K.BLOCKS:
-        ratio = best[block] / best[K.SMALL_BLOCK]
-        floor = min(max(ratio, floor), block / K.SMALL_BLOCK)
-        costs[block] = floor
+        last = min(max(best[block] / best[K.SMALL_BLOCK], last), block / K.SMALL_BLOCK)
+        costs[block] = last
     return costs
