@@ -7,8 +7,9 @@ The same 500 one-second keystrokes (random depth, speed and vacuum, seed 0) are 
     rtol 1e-6, atol 1e-9), run on the first `--baseline-n` keystrokes and scaled to 500.
 Accuracy is the largest |Δx2| against the same simulator at a 10× finer step, and (linear
 model) against the exact state-space solution. Rates are on one core (no threads are used);
-the JIT compile happens in a warm-up call and is reported separately. The JSON also goes to
-benchmarks/results/simulate.json.
+the JIT compile happens in a warm-up call and is reported separately. The step cost of the
+integrator's 8- and 16-lane blocks against its 4-lane one is measured too (`physics.lanes`: it
+depends on the CPU's vector width). The JSON also goes to benchmarks/results/simulate.json.
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ import numpy as np  # noqa: E402
 from scipy.integrate import solve_ivp  # noqa: E402
 
 from pianobot.physics.effects import Effects  # noqa: E402
+from pianobot.physics.lanes import block_costs  # noqa: E402
 from pianobot.physics.linear import simulate_linear  # noqa: E402
 from pianobot.physics.model import KeystrokeModel  # noqa: E402
 from pianobot.physics.msd import MSDParams  # noqa: E402
@@ -128,6 +130,12 @@ def main() -> dict[str, Any]:
                                    for j, p in enumerate(vacuum)])
                 entry["max_abs_dx2_vs_exact_m"] = float(np.max(np.abs(coarse.x2_m - exact)))
             out["batch"][f"{name}@{step * 1e3:g}ms"] = entry
+
+    # What the 8- and 16-lane blocks cost per step against the 4-lane one on this CPU (what
+    # fits group their keystrokes by: physics.lanes), for commanded presses and arm traces.
+    out["block_step_costs_vs_4_lanes"] = {
+        f"{name}, {'arm trace' if trace else 'commanded'}": block_costs(model, trace=trace)
+        for name, model in models.items() for trace in (False, True)}
 
     t_eval = np.arange(0.0, DURATION_S + 1e-9, 1e-3)
     nb = max(1, min(args.baseline_n, N))
