@@ -20,7 +20,7 @@ from cli_runner import invoke_cli
 from pianobot.analysis.discover.candidates import family_of
 from pianobot.analysis.discover.measured import arm_checks
 from pianobot.analysis.greybox.load import load_keystrokes, read_schedule
-from pianobot.analysis.greybox.split import split_holdout
+from pianobot.analysis.greybox.split import holdout_indices, split_holdout
 from pianobot.analysis.identify.fit import identify_trajectories, rms_x2_m
 from pianobot.errors import InputError
 from pianobot.io.importers import import_keystroke_log, import_mocap
@@ -251,6 +251,25 @@ def test_a_weak_velocity_curve_is_named_once_the_arm_is_in_the_model(
     step = next(c for it in payload["iterations"] for c in it["candidates"]
                 if c["status"] == "accepted" and c["effect"] == "velocity_curve")
     assert step["ratio"] is None or step["ratio"] >= 3.0, step
+
+
+@pytest.mark.slow
+def test_a_log_where_only_the_deepest_presses_sounded_is_fitted_on_sounded_ones(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """A 0.8 N rest stop that only the 40 mm presses of the study's grid overcome. The split held
+    out exactly those (the depth is the grid's innermost loop), so the training half had no
+    sounded keystroke: no fit moved a parameter, and the held-out error stayed at 3.79 MIDI and
+    649 ms of hold. Now the training half has 30 of the 45 sounded ones."""
+    run_id, data, truth, _ = _imported("variant-midi-preload-rest_stop-only-deepest-sound", tmp_path)
+    batch = load_keystrokes([run_id], data).batch
+    sounded = batch.sounded == 1.0
+    assert np.allclose(batch.depth_m[sounded], 0.04) and sounded.sum() == 45
+    train, _ = holdout_indices(batch)
+    assert sounded[train].sum() == 30
+    payload = _discover([run_id, "--data", str(data)], (capsys, monkeypatch))
+    after = payload["gap_after"]
+    assert after["on_velocity"] < 1.0 and after["hold_s"] < 0.02, payload["verdict"]
+    assert set(payload["accepted_effects"]) <= {"key_preload", *truth["always_present"]}
 
 
 @pytest.mark.slow

@@ -265,6 +265,8 @@ VARIANTS: tuple[tuple[str, str, dict[str, Any]], ...] = (
     ("preload-rest_stop-strong-resting", "mocap-key_preload-rest_stop-strong", {"take": asdict(SHALLOW)}),
     ("preload-rest_stop-strong-resting-stiff-key", "mocap-key_preload-rest_stop-strong",
      {"take": asdict(SHALLOW), "base": "stiff-key"}),
+    # A preload only the 40 mm presses overcome: the split's fixed position held out exactly those.
+    ("midi-preload-rest_stop-only-deepest-sound", "midi-key_preload-rest_stop-weak", {"effect": {"preload_n": 0.8}}),
     ("midi-clean-40-keystrokes", "midi-clean-light-finger-0", {"grid": SMALL_GRID}),
     ("midi-clean-other-grid", "midi-clean-stiff-key-1", {"grid": OTHER_GRID}),
     ("midi-velocity_curve-tanh-strong-40-keystrokes", "midi-velocity_curve-tanh-strong", {"grid": SMALL_GRID}),

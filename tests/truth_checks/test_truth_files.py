@@ -138,7 +138,7 @@ def test_a_take_captured_at_240_hz_says_so_and_imports_at_that_rate(tmp_path: Pa
 def test_variants_are_suite_takes_recorded_otherwise() -> None:
     by_name = {s.name: s for s in full_suite()}
     variants = variant_suite()
-    assert len(variants) == len({v.name for v in variants}) == 19
+    assert len(variants) == len({v.name for v in variants}) == 20
     assert {v.frame_rate_hz for v in variants} == {100.0, 120.0, 240.0}
     assert sum(v.effect is None for v in variants) == 7
     # One moves its hidden effect to another finger and key.
