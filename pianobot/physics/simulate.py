@@ -160,6 +160,13 @@ def _model_columns(
     return kp
 
 
+def internal_step_s(out_dt_s: float, step_s: float) -> float:
+    """The step a simulation asked for `step_s` at output period `out_dt_s` takes: the largest
+    divisor of the output period not above `step_s`. Steps asked for that share it give the same
+    numbers (a fit's perturbed models whose time scales moved by a hair run side by side)."""
+    return _grid(out_dt_s, step_s)[0]
+
+
 def _grid(out_dt_s: float, step_s: float) -> tuple[float, int]:
     """Internal step (a divisor of the output step, ≤ step_s ≤ MAX_STEP_S) and outputs per step."""
     if not out_dt_s > 0.0 or not step_s > 0.0:

@@ -5,6 +5,7 @@ is bit for bit what simulating it alone gives."""
 from __future__ import annotations
 
 import dataclasses
+from typing import Any
 
 import numpy as np
 import pytest
@@ -14,7 +15,7 @@ from pianobot.analysis.greybox.fitter import GreyBoxFit
 from pianobot.analysis.greybox.forward import MeasuredArm
 from pianobot.analysis.greybox.layout import base_layout
 from pianobot.analysis.greybox.load import load_keystrokes
-from pianobot.analysis.greybox.prediction import Prediction
+from pianobot.analysis.greybox.prediction import SIM_STEP_S, Prediction, integration_step
 from pianobot.physics.model import KeystrokeModel
 from pianobot.physics.simulate import simulate_arm
 
@@ -41,6 +42,8 @@ def test_models_side_by_side_predict_what_each_predicts_alone(drive: MeasuredArm
         study.replace(msd=dataclasses.replace(study.msd, c1_nspm=study.msd.c1_nspm * 1.01)),
         contact,  # other effects: simulated in a set of its own
         study.replace(msd=dataclasses.replace(study.msd, k2_npm=3e5, c2_nspm=30.0)),  # another step
+        # A hair stiffer: it asks for another step but takes the same one, and runs with those.
+        study.replace(msd=dataclasses.replace(study.msd, k2_npm=3e5 * 1.001, c2_nspm=30.0)),
         contact.replace(msd=dataclasses.replace(study.msd, m1_kg=study.msd.m1_kg * 1.01)),
         study,  # the same model twice
     ]
@@ -49,6 +52,23 @@ def test_models_side_by_side_predict_what_each_predicts_alone(drive: MeasuredArm
     for model, prediction in zip(models, together, strict=True):
         _same(prediction, drive.predict(model))
     assert np.isfinite(together[0].x2_m).any()
+
+
+def test_models_asking_for_steps_a_hair_apart_run_together(drive: MeasuredArm, monkeypatch: pytest.MonkeyPatch) -> None:
+    study = KeystrokeModel.study()
+    stiff = [study.replace(msd=dataclasses.replace(study.msd, k2_npm=3e5 * f, c2_nspm=30.0)) for f in (1.0, 1.001)]
+    asked = [integration_step(m, drive.batch.vacuum_kpa, SIM_STEP_S, drive.compression_m)[0] for m in stiff]
+    assert asked[0] != asked[1] and asked[0] < SIM_STEP_S
+    calls: list[int] = []
+    original = MeasuredArm._simulate
+
+    def counted(self: MeasuredArm, models: Any, *args: Any) -> Any:
+        calls.append(len(models))
+        return original(self, models, *args)
+
+    monkeypatch.setattr(MeasuredArm, "_simulate", counted)
+    drive.predict_many(stiff)
+    assert calls == [2]
 
 
 def test_the_jacobian_is_the_same_with_models_side_by_side(drive: MeasuredArm,

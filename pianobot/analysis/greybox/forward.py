@@ -57,7 +57,7 @@ from pianobot.physics.effects import Effects
 from pianobot.physics.lanes import block_costs
 from pianobot.physics.model import KeystrokeModel
 from pianobot.physics.msd import MSDParams
-from pianobot.physics.simulate import effect_vector, simulate_arm
+from pianobot.physics.simulate import effect_vector, internal_step_s, simulate_arm
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -157,7 +157,7 @@ class MeasuredArm:
 
     def simulate_many(self, models: Sequence[KeystrokeModel], *, states: bool = False) -> list[tuple[FloatArray, ...]]:
         """`simulate` for several models at once (a fit's Jacobian: one model per perturbed
-        parameter). Models with the same effects and integration step run side by side: the
+        parameter). Models with the same effects and internal step run side by side: the
         rows of all of them are grouped by length together, so the simulator's wide blocks
         fill with keystrokes of one length instead of a few of every length in narrow ones.
         Each model's outputs are bit for bit those of `simulate` (a row never depends on its
@@ -165,7 +165,11 @@ class MeasuredArm:
         batch = self.batch
         together: dict[tuple[tuple[float, bool], bytes], list[int]] = {}
         for j, model in enumerate(models):
-            step = integration_step(model, batch.vacuum_kpa, SIM_STEP_S, self.compression_m)
+            step_s, implicit = integration_step(model, batch.vacuum_kpa, SIM_STEP_S, self.compression_m)
+            # Grouped by the step the simulator takes (a divisor of the frame period): a model
+            # whose time scales a perturbation moved by a hair asks for another step but takes
+            # the same one, and runs with the others (the same numbers as alone).
+            step = (internal_step_s(batch.dt_s, step_s), implicit)
             together.setdefault((step, effect_vector(model.effects).tobytes()), []).append(j)
         results: list[tuple[FloatArray, ...]] = [() for _ in models]
         for (step, _), members in together.items():
