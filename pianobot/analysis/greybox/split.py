@@ -42,10 +42,20 @@ def holdout_indices(batch: KeystrokeBatch, every: int = 3, seed: int = 0) -> tup
     return train, test
 
 
+def split_holdout(batch: KeystrokeBatch, every: int = 3, seed: int = 0) -> tuple[KeystrokeBatch, KeystrokeBatch]:
+    """(train, held-out) batches; a batch too small to split is returned as both."""
+    train, test = holdout_indices(batch, every, seed)
+    if test.size == 0:
+        return batch, batch
+    return batch.subset(train), batch.subset(test)
+
+
 def _split(batch: KeystrokeBatch, every: int, seed: int, *, rotate: bool) -> tuple[IntArray, IntArray]:
+    """(train, held-out): one of each group of `every`, at the seed's position, or (`rotate`)
+    moving from one group of differing commands to the next."""
     level = np.abs(batch.vacuum_kpa)
     speed = np.where(np.isfinite(batch.down_velocity_mps), batch.down_velocity_mps, 0.0)
-    command = _commands(batch)
+    command = _commands(batch) if rotate else None
     phase = (every - 1 + seed) % every
     held: list[int] = []
     for p in sorted(set(level.tolist())):
@@ -55,7 +65,7 @@ def _split(batch: KeystrokeBatch, every: int, seed: int, *, rotate: bool) -> tup
         for start in range(0, rows.size, every):
             group = rows[start : start + every]
             position = phase
-            if rotate and not _repetitions(command[group]):
+            if command is not None and not _repetitions(command[group]):
                 position = (phase - _digit_sum(varied, every)) % every
                 varied += 1
             if position < group.size:
@@ -68,14 +78,6 @@ def _starved(batch: KeystrokeBatch, train: IntArray) -> bool:
     """True when the training rows lack an outcome (sounded, silent) that the batch has."""
     known = batch.sounded[np.isfinite(batch.sounded)]
     return any(bool((known == c).any()) and not bool((batch.sounded[train] == c).any()) for c in (0.0, 1.0))
-
-
-def split_holdout(batch: KeystrokeBatch, every: int = 3, seed: int = 0) -> tuple[KeystrokeBatch, KeystrokeBatch]:
-    """(train, held-out) batches; a batch too small to split is returned as both."""
-    train, test = holdout_indices(batch, every, seed)
-    if test.size == 0:
-        return batch, batch
-    return batch.subset(train), batch.subset(test)
 
 
 def _digit_sum(k: int, base: int) -> int:
