@@ -123,8 +123,9 @@ def mocap(
         float, typer.Option(help="Drop markers present on fewer frames (ghosts).")
     ] = 0.5,
     up_axis: Annotated[
-        str, typer.Option("--up-axis", help="Vertical axis of the export (x|y|z).")
-    ] = "y",
+        str, typer.Option("--up-axis", help="Vertical axis of the export (x|y|z); auto: y, or the axis the "
+                          "markers move along when they do not move along y (an export made Z-up).")
+    ] = "auto",
     vacuum_kpa: Annotated[
         float | None,
         typer.Option("--vacuum-kpa", help="Finger vacuum during the take (gauge kPa, <= 0)."),

@@ -20,7 +20,7 @@ from pianobot.errors import InputError
 from pianobot.io.arm_log import arm_samples, read_arm_log
 from pianobot.io.force_log import BurstRule, ForceCalibration, align_to_note_ons, read_force_log
 from pianobot.io.keystroke_import import import_keystroke_log
-from pianobot.io.mocap import MocapTake, read_mocap
+from pianobot.io.mocap import AUTO_AXIS, MocapTake, read_mocap
 from pianobot.io.mocap_align import ClockAlignment, run_arm_trace, starts_offset, xcorr_offset
 from pianobot.io.mocap_segment import rest_level_before, segment_take
 from pianobot.io.run_output import ImportResult, file_sha256, run_dir, trial_ids, write_run
@@ -123,7 +123,7 @@ def import_mocap(
     run_id: str | None = None,
     markers: dict[str, str] | None = None,
     min_coverage: float = 0.5,
-    up_axis: str = "y",
+    up_axis: str = AUTO_AXIS,
     vacuum_kpa: float | None = None,
     progress: Progress = NO_PROGRESS,
     arm_log: Path | str | None = None,
@@ -152,6 +152,8 @@ def import_mocap(
         take = read_mocap(path, markers, min_coverage, up_axis)
     with progress.task("segmenting keystrokes"):
         strokes = segment_take(take)
+    if run_id is None and strokes.empty:
+        raise InputError(_no_keystrokes(take), str(path))
     sha = file_sha256(path)
     meta: dict[str, Any] = {
         "source": {"file": path.name, "sha256": sha, "format": "motive-csv"},
@@ -163,11 +165,12 @@ def import_mocap(
         "stitched": take.stitched,
         "joins": [j.to_dict() for j in take.joins if take.stitched.get(j.chain)],
         "stitch_doubts": list(take.stitch_doubts),
-        "up_axis": up_axis,
+        "up_axis": take.up_axis,
         "vacuum_kpa": vacuum_kpa,
         "skipped_lines": [],
     }
-    extra: dict[str, Any] = {"keystrokes": len(strokes), "roles": take.roles, "stitched": take.stitched}
+    extra: dict[str, Any] = {"keystrokes": len(strokes), "roles": take.roles, "stitched": take.stitched,
+                             "up_axis": take.up_axis}
     if run_id is None:
         trials = _stroke_trials(strokes, sha)
         trials["vacuum_kpa"] = math.nan if vacuum_kpa is None else float(vacuum_kpa)
@@ -214,6 +217,20 @@ def import_mocap(
     return ImportResult(
         new_id, "mocap", len(base), int((base["status"] == "silent").sum()), (), extra, run_dir(data_dir, new_id)
     )
+
+
+def _no_keystrokes(take: MocapTake) -> str:
+    """Why a take gave no keystroke to import, and what to try."""
+    axis = take.up_axis.upper()
+    arm = take.roles.get("arm")
+    if arm is None:
+        why = f"no marker moves along the vertical axis ({axis}) as an arm that presses a key does"
+    else:
+        down = take.down_m("arm")
+        travel = 0.0 if down is None or not np.isfinite(down).any() else float(np.nanmax(down) - np.nanmin(down))
+        why = f"the arm marker {arm} never moves down and back along the vertical axis ({axis}; it spans {1e3 * travel:.2f} mm)"
+    return (f"no keystroke found: {why}; if the export's vertical axis is another one, give --up-axis, "
+            "or name the arm's marker with --marker arm=NAME")
 
 
 #: Recordings "started together" that the arm marker shows this far apart did not: refused.

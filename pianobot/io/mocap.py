@@ -8,7 +8,9 @@ leave it empty). Empty cells are occlusions (NaN). Positions are converted to me
 `Length Units` field. Only positions are read; rotations are not needed for vertical travel.
 
 Vertical axis: Motive is Y-up by default, so the downward displacement of a marker is
-−(Y − Y_rest); `up_axis` selects another axis for a Z-up export.
+−(Y − Y_rest). `up_axis` names another axis; by default (`auto`) it is Y unless no marker moves
+along Y (less than `mocap_roles.STATIC_MOTION_M`, where a keystroke's arm moves millimetres) while
+one does along another axis, as in an export made Z-up: then that axis (`detect_up_axis`).
 
 Motive gives a marker a new ID after an occlusion; the pieces of such a split track are joined
 first (`mocap_tracks`), so a marker seen in three pieces of 40/30/30 % of the frames is one
@@ -37,7 +39,7 @@ import numpy.typing as npt
 import pandas as pd
 
 from pianobot.errors import InputError
-from pianobot.io.mocap_roles import assign_roles
+from pianobot.io.mocap_roles import STATIC_MOTION_M, assign_roles
 from pianobot.io.mocap_tracks import Join, Stitched, Track, stitch
 from pianobot.io.source import read_input_bytes
 
@@ -52,6 +54,7 @@ _UNITS_M = {
 _TYPES = {"Marker", "Rigid Body", "Rigid Body Marker", "Bone", "Bone Marker"}
 _POSITION_TYPES = {"Marker", "Rigid Body", "Rigid Body Marker"}
 _AXES = {"x": 0, "y": 1, "z": 2}
+AUTO_AXIS = "auto"
 
 
 @dataclass(frozen=True)
@@ -102,7 +105,7 @@ def read_mocap(
     path: Path | str,
     markers: dict[str, str] | None = None,
     min_coverage: float = 0.5,
-    up_axis: str = "y",
+    up_axis: str = AUTO_AXIS,
 ) -> MocapTake:
     """Read a Motive CSV export and assign marker roles.
 
@@ -110,15 +113,16 @@ def read_mocap(
         path: the CSV file.
         markers: role → marker name (`arm`, `fingertip`, `key`); missing roles are inferred.
         min_coverage: markers present on fewer frames than this fraction are ghosts and dropped.
-        up_axis: "x", "y" or "z" (Motive default: y).
+        up_axis: "x", "y" or "z", or "auto" (`detect_up_axis`: Motive's default y unless the
+            markers move along another axis only).
 
     Raises:
         InputError: not a Motive CSV export, no position column, an unknown marker or role.
     """
     path = Path(path)
     where = str(path)
-    if up_axis not in _AXES:
-        raise InputError(f"up axis should be one of x, y, z, got {up_axis!r}", "--up-axis")
+    if up_axis not in (*_AXES, AUTO_AXIS):
+        raise InputError(f"up axis should be one of x, y, z or auto, got {up_axis!r}", "--up-axis")
     if not 0.0 <= min_coverage <= 1.0:  # also refuses NaN
         raise InputError(f"must be a fraction of frames in [0, 1], got {min_coverage}", "--min-coverage")
     try:
@@ -163,10 +167,36 @@ def _read_mocap(
                        "x": tr.xyz[:, 0], "y": tr.xyz[:, 1], "z": tr.xyz[:, 2]}) for tr in kept],
         ignore_index=True,
     )  # fmt: skip
+    if up_axis == AUTO_AXIS:
+        up_axis = detect_up_axis(kept)
     take = MocapTake(path, meta, frame_rate, t, long, coverage, {}, up_axis, pieces=stitched.pieces,
                      joins=tuple(stitched.joins), stitch_doubts=_doubts(stitched, kept))  # fmt: skip
     roles = assign_roles([tr.name for tr in kept], take.up_m, markers or {}, stitched.chain_of, where)
     return dataclasses.replace(take, roles=roles)
+
+
+def detect_up_axis(tracks: list[Track]) -> str:
+    """The vertical axis of a take: y (Motive's default) unless no marker moves along y while one
+    moves along another axis (an export made Z-up); then the axis along which one moves most.
+
+    A keystroke moves the arm marker millimetres along the vertical; a marker moving less than
+    `STATIC_MOTION_M` (1st to 99th percentile) is still. Only a take with no motion along y at
+    all is read another way: an arm that also moves sideways (from key to key) must not turn a
+    Y-up take on its side.
+    """
+    motion = {axis: max((_motion(track.xyz[:, i]) for track in tracks), default=0.0) for axis, i in _AXES.items()}
+    if motion["y"] >= STATIC_MOTION_M:
+        return "y"
+    best = max(motion, key=lambda axis: motion[axis])
+    return best if motion[best] >= STATIC_MOTION_M else "y"
+
+
+def _motion(values: FloatArray) -> float:
+    """How far a coordinate moves: its 1st to 99th percentile (0 when it has no samples)."""
+    if values.size == 0:
+        return 0.0
+    low, high = np.percentile(values, [1, 99])
+    return float(high - low)
 
 
 def _doubts(stitched: Stitched, kept: list[Track]) -> tuple[str, ...]:

@@ -38,8 +38,11 @@ def motive_csv(
     seed: int = 0,
     split: dict[str, tuple[float, ...]] | None = None,
     markers: tuple[str, ...] = ("Unlabeled:100", "Unlabeled:101", "Unlabeled:102", "Unlabeled:103"),
+    up: str = "y",
 ) -> Path:
     """A Motive 1.2x export: arm, finger middle, fingertip, key markers (Y up) plus two ghosts.
+
+    `up="z"`: exported Z-up, as Motive's export option writes it (X, −Z, Y of the Y-up take).
 
     `split`: marker -> fractions of the take where Motive lost it for a few frames and gave it a
     new ID (e.g. (0.4, 0.7): pieces of 40, 30 and 30 % of the frames, the later ones named
@@ -77,6 +80,8 @@ def motive_csv(
             present = np.zeros(t.size, bool)
             begin = rng.integers(0, t.size - 30)
             present[begin : begin + 20] = True  # a short ghost track
+        if up == "z":
+            y, z = -z, y
         cuts = (split or {}).get(name, ())
         if not cuts:
             columns.append((name, x * scale, y * scale, z * scale, present))

@@ -103,6 +103,30 @@ def test_mocap_without_run(synthetic_take_path: Path, data_dir: Path) -> None:
     assert first["x0_m"].max() == pytest.approx(0.0072, abs=2e-4)
 
 
+def test_mocap_exported_z_up_gives_the_y_up_takes_keystrokes(tmp_path: Path, data_dir: Path) -> None:
+    speeds, starts = [0.01, 0.03, 0.05], [1.0, 4.0, 7.0]
+    takes = {up: motive_csv(tmp_path / f"{up}.csv", duration_s=10.0, starts_s=starts, speeds_mps=speeds, up=up)
+             for up in ("y", "z")}
+    results = {up: import_mocap(path, data_dir) for up, path in takes.items()}
+    assert {up: r.extra["up_axis"] for up, r in results.items()} == {"y": "y", "z": "z"}
+    runs = {up: load_run(r.run_id, data_dir) for up, r in results.items()}
+    assert runs["z"].meta["up_axis"] == "z"
+    columns = ["down_velocity_mps", "arm_travel_m", "fingertip_travel_m", "key_travel_m", "t_start_s"]
+    pd.testing.assert_frame_equal(runs["z"].trials[columns], runs["y"].trials[columns])
+    positions = ["t_s", "x0_m", "x1_m", "x2_m"]
+    pd.testing.assert_frame_equal(runs["z"].samples[positions], runs["y"].samples[positions])
+
+
+def test_take_without_keystrokes_is_refused_naming_the_axis(tmp_path: Path, data_dir: Path) -> None:
+    z_up = motive_csv(tmp_path / "z.csv", duration_s=10.0, starts_s=[1.0, 4.0], speeds_mps=[0.01, 0.03], up="z")
+    with pytest.raises(InputError, match=r"no keystroke found: no marker moves along the vertical axis \(Y\).*--up-axis"):
+        import_mocap(z_up, data_dir, up_axis="y")
+    still = motive_csv(tmp_path / "still.csv", duration_s=5.0, starts_s=[], speeds_mps=[])
+    with pytest.raises(InputError, match="no keystroke found"):
+        import_mocap(still, data_dir)
+    assert list_runs(data_dir) == []
+
+
 def test_mocap_aligned_to_a_run_makes_a_derived_run(tmp_path: Path, data_dir: Path) -> None:
     speeds = [0.02, 0.03, 0.04, 0.05]
     starts_run = [5.0, 8.0, 11.0, 14.0]
