@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from pianobot.store.journal import BOOKKEEPING_EVENTS, scan_journal
+from pianobot.store.layout import TABLE_NAMES
 
 PART = "part"
 COMPACTED = "compacted"
@@ -130,7 +131,7 @@ def index_journal(path: Path) -> JournalIndex:
             _index_part(index, event)
         elif kind == COMPACTED:
             for name, raw in (event.get("files") or {}).items():
-                record = FileRecord.parse(raw)
+                record = FileRecord.parse(raw) if name in TABLE_NAMES else None
                 if record is not None:
                     index.compacted.setdefault(str(name), []).append(record)
         elif kind in ("done", "failed") and isinstance(event.get("part"), int):
@@ -150,7 +151,8 @@ def _index_part(index: JournalIndex, event: dict[str, Any]) -> None:
     files = event.get("files")
     if not isinstance(batch, int) or not isinstance(files, dict):
         return
-    parsed = {str(n): r for n, raw in files.items() if (r := FileRecord.parse(raw)) is not None}
+    # Only the run's tables: a line a flipped byte left readable may name another ('tr3als').
+    parsed = {str(n): r for n, raw in files.items() if n in TABLE_NAMES and (r := FileRecord.parse(raw)) is not None}
     index.parts[batch] = parsed
     index.lost_batches.discard(batch)  # a batch number written again after a repair
     if isinstance(event.get("copy"), str):

@@ -184,6 +184,25 @@ def test_samples_are_written_once_and_stay_committed_after_compaction(data_dir: 
     assert list(run.trials["trial_id"]) == ids and check_run(run.paths).ok
 
 
+def test_a_journal_line_naming_an_unknown_table_is_checked_not_crashed_on(data_dir: Path) -> None:
+    """A flipped byte that leaves a part line readable JSON (`"tr3als"`; found by the fuzz test):
+    the check and the reader go on with the tables they know."""
+    from pianobot.store import check_run
+
+    writer = _create(data_dir, ["a", "b"])
+    writer.append(_trials(["a", "b"]), _samples(["a", "b"]), _midi(["a", "b"]))
+    writer.close()
+    journal = writer.path / "journal.jsonl"
+    lines = journal.read_text().splitlines()
+    part = next(i for i, line in enumerate(lines) if json.loads(line).get("event") == "part")
+    assert '"trials":' in lines[part]
+    lines[part] = lines[part].replace('"trials":', '"tr3als":', 1)
+    journal.write_text("\n".join(lines) + "\n")
+    report = check_run(RunPaths(writer.path))
+    assert report.files_checked > 0
+    assert sorted(load_run(writer.run_id, data_dir).trials["trial_id"]) == ["a", "b"]
+
+
 def test_a_run_with_samples_parts_of_an_older_pianobot_reads_and_resumes(data_dir: Path) -> None:
     """Samples parts in parts/ (where an older pianobot wrote them) are read and kept."""
     writer = _create(data_dir, ["a", "b"])
