@@ -116,11 +116,15 @@ def read_keystroke_log(
             + (f": {reasons}" if reasons else ""),
             where,
         )
+    _refuse_systematic_skips(parsed, where)
     if parsed.n_named > parsed.n_positional:
         records, layout_name, notes_text = _named(parsed, note_octave, finger)
     else:
         records, layout_name = _positional(parsed, layout, declared, finger, where)
         notes_text = ""
+    if parsed.ignored:
+        ignored = ", ".join(f"{key} ({count} lines)" for key, count in parsed.ignored.items())
+        notes_text = "; ".join(t for t in (notes_text, f"keys besides control and midi ignored: {ignored}") if t)
     trials, midi, summary = assign_events(records, progress)
     skipped = sorted(parsed.skipped + records.skipped, key=lambda s: s.line)
     fingers = Counter(trials["finger"])
@@ -138,6 +142,26 @@ def read_keystroke_log(
         columns=records.columns,
         notes=notes_text,
     )
+
+
+#: Skipped lines outnumber the records and this share of them fails for one reason: refused.
+SYSTEMATIC_SKIP_SHARE = 0.9
+
+
+def _refuse_systematic_skips(parsed: LogLines, where: str) -> None:
+    """InputError when most lines fail for one and the same reason (a format this reader does
+    not know, e.g. MIDI timestamps in seconds): importing the rest would keep only the lines the
+    problem spared (there, the silent keystrokes), a biased session. Lines that fail for
+    different reasons (a damaged file) are reported and the rest imported."""
+    skipped = parsed.skipped
+    if len(skipped) <= len(parsed):
+        return
+    reason, count = Counter(s.reason.split(":")[0] for s in skipped).most_common(1)[0]
+    if count < SYSTEMATIC_SKIP_SHARE * len(skipped):
+        return
+    first = next(s for s in skipped if s.reason.split(":")[0] == reason)
+    raise InputError(f"{len(skipped)} of {len(skipped) + len(parsed)} keystroke lines fail alike (line {first.line}: "
+                     f"{first.reason}); the log is not imported in part", where)
 
 
 def _bounded(lines: Iterator[tuple[int, str]], where: str) -> Iterator[tuple[int, str]]:

@@ -6,9 +6,13 @@
 A line is a *positional* record (a `control` list), a *named* record (named keys and `midi`), a
 *header* (a dict with neither, e.g. `start_position_l`: metadata that also starts a new MIDI
 clock session) or skipped with the reason (line number kept). Lines are parsed with
-`ast.literal_eval` semantics (never `eval`; bare `nan`/`inf` accepted); the common shape goes
-through `json` first, which is ~20x faster and gives the same values, so a log of hundreds of
-thousands of lines reads in seconds. Records are kept in flat arrays, not one object per line.
+`ast.literal_eval` semantics (never `eval`); also accepted, as the scripts that write such logs
+print them: bare `nan`/`inf`, numpy scalars (`np.float64(0.015)`: numpy 2's repr of a value taken
+from an array), Python 2 longs (`468620L`) and whole numbers written as floats (`468620.0`). Keys
+of a positional record besides `control` and `midi` are ignored and listed (`LogLines.ignored`).
+The common shape goes through `json` first, which is ~20x faster and gives the same values, so a
+log of hundreds of thousands of lines reads in seconds. Records are kept in flat arrays, not one
+object per line.
 """
 
 from __future__ import annotations
@@ -16,6 +20,7 @@ from __future__ import annotations
 import ast
 import json
 import math
+import re
 import warnings
 from array import array
 from collections.abc import Iterable
@@ -59,6 +64,7 @@ class LogLines:
     ev_t_ms: array[int] = field(default_factory=lambda: array("q"))
     headers: list[tuple[int, dict[str, Any]]] = field(default_factory=list)
     skipped: list[SkippedLine] = field(default_factory=list)
+    ignored: dict[str, int] = field(default_factory=dict)  # keys of positional records not read: lines
     n_positional: int = 0
     n_named: int = 0
 
@@ -120,9 +126,10 @@ def _add_record(out: LogLines, number: int, value: dict[Any, Any]) -> None:
     events = _events(value.get(MIDI_KEY))
     if CONTROL_KEY in value:
         control = _control(value[CONTROL_KEY])
-        extra = [k for k in value if k not in (CONTROL_KEY, MIDI_KEY)]
-        if extra:
-            raise ValueError(f"a 'control' record with other keys {extra[:3]}")
+        for key in value:
+            if key not in (CONTROL_KEY, MIDI_KEY):
+                name = str(key)
+                out.ignored[name] = out.ignored.get(name, 0) + 1
         out.control.extend(control)
         out.n_control.append(len(control))
         out.n_positional += 1
@@ -165,28 +172,72 @@ def literal(text: str) -> Any:
         except (ValueError, RecursionError):
             pass
     try:
-        with warnings.catch_warnings():  # "invalid escape sequence" in a garbled line is not news
-            warnings.simplefilter("ignore")
-            tree = ast.parse(text, mode="eval")
-    except (SyntaxError, ValueError, MemoryError, RecursionError) as exc:
+        tree = _parse(text)
+    except SyntaxError:
+        if not _PY2_LONG.search(text):
+            raise ValueError("invalid syntax") from None
+        try:
+            tree = _parse(_PY2_LONG.sub(r"\1", text))
+        except SyntaxError as exc:
+            raise ValueError(exc.msg or "invalid syntax") from None
+    except (ValueError, MemoryError, RecursionError) as exc:
         raise ValueError(getattr(exc, "msg", None) or type(exc).__name__) from None
     try:
         return ast.literal_eval(_Floats().visit(tree))
     except (ValueError, TypeError, SyntaxError, MemoryError, RecursionError) as exc:
-        raise ValueError(str(exc).split("\n")[0] or type(exc).__name__) from None
+        text = str(exc).split("\n")[0]
+        if text.startswith("malformed node"):  # literal_eval names an AST object: say what it was
+            text = "holds a call or a name, not a literal value"
+        raise ValueError(text or type(exc).__name__) from None
+
+
+#: A Python 2 long (`468620L`), outside a name or a decimal fraction.
+_PY2_LONG = re.compile(r"(?<![\w.])(\d+)[lL]\b")
+
+
+def _parse(text: str) -> ast.Expression:
+    """The expression tree of one line (SyntaxError when it is none; also ValueError, MemoryError,
+    RecursionError on a garbled or hostile line)."""
+    with warnings.catch_warnings():  # "invalid escape sequence" in a garbled line is not news
+        warnings.simplefilter("ignore")
+        return ast.parse(text, mode="eval")
 
 
 def _no_constant(name: str) -> Any:
     raise ValueError(name)  # JSON's NaN/Infinity are not Python literals: let ast decide
 
 
+#: numpy scalar types whose repr a log written from numpy values holds (`np.float64(0.015)`).
+_NUMPY_SCALARS = frozenset({"float64", "float32", "float16", "double", "single", "longdouble", "int64", "int32",
+                            "int16", "int8", "uint64", "uint32", "uint16", "uint8", "intc", "intp", "longlong",
+                            "str_"})
+_NUMPY_MODULES = frozenset({"np", "numpy"})
+
+
 class _Floats(ast.NodeTransformer):
-    """Turns the names `nan` and `inf` into float constants (nothing else is evaluated)."""
+    """Turns the names `nan` and `inf` into float constants and a numpy scalar's repr
+    (`np.float64(0.015)`, `numpy.int64(60)`) into its argument; nothing is evaluated, and
+    `literal_eval` still refuses any other call."""
 
     def visit_Name(self, node: ast.Name) -> ast.AST:
         if node.id in ("nan", "inf"):
             return ast.copy_location(ast.Constant(float(node.id)), node)
         return node
+
+    def visit_Call(self, node: ast.Call) -> ast.AST:
+        func = node.func
+        if (isinstance(func, ast.Attribute) and isinstance(func.value, ast.Name) and func.value.id in _NUMPY_MODULES
+                and func.attr in _NUMPY_SCALARS and len(node.args) == 1 and not node.keywords):
+            inner: ast.AST = self.visit(node.args[0])
+            return inner
+        return node
+
+
+def _whole(value: Any) -> Any:
+    """A float holding a whole number (`468620.0`) as that int; anything else unchanged."""
+    if type(value) is float and value.is_integer() and abs(value) < 2**53:
+        return int(value)
+    return value
 
 
 def is_number(value: Any) -> bool:
@@ -219,6 +270,7 @@ def _events(value: Any) -> list[tuple[int, int, int, int]]:
             raise ValueError(
                 f"MIDI event {i} is not [[status, note, velocity, 0], timestamp_ms]"
             ) from None
+        status, note, velocity, timestamp = (_whole(v) for v in (status, note, velocity, timestamp))
         if not (
             type(status) is int
             and type(note) is int

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import io
 import os
 import stat
 from collections.abc import Iterator
 from pathlib import Path
+from typing import BinaryIO
 
 from pianobot.errors import InputError
 
@@ -53,11 +55,12 @@ def read_input_bytes(path: Path, kind: str) -> bytes:
 
 
 def text_lines(path: Path, kind: str) -> Iterator[tuple[int, str]]:
-    """The numbered lines (1-based, line ends removed) of a UTF-8 text file, read as a stream.
+    """The numbered lines (1-based, line ends removed) of a text file, read as a stream.
 
-    Memory stays bounded however long the file is. A UTF-8 byte-order mark is dropped. Raises
-    InputError naming the file (and line) when it is missing, unreadable, binary, not UTF-8
-    text, or holds nothing but blank lines.
+    UTF-8 (a byte-order mark dropped), or UTF-16 when the file starts with its byte-order mark
+    (what Windows PowerShell 5 writes for `python script.py > log.txt`). Memory stays bounded
+    however long the file is. Raises InputError naming the file (and line) when it is missing,
+    unreadable, binary, not text in those encodings, or holds nothing but blank lines.
     """
     where = str(path)
     check_input_file(path, kind)
@@ -69,17 +72,36 @@ def text_lines(path: Path, kind: str) -> Iterator[tuple[int, str]]:
         raise InputError(f"cannot read the file ({exc.strerror or exc})", where) from None
     blank = True
     with handle:
-        for number, raw in enumerate(handle, start=1):
-            if b"\x00" in raw:
-                raise InputError(f"not {kind} (binary data on line {number})", where)
-            if number == 1 and raw.startswith(b"\xef\xbb\xbf"):
-                raw = raw[3:]
-            try:
-                text = raw.decode("utf-8")
-            except UnicodeDecodeError:
-                raise InputError(f"not {kind} (line {number} is not UTF-8 text)", where) from None
-            text = text.rstrip("\r\n")
+        utf16 = handle.peek(2)[:2] in (b"\xff\xfe", b"\xfe\xff")
+        for number, text in (_utf16_lines if utf16 else _utf8_lines)(handle, kind, where):
             blank = blank and not text.strip()
             yield number, text
     if blank:
         raise InputError("the file is empty", where)
+
+
+def _utf8_lines(handle: BinaryIO, kind: str, where: str) -> Iterator[tuple[int, str]]:
+    for number, raw in enumerate(handle, start=1):
+        if b"\x00" in raw:
+            raise InputError(f"not {kind} (binary data on line {number})", where)
+        if number == 1 and raw.startswith(b"\xef\xbb\xbf"):
+            raw = raw[3:]
+        try:
+            text = raw.decode("utf-8")
+        except UnicodeDecodeError:
+            raise InputError(f"not {kind} (line {number} is not UTF-8 text)", where) from None
+        yield number, text.rstrip("\r\n")
+
+
+def _utf16_lines(handle: BinaryIO, kind: str, where: str) -> Iterator[tuple[int, str]]:
+    text = io.TextIOWrapper(handle, encoding="utf-16", newline=None)  # its mark gives the byte order
+    number = 0
+    try:
+        for number, line in enumerate(text, start=1):
+            if "\x00" in line:
+                raise InputError(f"not {kind} (binary data on line {number})", where)
+            yield number, line.rstrip("\r\n")
+    except UnicodeDecodeError:
+        raise InputError(f"not {kind} (line {number + 1} is not UTF-16 text)", where) from None
+    finally:
+        text.detach()  # the caller closes the file

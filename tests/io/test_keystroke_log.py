@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import numpy as np
@@ -89,6 +90,33 @@ def test_malformed_lines_are_reported_and_the_rest_imported(tmp_path: Path) -> N
     log = read_keystroke_log(path)
     assert [s.line for s in log.skipped] == [2, 3, 4, 5]
     assert len(log.trials) == 2 and log.trials["source_line"].tolist() == [1, 6]
+
+
+def test_what_other_scripts_write_reads_as_the_plain_log(tmp_path: Path) -> None:
+    lines = [rec([60, 45, 0.5, 0.01 * (i + 1), 0.04, 0.05, 0], [(144, 57, 5 + i, 1000 + 900 * i), (128, 57, 9, 1400 + 900 * i)])
+             for i in range(6)]
+    plain = read_keystroke_log(write(tmp_path, lines))
+    utf16 = tmp_path / "utf16.txt"
+    utf16.write_text("\n".join(lines) + "\n", encoding="utf-16")  # PowerShell 5's `>` redirect
+    whole_floats = [re.sub(r"\], (\d+)\]", r"], \1.0]", line) for line in lines]
+    assert "1000.0]" in whole_floats[0] and "1400.0]" in whole_floats[0]
+    extra_keys = [line[:-1] + ", 'time': 12.5}" for line in lines]
+    for other, name in ((read_keystroke_log(utf16), "utf16"),
+                        (read_keystroke_log(write(tmp_path, whole_floats, "floats.txt")), "floats"),
+                        (read_keystroke_log(write(tmp_path, extra_keys, "extra.txt")), "extra")):
+        assert not other.skipped, name
+        columns = ["on_velocity", "midi_hold_s", "down_velocity_mps", "depth_m", "status"]
+        assert other.trials[columns].equals(plain.trials[columns]), name
+    assert read_keystroke_log(write(tmp_path, extra_keys, "extra.txt")).notes == (
+        "keys besides control and midi ignored: time (6 lines)")
+
+
+def test_a_log_most_of_whose_lines_fail_is_not_imported_in_part(tmp_path: Path) -> None:
+    silent = rec([60, 45, 0.5, 0.01, 0.04, 0.05, 0], [])
+    in_seconds = rec([60, 45, 0.5, 0.02, 0.04, 0.05, 0], [])[:-3] + "[[[144, 57, 5, 0], 1.25]]}"
+    with pytest.raises(InputError, match=r"2 of 3 keystroke lines fail alike \(line 2: MIDI event 0 holds a non-integer"):
+        read_keystroke_log(write(tmp_path, [silent, in_seconds, in_seconds]))
+    assert len(read_keystroke_log(write(tmp_path, [silent, silent, in_seconds], "ok.txt")).trials) == 2
 
 
 def test_double_notes_and_spills_assigned_by_timestamp(tmp_path: Path) -> None:

@@ -44,6 +44,20 @@ def test_nan_and_inf_are_accepted_and_nothing_is_evaluated() -> None:
             literal(bad)
 
 
+def test_numpy_reprs_python2_longs_and_whole_floats_read_as_their_values() -> None:
+    plain = literal("{'control': [60, 45, 0.5, 0.03, 0.04, 0.05, 0], 'midi': [[[144, 57, 1, 0], 468620]]}")
+    written = ("{'control': [np.float64(60.0), numpy.int64(45), np.float64(0.5), np.float32(0.03), 0.04, 0.05, 0],"
+               " 'midi': [[[144, 57, 1, 0], 468620L]]}")
+    value = literal(written)
+    assert value == plain and type(value["midi"][0][1]) is int and type(value["control"][1]) is int
+    assert math.isnan(literal("{'control': [np.float64(nan)]}")["control"][0])
+    assert literal("{'control': [np.float64(-0.5)]}")["control"] == [-0.5]
+    for bad in ("{'a': np.float64(os.system('x'))}", "{'a': np.array([1, 2])}", "{'a': np.float64(1, 2)}",
+                "{'a': 'x'L}"):
+        with pytest.raises(ValueError, match="call or a name|syntax|malformed"):
+            literal(bad)
+
+
 def stepped_move(distance: float, speed: float, accel: float, step: float = 1e-5) -> tuple[float, list[float]]:
     """Duration and positions of a move by stepping accelerate / cruise / brake."""
     x = v = 0.0
