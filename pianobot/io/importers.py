@@ -20,7 +20,7 @@ from pianobot.errors import InputError
 from pianobot.io.arm_log import arm_samples, read_arm_log
 from pianobot.io.force_log import BurstRule, ForceCalibration, align_to_note_ons, read_force_log
 from pianobot.io.keystroke_import import import_keystroke_log
-from pianobot.io.mocap import AUTO_AXIS, MocapTake, read_mocap
+from pianobot.io.mocap import AUTO_AXIS, MocapTake, axis_hint, read_mocap
 from pianobot.io.mocap_align import ClockAlignment, run_arm_trace, starts_offset, xcorr_offset
 from pianobot.io.mocap_segment import rest_level_before, segment_take
 from pianobot.io.run_output import ImportResult, file_sha256, run_dir, trial_ids, write_run
@@ -229,8 +229,8 @@ def _no_keystrokes(take: MocapTake) -> str:
         down = take.down_m("arm")
         travel = 0.0 if down is None or not np.isfinite(down).any() else float(np.nanmax(down) - np.nanmin(down))
         why = f"the arm marker {arm} never moves down and back along the vertical axis ({axis}; it spans {1e3 * travel:.2f} mm)"
-    return (f"no keystroke found: {why}; if the export's vertical axis is another one, give --up-axis, "
-            "or name the arm's marker with --marker arm=NAME")
+    hint = axis_hint(take, take.up_axis) or "; if the export's vertical axis is another one, give --up-axis"
+    return f"no keystroke found: {why}{hint}; or name the arm's marker with --marker arm=NAME"
 
 
 #: Recordings "started together" that the arm marker shows this far apart did not: refused.

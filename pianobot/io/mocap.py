@@ -8,9 +8,8 @@ leave it empty). Empty cells are occlusions (NaN). Positions are converted to me
 `Length Units` field. Only positions are read; rotations are not needed for vertical travel.
 
 Vertical axis: Motive is Y-up by default, so the downward displacement of a marker is
-−(Y − Y_rest). `up_axis` names another axis; by default (`auto`) it is Y unless no marker moves
-along Y (less than `mocap_roles.STATIC_MOTION_M`, where a keystroke's arm moves millimetres) while
-one does along another axis, as in an export made Z-up: then that axis (`detect_up_axis`).
+−(Y − Y_rest). `up_axis` names another axis; by default (`auto`) it is Y unless the markers
+clearly move along another one, as in an export made Z-up: then that axis (`detect_up_axis`).
 
 Motive gives a marker a new ID after an occlusion; the pieces of such a split track are joined
 first (`mocap_tracks`), so a marker seen in three pieces of 40/30/30 % of the frames is one
@@ -55,6 +54,11 @@ _TYPES = {"Marker", "Rigid Body", "Rigid Body Marker", "Bone", "Bone Marker"}
 _POSITION_TYPES = {"Marker", "Rigid Body", "Rigid Body Marker"}
 _AXES = {"x": 0, "y": 1, "z": 2}
 AUTO_AXIS = "auto"
+#: y stays the vertical axis when a marker moves this far along it (`detect_up_axis`): an arm
+#: that presses keys moves millimetres along the vertical (the study's takes: 7 mm and more).
+SURE_VERTICAL_M = 0.003
+#: Otherwise another axis is vertical when the markers move this many times farther along it.
+UP_AXIS_RATIO = 3.0
 
 
 @dataclass(frozen=True)
@@ -151,7 +155,7 @@ def _read_mocap(
         raise InputError("no data rows after the header", where)
     t = data[:, 1] if data.shape[1] > 1 else np.arange(data.shape[0]) / frame_rate
     _refuse_time_going_back(t, where)
-    t = np.where(np.isfinite(t), t, np.arange(data.shape[0]) / frame_rate)
+    t = _filled_times(t, frame_rate)
     stitched = stitch(_tracks(data, columns, scale), t)
     coverage = {track.name: track.frames.size / data.shape[0] for track in stitched.chains}
     kept = [track for track in stitched.chains if coverage[track.name] >= min_coverage]
@@ -171,24 +175,59 @@ def _read_mocap(
         up_axis = detect_up_axis(kept)
     take = MocapTake(path, meta, frame_rate, t, long, coverage, {}, up_axis, pieces=stitched.pieces,
                      joins=tuple(stitched.joins), stitch_doubts=_doubts(stitched, kept))  # fmt: skip
-    roles = assign_roles([tr.name for tr in kept], take.up_m, markers or {}, stitched.chain_of, where)
+    try:
+        roles = assign_roles([tr.name for tr in kept], take.up_m, markers or {}, stitched.chain_of, where)
+    except InputError as exc:
+        raise InputError(exc.message + axis_hint([tr.xyz for tr in kept], up_axis), exc.where) from None
     return dataclasses.replace(take, roles=roles)
 
 
 def detect_up_axis(tracks: list[Track]) -> str:
-    """The vertical axis of a take: y (Motive's default) unless no marker moves along y while one
-    moves along another axis (an export made Z-up); then the axis along which one moves most.
+    """The vertical axis of a take: y (Motive's default) unless the markers clearly move along
+    another one (an export made Z-up); then that axis.
 
-    A keystroke moves the arm marker millimetres along the vertical; a marker moving less than
-    `STATIC_MOTION_M` (1st to 99th percentile) is still. Only a take with no motion along y at
-    all is read another way: an arm that also moves sideways (from key to key) must not turn a
-    Y-up take on its side.
+    The markers' motion along an axis is the sum over them of its 1st to 99th percentile. Another
+    axis is taken only when no marker moves `SURE_VERTICAL_M` along y, and the markers move
+    `UP_AXIS_RATIO` times farther along it: the study's zzz40 exported Z-up moves 24 mm along z
+    (presses) against 3.9 mm along y (the markers' sideways wobble, 1.8 mm at most), while a Y-up
+    take whose arm also moves from key to key keeps y, however far it moves sideways.
     """
-    motion = {axis: max((_motion(track.xyz[:, i]) for track in tracks), default=0.0) for axis, i in _AXES.items()}
-    if motion["y"] >= STATIC_MOTION_M:
-        return "y"
+    motion, along_y = axis_motion([track.xyz for track in tracks])
     best = max(motion, key=lambda axis: motion[axis])
-    return best if motion[best] >= STATIC_MOTION_M else "y"
+    if (best != "y" and along_y < SURE_VERTICAL_M and motion[best] >= UP_AXIS_RATIO * motion["y"]
+            and motion[best] >= STATIC_MOTION_M):
+        return best
+    return "y"
+
+
+def axis_motion(positions: list[FloatArray]) -> tuple[dict[str, float], float]:
+    """How far markers (frames x 3 positions each) move along each axis, summed over them, and
+    the farthest one marker moves along y."""
+    motion = dict.fromkeys(_AXES, 0.0)
+    along_y = 0.0
+    for xyz in positions:
+        for axis, i in _AXES.items():
+            moved = _motion(xyz[:, i])
+            motion[axis] += moved
+            if axis == "y":
+                along_y = max(along_y, moved)
+    return motion, along_y
+
+
+def axis_hint(take_or_positions: MocapTake | list[FloatArray], up_axis: str) -> str:
+    """A hint for an error when the markers move farther along another axis than along the one
+    read as vertical ("" when they do not)."""
+    if isinstance(take_or_positions, MocapTake):
+        markers = take_or_positions.markers
+        positions = [group[["x", "y", "z"]].to_numpy(dtype=np.float64) for _, group in markers.groupby("marker")]
+    else:
+        positions = take_or_positions
+    motion, _ = axis_motion(positions)
+    best = max(motion, key=lambda axis: motion[axis])
+    if best == up_axis or motion[best] < 2.0 * motion[up_axis]:
+        return ""
+    return (f" (the markers move {1e3 * motion[up_axis]:.1f} mm along {up_axis.upper()} and {1e3 * motion[best]:.1f} mm "
+            f"along {best.upper()}: if {best.upper()} is vertical in this export, give --up-axis {best})")
 
 
 def _motion(values: FloatArray) -> float:
@@ -217,6 +256,23 @@ def _tracks(data: npt.NDArray[np.float64], columns: dict[str, dict[str, int]], s
         present = np.flatnonzero(np.isfinite(xyz).all(axis=1))
         tracks.append(Track(name, present.astype(np.int64), xyz[present]))
     return tracks
+
+
+def _filled_times(t: FloatArray, frame_rate_hz: float) -> FloatArray:
+    """Frame times with the missing ones filled: between two known times by the frame count,
+    before the first and after the last at the frame rate (a take exported from a working range
+    starts at its range's time, not at 0)."""
+    known = np.flatnonzero(np.isfinite(t))
+    if known.size == t.size:
+        return t
+    frames = np.arange(t.size, dtype=np.float64)
+    if known.size == 0:
+        return frames / frame_rate_hz
+    filled = np.interp(frames, known, t[known])
+    first, last = known[0], known[-1]
+    filled[:first] = t[first] - (first - frames[:first]) / frame_rate_hz
+    filled[last + 1 :] = t[last] + (frames[last + 1 :] - last) / frame_rate_hz
+    return filled
 
 
 def _refuse_time_going_back(t: FloatArray, where: str) -> None:

@@ -39,10 +39,12 @@ def motive_csv(
     split: dict[str, tuple[float, ...]] | None = None,
     markers: tuple[str, ...] = ("Unlabeled:100", "Unlabeled:101", "Unlabeled:102", "Unlabeled:103"),
     up: str = "y",
+    sideways_m: float = 0.0,
 ) -> Path:
     """A Motive 1.2x export: arm, finger middle, fingertip, key markers (Y up) plus two ghosts.
 
     `up="z"`: exported Z-up, as Motive's export option writes it (X, −Z, Y of the Y-up take).
+    `sideways_m`: halfway through, the arm (and the finger) moves this far along Z, to another key.
 
     `split`: marker -> fractions of the take where Motive lost it for a few frames and gave it a
     new ID (e.g. (0.4, 0.7): pieces of 40, 30 and 30 % of the frames, the later ones named
@@ -72,7 +74,7 @@ def motive_csv(
         if name in heights:
             y = heights[name] - down[name] + rng.normal(0, 3e-6, t.size)
             x = np.full(t.size, 0.1) + rng.normal(0, 3e-6, t.size)
-            z = np.full(t.size, 0.2)
+            z = np.full(t.size, 0.2) + (sideways_m * (t > duration_s / 2) if name != "Unlabeled:103" else 0.0)
             present = np.ones(t.size, bool)
             present[int(t.size * 0.4) : int(t.size * 0.4) + 3] = False  # dropped for all markers
         else:
@@ -123,3 +125,18 @@ def six_press_take(folder: Path) -> Path:
     speeds = [0.01, 0.02, 0.03, 0.04, 0.05, 0.06]
     starts = [1.0 + 3.0 * i for i in range(6)]
     return motive_csv(folder / "take.csv", duration_s=20.0, starts_s=starts, speeds_mps=speeds)
+
+
+def as_z_up(source: Path, target: Path) -> Path:
+    """A Y-up Motive export written again as Motive's Z-up option writes it (X, −Z, Y)."""
+    lines = source.read_text().splitlines()
+    header = next(i for i, line in enumerate(lines) if line.startswith("Frame,"))
+    out = lines[: header + 1]
+    for line in lines[header + 1 :]:
+        cells = line.split(",")
+        for c in range(2, len(cells) - 2, 3):
+            if cells[c + 1] and cells[c + 2]:
+                cells[c + 1], cells[c + 2] = f"{-float(cells[c + 2]):.6f}", cells[c + 1]
+        out.append(",".join(cells))
+    target.write_text("\n".join(out) + "\n")
+    return target

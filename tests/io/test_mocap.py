@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from motive_synth import motive_csv, six_press_take
+from motive_synth import as_z_up, motive_csv, six_press_take
 
 from pianobot.errors import InputError
 from pianobot.io.mocap import read_mocap
@@ -98,3 +98,43 @@ def test_fixture_p50_has_no_key(zhang2022: Path) -> None:
     take = read_mocap(zhang2022 / "data/soft/soft_no_pp/P50.csv")
     assert set(take.roles) == {"arm", "fingertip"}
     assert len(segment_take(take)) == 3
+
+
+def test_fixture_zzz40_exported_z_up_reads_as_exported(zhang2022: Path, tmp_path: Path) -> None:
+    y_up = read_mocap(zhang2022 / "zzz/zzz40.csv")
+    z_up_file = as_z_up(zhang2022 / "zzz/zzz40.csv", tmp_path / "zzz40_z_up.csv")
+    z_up = read_mocap(z_up_file)
+    assert (y_up.up_axis, z_up.up_axis) == ("y", "z") and z_up.roles == y_up.roles
+    assert segment_take(z_up).equals(segment_take(y_up))
+    # Read as Y-up, the markers' sideways wobble is no keystroke: the error says which axis moves.
+    with pytest.raises(InputError, match="along Z: if Z is vertical in this export, give --up-axis z"):
+        read_mocap(z_up_file, up_axis="y")
+
+
+def test_a_y_up_take_whose_arm_also_moves_sideways_stays_y_up(tmp_path: Path) -> None:
+    path = motive_csv(tmp_path / "two_keys.csv", duration_s=12.0, starts_s=[1.0, 4.0, 7.0, 10.0],
+                      speeds_mps=[0.02, 0.04, 0.02, 0.04], sideways_m=0.05)
+    take = read_mocap(path)
+    assert take.up_axis == "y" and take.roles["arm"] == "Unlabeled:100"
+    assert len(segment_take(take)) == 4
+
+
+def test_a_missing_frame_time_is_filled_from_its_neighbours(tmp_path: Path) -> None:
+    """An export of a working range starts at that range's time, not at 0."""
+    path = six_press_take(tmp_path)
+    lines = path.read_text().splitlines()
+    header = next(i for i, line in enumerate(lines) if line.startswith("Frame,"))
+    shifted = [line if i <= header or not line else
+               ",".join([line.split(",")[0], f"{float(line.split(',')[1]) + 10.0:.6f}", *line.split(",")[2:]])
+               for i, line in enumerate(lines)]
+    full = tmp_path / "range.csv"
+    full.write_text("\n".join(shifted) + "\n")
+    blanked = list(shifted)
+    for row in (header + 1, header + 1 + 250, len(lines) - 1):  # first frame, inside a press, last frame
+        cells = blanked[row].split(",")
+        blanked[row] = ",".join([cells[0], "", *cells[2:]])
+    gaps = tmp_path / "gaps.csv"
+    gaps.write_text("\n".join(blanked) + "\n")
+    expected, got = read_mocap(full), read_mocap(gaps)
+    assert got.t_s == pytest.approx(expected.t_s, abs=1e-6) and expected.t_s[0] == pytest.approx(10.0)
+    assert segment_take(got)["t_start_s"].to_numpy() == pytest.approx(segment_take(expected)["t_start_s"].to_numpy())
