@@ -4,13 +4,16 @@ Layout: one header line naming the recorded RTDE outputs, vectors spread over `<
 `<name>_5` (`timestamp,actual_TCP_pose_0,…,actual_TCP_pose_5,…`), then one row per controller
 cycle (125 Hz on a CB3 UR5, 500 Hz on an e-Series). ur_rtde separates the fields with commas;
 the recorder of UR's own RTDE client library (`record.py`) writes the same header with spaces,
-and both are read. `timestamp` is the controller's clock (seconds since it started);
+and both are read, as is a spreadsheet's re-save with semicolons (and decimal commas) or quoted
+names. `timestamp` is the controller's clock (seconds since it started);
 `actual_TCP_pose_2` is the tool point's height in the robot base frame (metres, up).
 
 What is kept: the time from the log's first row, the tool point's downward displacement
 (−z, for pianobot's downward-positive x0) and, when recorded, the controller's target pose
 (`target_TCP_pose_2`: the commanded profile). A last row cut short (the recording stopped
-mid-line) is dropped and counted; any other row that is not numbers is an error naming its line.
+mid-line) is dropped and counted; a row that repeats the one before's timestamp (a recorder
+that wrote the same controller state twice) is dropped and counted; any other row that is not
+numbers, or a timestamp that goes back, is an error naming its line.
 """
 
 from __future__ import annotations
@@ -46,6 +49,7 @@ class ArmLog:
     first_timestamp_s: float  # the controller time of the first row
     rate_hz: float
     dropped_last_row: bool
+    repeated_rows: int = 0  # rows with the timestamp of the row before them, dropped
 
     def meta(self) -> dict[str, object]:
         return {
@@ -56,6 +60,7 @@ class ArmLog:
             "first_timestamp_s": self.first_timestamp_s,
             "target_recorded": self.target_down_m is not None,
             "dropped_last_row": self.dropped_last_row,
+            "repeated_rows": self.repeated_rows,
         }
 
 
@@ -100,29 +105,45 @@ def read_arm_log(path: Path | str) -> ArmLog:
     if len(rows) < MIN_ROWS:
         raise InputError(f"only {len(rows)} rows of arm samples (need at least {MIN_ROWS})", where)
     table = np.asarray(rows, dtype=np.float64)
-    stamps = table[:, 0]
-    steps = np.diff(stamps)
-    if not (steps > 0).all():
-        bad = int(np.argmax(~(steps > 0)))
-        raise InputError(f"the timestamp does not increase ({stamps[bad]:.6f} then {stamps[bad + 1]:.6f})",
+    steps = np.diff(table[:, 0])
+    if (steps < 0).any():
+        bad = int(np.argmax(steps < 0))
+        raise InputError(f"the timestamp goes back ({table[bad, 0]:.6f} then {table[bad + 1, 0]:.6f})",
                          f"{where}:{body[bad + 1][0]}")
+    repeated = np.concatenate([[False], steps == 0])
+    table = table[~repeated]
+    if table.shape[0] < MIN_ROWS:
+        raise InputError(f"only {table.shape[0]} rows of arm samples with distinct timestamps (need at least "
+                         f"{MIN_ROWS})", where)
+    stamps = table[:, 0]
     target = -table[:, 2] if table.shape[1] > 2 else None
     return ArmLog(path, stamps - stamps[0], -table[:, 1], target, float(stamps[0]),
-                  1.0 / float(np.median(steps)), dropped)
+                  1.0 / float(np.median(np.diff(stamps))), dropped, int(repeated.sum()))
 
 
 def _splitter(header: str) -> Callable[[str], list[str]]:
-    """Comma-separated (ur_rtde) or whitespace-separated (UR's record.py) fields."""
-    pattern = re.compile(r"\s*,\s*") if "," in header else re.compile(r"\s+")
+    """Comma-separated (ur_rtde), whitespace-separated (UR's record.py) or semicolon-separated
+    fields (a spreadsheet's re-save, whose numbers may then have decimal commas); quotes around
+    a field are dropped."""
+    if ";" in header:
+        pattern, decimal_comma = re.compile(r"\s*;\s*"), True
+    elif "," in header:
+        pattern, decimal_comma = re.compile(r"\s*,\s*"), False
+    else:
+        pattern, decimal_comma = re.compile(r"\s+"), False
 
     def split(line: str) -> list[str]:
-        return pattern.split(line.strip())
+        fields = [f.strip().strip("\"'") for f in pattern.split(line.strip())]
+        return [f.replace(",", ".") for f in fields] if decimal_comma else fields
 
     return split
 
 
 def _numbers(fields: list[str], wanted: list[int], width: int) -> list[float] | None:
-    """The wanted fields as finite floats, or None when the row is not one of the header's width."""
+    """The wanted fields as finite floats, or None when the row is not one of the header's width
+    (a row that ends in one empty field more, a trailing separator, is of its width)."""
+    if len(fields) == width + 1 and not fields[-1]:
+        fields = fields[:-1]
     if len(fields) != width:
         return None
     try:

@@ -59,10 +59,33 @@ def test_a_last_row_cut_short_by_the_recording_stopping_is_dropped(tmp_path: Pat
     assert log.t_s.size == 15 and log.dropped_last_row
 
 
+def test_what_recorders_and_spreadsheets_write_reads_as_the_recording(tmp_path: Path) -> None:
+    stamps = [2000.0 + 0.008 * k for k in range(30)]
+    z = [0.25 - 0.0003 * k for k in range(30)]
+    plain = read_arm_log(_log(tmp_path / "arm.csv", stamps, z))
+    lines = (tmp_path / "arm.csv").read_text().splitlines()
+    variants = {
+        # A recorder that wrote one controller state twice.
+        "repeated": [*lines[:8], lines[7], lines[7], *lines[8:]],
+        # A European spreadsheet's re-save: semicolons and decimal commas.
+        "semicolons": [line.replace(",", ";").replace(".", ",") for line in lines],
+        "quoted": [",".join(f'"{f}"' for f in lines[0].split(",")), *lines[1:]],
+        "trailing separator": [lines[0], *(line + "," for line in lines[1:])],
+    }
+    for name, text in variants.items():
+        path = tmp_path / f"{name}.csv"
+        path.write_text("\n".join(text) + "\n", encoding="utf-8")
+        log = read_arm_log(path)
+        assert log.t_s == pytest.approx(plain.t_s, abs=1e-9), name
+        assert log.down_m == pytest.approx(plain.down_m, abs=1e-9), name
+        assert log.first_timestamp_s == pytest.approx(plain.first_timestamp_s), name
+    assert read_arm_log(tmp_path / "repeated.csv").repeated_rows == 2 and plain.repeated_rows == 0
+
+
 @pytest.mark.parametrize(("edit", "where", "what"), [
     (lambda lines: ["time,x,y,z", *lines[1:]], ":1", "no column timestamp"),
     (lambda lines: [*lines[:5], lines[5].replace(",0.200000,", ",n/a,"), *lines[6:]], ":6", "expected 13 numbers"),
-    (lambda lines: [*lines[:5], lines[7], lines[6], *lines[8:]], ":7", "does not increase"),
+    (lambda lines: [*lines[:5], lines[7], lines[6], *lines[8:]], ":7", "goes back"),
     (lambda lines: lines[:4], "arm.csv", "only 3 rows"),
     (lambda lines: [], "arm.csv", "empty"),
 ])
