@@ -6,6 +6,8 @@ Reading rules (`read_song`):
 - Times go through the tempo map (every `set_tempo`, in whichever track it sits) to absolute
   seconds; tracks are merged; `--track N` keeps the notes of one track (tempo still applies).
 - Channel 10 (index 9, General MIDI drums) is dropped: it holds no pitches.
+- The written tempo (`Song.tempo_bpm`) is the one in force at the first note; a tempo of 0 is refused.
+- A key signature mido cannot decode (8 sharps) is kept as an unknown meta event: it changes no note.
 - A `note_on` with velocity 0 is a note-off.
 - Overlapping notes of the same pitch on one channel: a new `note_on` while the key sounds
   re-strikes it — the earlier note ends at the new onset (a key cannot sound twice), and the
@@ -78,6 +80,7 @@ class Melody:
     chords: int  # onsets where several notes started together (only one kept)
     dropped: int  # notes removed: under a chord's chosen note or under a sounding melody note
     shortened: int  # melody notes cut short because the next melody note starts earlier
+    lead_in_s: float = 0.0  # silence before the first note, skipped (`without_lead_in`)
 
     @property
     def warnings(self) -> tuple[str, ...]:
@@ -90,7 +93,18 @@ class Melody:
             )
         if self.shortened:
             out.append(f"shortened {self.shortened} overlapping melody note(s) to the next onset")
+        if self.lead_in_s:
+            out.append(f"the first note comes {self.lead_in_s:.1f} s into the song: the silence before it is skipped")
         return tuple(out)
+
+    def without_lead_in(self, longest_s: float) -> Melody:
+        """The line started at its first note when the silence before it is longer than
+        `longest_s` (a robot waiting out a long silence plays nothing the better for it)."""
+        first = self.notes[0].onset_s if self.notes else 0.0
+        if first <= longest_s:
+            return self
+        notes = tuple(replace(n, onset_s=n.onset_s - first, offset_s=n.offset_s - first) for n in self.notes)
+        return replace(self, notes=notes, lead_in_s=self.lead_in_s + first)
 
 
 def read_song(
@@ -110,8 +124,6 @@ def read_song(
     Raises:
         InputError: missing file, not a MIDI file, a type-2 file, a bad option value.
     """
-    import mido
-
     source = Path(path)
     where = str(source)
     if not (math.isfinite(tempo_scale) and tempo_scale > 0):
@@ -122,10 +134,9 @@ def read_song(
     if size > MAX_SONG_BYTES:
         raise InputError(f"is {size / 2**20:.0f} MB; a song file is read up to "
                          f"{MAX_SONG_BYTES >> 20} MB", where)
-    try:
-        mid = mido.MidiFile(source)
-    except (OSError, EOFError, ValueError, KeyError, IndexError) as exc:
-        raise InputError(f"not a standard MIDI file ({type(exc).__name__}: {exc})", where) from None
+    if size == 0:
+        raise InputError("not a standard MIDI file (the file is empty)", where)
+    mid = _midi_file(source)
     if mid.type == 2:
         raise InputError(
             "type-2 MIDI file (independent sequences without a shared time axis) is not supported; "
@@ -141,6 +152,10 @@ def read_song(
             f"ticks per beat should be > 0, got {mid.ticks_per_beat} (SMPTE timing is not supported)",
             where,
         )
+    stalled = next((i for i, trk in enumerate(mid.tracks) for msg in trk
+                    if getattr(msg, "type", "") == "set_tempo" and int(msg.tempo) <= 0), None)
+    if stalled is not None:
+        raise InputError(f"track {stalled} sets a tempo of 0 µs per beat (time would stand still)", where)
     n_notes = sum(1 for trk in mid.tracks for msg in trk
                   if getattr(msg, "type", "") == "note_on" and getattr(msg, "velocity", 0) > 0)
     if n_notes > MAX_SONG_NOTES:
@@ -180,6 +195,36 @@ def read_song(
     )
 
 
+#: A key signature meta event's type byte (`FF 59`).
+KEY_SIGNATURE = 0x59
+
+
+def _midi_file(source: Path) -> Any:
+    """The file as mido reads it; a key signature mido cannot decode (8 sharps: notation programs
+    write such) is kept as an unknown meta event, since it changes no note."""
+    import mido
+    from mido.midifiles import meta
+
+    where = str(source)
+    try:
+        try:
+            return mido.MidiFile(source)
+        except meta.KeySignatureError:
+            specs = getattr(meta, "_META_SPECS", None)
+            if not isinstance(specs, dict) or KEY_SIGNATURE not in specs:
+                raise
+            spec = specs.pop(KEY_SIGNATURE)
+            try:
+                return mido.MidiFile(source)
+            finally:
+                specs[KEY_SIGNATURE] = spec
+    except EOFError:
+        raise InputError("not a standard MIDI file (it ends inside a chunk: truncated?)", where) from None
+    except (OSError, ValueError, KeyError, IndexError, meta.KeySignatureError) as exc:
+        detail = f"{type(exc).__name__}: {exc}" if str(exc) else f"{type(exc).__name__}: a malformed chunk or event"
+        raise InputError(f"not a standard MIDI file ({detail})", where) from None
+
+
 def _notes(mid: Any, tempo_scale: float) -> tuple[list[Note], dict[str, int], int]:
     """Pair note events of all tracks on the seconds axis of the (merged) tempo map."""
     tracks = mid.tracks
@@ -195,9 +240,13 @@ def _notes(mid: Any, tempo_scale: float) -> tuple[list[Note], dict[str, int], in
     events.sort(key=lambda e: (e[0], _rank(e[3]), e[1], e[2]))
     counts = {"drums": 0, "restruck": 0, "unterminated": 0, "zero_length": 0}
     tempo_us = DEFAULT_TEMPO_US
-    first_tempo_us: int | None = None
+    first_tempo_us: int | None = None  # the tempo in force at the first note
     last_tick, t_s = 0, 0.0
     open_notes: dict[tuple[int, int, int], tuple[float, int]] = {}  # (track, ch, pitch) → (on, vel)
+    # Note-offs that found no sounding note, by key: (tick, order in the track). One written after
+    # a note-on of its tick ends that note at once (a zero-length note, dropped): offs are sorted
+    # before ons of a tick for legato repeats, so it came first.
+    unmatched_offs: dict[tuple[int, int, int], list[tuple[int, int]]] = {}
     notes: list[Note] = []
 
     def close(key: tuple[int, int, int], end_s: float) -> None:
@@ -207,7 +256,7 @@ def _notes(mid: Any, tempo_scale: float) -> tuple[list[Note], dict[str, int], in
             return
         notes.append(Note(key[2], on_s, end_s, velocity, track=key[0], channel=key[1]))
 
-    for tick, index, _, msg in events:
+    for tick, index, order, msg in events:
         t_s += (tick - last_tick) * tempo_us / 1e6 / ticks_per_beat / tempo_scale
         last_tick = tick
         if msg is None:
@@ -218,8 +267,6 @@ def _notes(mid: Any, tempo_scale: float) -> tuple[list[Note], dict[str, int], in
         kind = getattr(msg, "type", "")
         if kind == "set_tempo":
             tempo_us = int(msg.tempo)
-            if first_tempo_us is None and tick == 0:
-                first_tempo_us = tempo_us
             continue
         if kind not in ("note_on", "note_off"):
             continue
@@ -230,12 +277,22 @@ def _notes(mid: Any, tempo_scale: float) -> tuple[list[Note], dict[str, int], in
             continue
         key = (index, channel, pitch)
         if kind == "note_on" and velocity > 0:
+            offs = unmatched_offs.get(key, [])
+            later = next((off for off in offs if off[0] == tick and off[1] > order), None)
+            if later is not None:
+                offs.remove(later)
+                counts["zero_length"] += 1
+                continue
             if key in open_notes:
                 counts["restruck"] += 1
                 close(key, t_s)
+            if first_tempo_us is None:
+                first_tempo_us = tempo_us
             open_notes[key] = (t_s, velocity)
         elif key in open_notes:
             close(key, t_s)
+        else:
+            unmatched_offs.setdefault(key, []).append((tick, order))
     notes.sort(key=lambda n: (n.onset_s, n.pitch))
     return notes, counts, first_tempo_us or _first_tempo(events) or DEFAULT_TEMPO_US
 

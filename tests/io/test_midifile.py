@@ -67,6 +67,68 @@ def test_drums_velocity_zero_and_restrike(tmp_path: Path) -> None:
     assert any("re-strike" in w for w in song.warnings)
 
 
+def test_zero_length_notes_are_dropped_and_legato_repeats_kept(tmp_path: Path) -> None:
+    messages = [
+        on(60, 0), off(60, 0),  # zero length: its note-off follows at the same tick
+        on(62, 240), off(62, 240),
+        on(62, 0), off(62, 240),  # a legato repeat: the note-off of one, the note-on of the next
+        on(64, 0), off(64, 0),  # zero length again
+        on(65, 240), off(65, 240),
+    ]
+    song = read_song(_file(tmp_path / "z.mid", [messages], type_=0))
+    assert [(n.pitch, round(n.onset_s, 4), round(n.offset_s, 4)) for n in song.notes] == [
+        (62, 0.25, 0.5), (62, 0.5, 0.75), (65, 1.0, 1.25)]
+    assert "dropped 2 zero-length note(s)" in song.warnings
+
+
+def test_the_written_tempo_is_the_one_in_force_at_the_first_note(tmp_path: Path) -> None:
+    notes = [on(60, 0), off(60, 480), on(62, 0), off(62, 480)]
+    two_at_zero = [mido.MetaMessage("set_tempo", tempo=500_000, time=0),
+                   mido.MetaMessage("set_tempo", tempo=750_000, time=0)]  # 120 then 80 bpm
+    song = read_song(_file(tmp_path / "a.mid", [two_at_zero, notes]))
+    assert song.tempo_bpm == pytest.approx(80.0) and song.notes[1].onset_s == pytest.approx(0.75)
+    later = [mido.MetaMessage("set_tempo", tempo=1_000_000, time=960)]  # 120 bpm (default), then 60
+    song = read_song(_file(tmp_path / "b.mid", [later, notes]))
+    assert song.tempo_bpm == pytest.approx(120.0) and song.notes[1].onset_s == pytest.approx(0.5)
+
+
+def test_a_key_signature_mido_cannot_decode_changes_no_note(tmp_path: Path) -> None:
+    path = _file(tmp_path / "k.mid", [[mido.MetaMessage("key_signature", key="C", time=0), on(60, 0), off(60, 480)]],
+                 type_=0)
+    data = path.read_bytes()
+    at = data.index(bytes([0xFF, 0x59, 0x02]))
+    path.write_bytes(data[: at + 3] + bytes([8, 0]) + data[at + 5 :])  # 8 sharps, as some notation programs write
+    with pytest.raises(mido.midifiles.meta.KeySignatureError):
+        mido.MidiFile(path)
+    assert [n.pitch for n in read_song(path).notes] == [60]
+
+
+def test_a_tempo_of_zero_is_refused_naming_its_track(tmp_path: Path) -> None:
+    conductor = [mido.MetaMessage("set_tempo", tempo=0, time=0)]
+    with pytest.raises(InputError, match="track 0 sets a tempo of 0"):
+        read_song(_file(tmp_path / "t0.mid", [conductor, [on(60, 0), off(60, 480)]]))
+
+
+def test_a_long_silence_before_the_first_note_is_skipped_for_the_robot(tmp_path: Path) -> None:
+    from pianobot.play.session import MAX_LEAD_IN_S, load_song
+
+    path = _file(tmp_path / "late.mid", [[on(60, 480 * 60), off(60, 480), on(62, 0), off(62, 480)]], type_=0)
+    song, line = load_song(path)
+    assert song.notes[0].onset_s == pytest.approx(30.0)  # the file as written
+    assert [(n.pitch, round(n.onset_s, 6)) for n in line.notes] == [(60, 0.0), (62, 0.5)]
+    assert line.lead_in_s == pytest.approx(30.0) and any("30.0 s into the song" in w for w in line.warnings)
+    short = _file(tmp_path / "soon.mid", [[on(60, 480), off(60, 480)]], type_=0)
+    assert load_song(short)[1].notes[0].onset_s == pytest.approx(0.5) and 0.5 < MAX_LEAD_IN_S  # kept as written
+
+
+def test_a_song_left_without_notes_says_why(tmp_path: Path) -> None:
+    from pianobot.play.session import load_song
+
+    path = _file(tmp_path / "zero.mid", [[on(60, 0), off(60, 0), on(62, 0), off(62, 0)]], type_=0)
+    with pytest.raises(InputError, match=r"no playable notes \(dropped 2 zero-length note\(s\)\)"):
+        load_song(path)
+
+
 def test_unplayable_pitches_are_reported(tmp_path: Path) -> None:
     path = _file(tmp_path / "u.mid", [[on(100, 0), off(100, 480), on(60, 0), off(60, 480)]], type_=0)
     song = read_song(path, transpose=12)
@@ -77,7 +139,8 @@ def test_unplayable_pitches_are_reported(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize(("content", "match"), [
     (b"this is not a MIDI file", "not a standard MIDI file"),
-    (b"", "not a standard MIDI file"),
+    (b"", r"not a standard MIDI file \(the file is empty\)"),
+    (b"MThd\x00\x00\x00\x06\x00\x00\x00\x01\x01\xe0MTrk\x00\x00\x00\x10\x00\x90", "truncated"),
 ])
 def test_bad_files(tmp_path: Path, content: bytes, match: str) -> None:
     path = tmp_path / "bad.mid"
