@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
+import numpy as np
 import pandas as pd
 
 from pianobot.analysis.learn.files import load_predictor
@@ -145,15 +146,21 @@ def _load_rig(rig: str | Path) -> RigSpec:
     return load_rig(rig)
 
 
+#: Silence before a song's first note longer than this is skipped (seconds on the song clock).
+MAX_LEAD_IN_S = 2.0
+
+
 def load_song(path: Path, *, tempo_scale: float = 1.0, transpose: int = 0, track: int | None = None,
               rule: str = "highest") -> tuple[Song, Melody]:
     """Read a song and reduce it to one finger's melody; InputError if nothing is playable."""
     song = read_song(path, tempo_scale=tempo_scale, transpose=transpose, track=track)
     line = melody(song.notes, rule=rule)
     if not line.notes:
-        detail = f" ({len(song.unplayable)} outside the piano's keys)" if song.unplayable else ""
+        reasons = [f"{len(song.unplayable)} outside the piano's keys"] if song.unplayable else []
+        reasons += [w for w in song.warnings if "outside the piano" not in w]
+        detail = f" ({'; '.join(reasons)})" if reasons else ""
         raise InputError(f"the song has no playable notes{detail}", str(path))
-    return song, line
+    return song, line.without_lead_in(MAX_LEAD_IN_S)
 
 
 def play_song(
@@ -221,6 +228,7 @@ def play_song(
         model = None
         if not context.used:
             tell(context.describe())
+    predictor: StrokePredictor | None = None
     if planner == "naive":
         plan = plan_naive(line.notes, settings, rig_spec, tempo=request, written_bpm=song.tempo_bpm)
         label, strokes = "none (naive: 0.001·v m/s)", 0
@@ -263,7 +271,27 @@ def play_song(
                    seed=seed, world=world, progress=progress, on_warning=tell) as performer:
         if design:
             survey, survey_s = performer.warm_up(design)
-            focus = design_warmup([n.pitch for n in line.notes], plan.geometry, levels, settings,  # type: ignore[arg-type]
+            tables, excluded = plan.tables, set[float]()
+            while predictor is not None:  # a level this piano never sounds at: plan without it
+                deaf = {lv for lv in levels if _heard(survey, lv) < MIN_HEARD_PER_LEVEL} - excluded
+                usable = {lv: t for lv, t in tables.items() if lv not in excluded | deaf}
+                if not deaf or not usable:
+                    break
+                excluded |= deaf
+                plan = plan_model(line.notes, predictor, settings, rig_spec, dynamics=mode, tables=usable,
+                                  tempo=request, written_bpm=song.tempo_bpm, context=context)
+                more_levels = [lv for lv in sorted({float(v) for v in plan.played["vacuum_kpa"]}) if lv not in levels]
+                if not more_levels:
+                    break
+                tell(f"the warm-up heard no note at {', '.join(f'{d:g}' for d in sorted(deaf))} kPa: it warms up at "
+                     f"{', '.join(f'{lv:g}' for lv in more_levels)} kPa too")
+                more = design_warmup([n.pitch for n in line.notes], plan.geometry, more_levels, settings,  # type: ignore[arg-type]
+                                     rig_spec, strokes_per_level=strokes, song_key=song_key, start=len(design))
+                extra, extra_s = performer.warm_up(more)
+                design, levels = design + more, levels + more_levels
+                survey, survey_s = pd.concat([survey, extra], ignore_index=True), survey_s + extra_s
+            heard = [lv for lv in levels if _heard(survey, lv) >= MIN_HEARD_PER_LEVEL] or levels
+            focus = design_warmup([n.pitch for n in line.notes], plan.geometry, heard, settings,  # type: ignore[arg-type]
                                   rig_spec, strokes_per_level=strokes, song_key=song_key, survey=survey)
             mapped, mapped_s = performer.warm_up(focus) if focus else (survey.iloc[:0], 0.0)
             rows = pd.concat([survey, mapped], ignore_index=True)
@@ -291,6 +319,16 @@ def play_song(
     files = _write_outputs(performance, target, score, plan, plot, label, warm)
     warnings = (*song.warnings, *line.warnings, *plan.warnings)
     return PlayResult(song, line, plan, performance, score, warnings, files, label, warm, prior)
+
+
+#: A level whose survey heard fewer notes than this is one the warm-up cannot learn (`fit_warmup`).
+MIN_HEARD_PER_LEVEL = 3
+
+
+def _heard(survey: pd.DataFrame, level: float) -> int:
+    """How many notes the warm-up heard at a vacuum level."""
+    at = survey[np.isclose(survey["vacuum_kpa"].to_numpy(float), level)]
+    return int((at["status"] == "ok").sum())
 
 
 def _sequence_context(model: Path | StrokePredictor | SongContext | None, planner: str,

@@ -51,7 +51,7 @@ def survey_size(strokes_per_level: int) -> int:
 
 def design_warmup(pitches: Sequence[int], geometry: StrokeGeometry, levels_kpa: Sequence[float],
                   settings: PlaySettings, rig: RigSpec, *, strokes_per_level: int, song_key: str,
-                  survey: pd.DataFrame | None = None) -> list[Trial]:
+                  survey: pd.DataFrame | None = None, start: int | None = None) -> list[Trial]:
     """One pass of the warm-up keystrokes, level by level (the regulator settles once per level).
 
     Without `survey`: the first pass, `survey_size` down velocities spread geometrically over
@@ -59,7 +59,8 @@ def design_warmup(pitches: Sequence[int], geometry: StrokeGeometry, levels_kpa: 
     and the lead like its inverse, so equal ratios see equal changes). With the first pass's
     trials rows as `survey`: the rest of the strokes, geometrically over the speeds where the
     loudness changed (`useful_speeds`). Each stroke is on one of the song's keys in turn (the
-    most frequent first); every other one holds the key.
+    most frequent first); every other one holds the key. `start`: the first keystroke's index
+    (default: after the survey, or 0), for a first pass at more levels after an earlier one.
     """
     if strokes_per_level <= 0:
         return []
@@ -70,7 +71,8 @@ def design_warmup(pitches: Sequence[int], geometry: StrokeGeometry, levels_kpa: 
     for p in pitches:
         counts[int(p)] = counts.get(int(p), 0) + 1
     keys = sorted(counts, key=lambda p: (-counts[p], p)) or [60]
-    start = 0 if survey is None else len(survey)
+    if start is None:
+        start = 0 if survey is None else len(survey)
     trials: list[Trial] = []
     for level in levels_kpa:
         if survey is None:

@@ -101,6 +101,44 @@ def test_the_lab_time_estimate_matches_the_warm_up_on_the_sim_rig(song_files: di
     print(f"warm-up lab time {result.warmup.lab_time_s:.1f} s, estimated {estimate:.1f} s")
 
 
+def test_a_song_at_one_loudness_plays_by_default(tmp_path: Path) -> None:
+    """Every note at velocity 80, as a notation program exports a score without dynamics. The
+    plan puts it all at one vacuum level (the middle of the reachable loudness); where this piano
+    never sounds at that level (the default world at -40 kPa), the warm-up moves on to the level
+    the plan then takes instead of giving up."""
+    from pianobot.io.midifile import Note, write_song
+    from pianobot.play import play_song
+
+    notes = [Note(60 + (i % 5), 0.5 * i, 0.5 * i + 0.4, 80) for i in range(10)]
+    song = write_song(tmp_path / "even.mid", notes, tempo_bpm=120)
+    heard: list[str] = []
+    result = play_song(song, data_dir=tmp_path / "data", seed=0, on_warning=heard.append)
+    assert result.score is not None and result.performance is not None and result.warmup is not None
+    assert result.score.f1 >= 0.9 and result.score.notes_played == len(notes)
+    velocities = np.array([n.velocity for n in result.performance.notes], dtype=float)
+    assert velocities.std() <= 2.0  # played evenly
+    moved = [w for w in heard if "warm-up heard no note" in w]
+    print(f"F1 {result.score.f1:.2f}, velocities {velocities.mean():.1f} ± {velocities.std():.1f}; {moved}")
+
+
+def test_a_hold_map_is_not_warm_started_from_a_map_of_other_inputs() -> None:
+    """A warm-up over two vacuum levels: the hold map sees (speed, vacuum, hold), the lead map it
+    used to start from only (speed, vacuum); the Gaussian process raised on the mismatch."""
+    from pianobot.analysis.learn.training import LearnedPredictor, training_set
+
+    rng = np.random.default_rng(0)
+    n = 24
+    speed = np.geomspace(0.01, 0.06, n)
+    frame = pd.DataFrame({"down_velocity_mps": np.log(speed), "vacuum_kpa": np.repeat([-60.0, -80.0], n // 2),
+                          "hold_s": np.tile([0.0, 0.1], n // 2), "status": "ok",
+                          "on_velocity": 200 * speed + rng.normal(0, 0.5, n), "t_on_s": 0.01 / speed,
+                          "midi_hold_s": 0.2 + rng.normal(0, 0.01, n)})
+    lead = LearnedPredictor("gp").fit(training_set(frame.assign(hold_s=0.0, midi_hold_s=np.nan)))
+    hold = LearnedPredictor("gp").fit(training_set(frame), warm=lead)
+    assert tuple(hold.inputs_) != tuple(lead.inputs_)
+    assert np.isfinite(hold.predict(frame)["midi_hold_s"]).all()
+
+
 @pytest.mark.parametrize(("velocities", "expected"), [
     ([math.nan, math.nan, math.nan, math.nan], (0.01, 0.5)),  # heard nothing: everything
     ([5.0, 5.0, 5.0, 5.0], (0.01, 0.5)),  # one loudness: everything

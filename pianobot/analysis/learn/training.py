@@ -116,8 +116,11 @@ class LearnedPredictor:
 
         `warm`: a predictor of the same kind fitted before (e.g. on all the data) whose
         hyperparameters start this fit's optimiser — cross-validation folds converge in a few
-        steps instead of searching from scratch.
+        steps instead of searching from scratch. Only a fit on the same inputs starts one (a
+        warm-up's hold map sees the arm's hold besides what its loudness map saw).
         """
+        if warm is not None and tuple(getattr(warm, "inputs_", ())) != tuple(data.inputs):
+            warm = None
         self.inputs_ = data.inputs
         self.ranges_ = data.ranges
         self.defaults_ = data.defaults
