@@ -7,6 +7,7 @@ import re
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 from _synthetic_runs import linear_keystrokes, linear_sweep
 
@@ -163,6 +164,19 @@ def test_batch_keeps_each_keystrokes_frames_and_its_gap(hover_sweep: tuple[Path,
     assert np.all(keystroke_batch(stored.samples, trials).distance_m == 0.0)
     trials = stored.trials.assign(distance_m=np.nan)
     assert np.all(keystroke_batch(stored.samples, trials).distance_m == 0.0)
+
+
+def test_runs_with_and_without_an_arm_log_are_driven_by_the_marker_they_share() -> None:
+    """A sweep's run logs the arm, an imported take has only the mocap arm marker: identified
+    together, every keystroke is driven by the marker (the arm log would leave the take out)."""
+    trials, samples = linear_keystrokes(TRUTH, seed=3)
+    half = set(trials["trial_id"].iloc[: len(trials) // 2])
+    logged = samples[samples["trial_id"].isin(half)].assign(source="arm", x1_m=np.nan, x2_m=np.nan)
+    both = pd.concat([samples, logged], ignore_index=True)
+    batch = keystroke_batch(both, trials)
+    assert batch.n == len(trials) and batch.arm_source == "mocap"
+    only_logged = keystroke_batch(pd.concat([samples[samples["trial_id"].isin(half)], logged]), trials)
+    assert only_logged.arm_source == "arm" and only_logged.n == len(half)
 
 
 def test_recovers_linear_parameters_within_tolerance() -> None:

@@ -135,6 +135,8 @@ def load_keystrokes(run_ids: Sequence[str], data_dir: Path, *, x0_source: str = 
     imported_arm: set[str] = set()  # runs whose arm log came with an imported take
     for run_id in run_ids:
         run = load_run(run_id, data_dir)
+        if run.run_id in hashes:  # the same run twice (or two prefixes of it): its keystrokes once
+            continue
         t, s = run.trials, run.samples
         if t.empty:
             raise InputError("the run has no trials", run.run_id)

@@ -120,6 +120,27 @@ def _uniform_dt(times_by_trial: list[FloatArray]) -> float:
     return float(np.median(diffs))
 
 
+#: An arm trace drives the model when at least this share of the keystrokes with a key
+#: trajectory have it (a few lost to a dropped stream are left out, as before; a whole run
+#: imported without an arm log is not).
+ARM_COVERAGE = 0.9
+
+
+def _arm_source(samples: pd.DataFrame, out_source: str) -> str:
+    """The arm trace to drive the model with: the arm log, else the output instrument's arm
+    marker, else the simulator's truth; the first that `ARM_COVERAGE` of the keystrokes with a key
+    trajectory have (runs imported with and without an arm log, together: the marker all of
+    them have), else the one most have."""
+    keyed = set(samples.loc[(samples["source"] == out_source) & samples["x2_m"].notna(), "trial_id"])
+    coverage = {}
+    for candidate in dict.fromkeys(("arm", out_source, "mocap", "sim-truth")):
+        has = set(samples.loc[(samples["source"] == candidate) & samples["x0_m"].notna(), "trial_id"])
+        coverage[candidate] = len(keyed & has)
+        if keyed and coverage[candidate] >= ARM_COVERAGE * len(keyed):
+            return candidate
+    return max(coverage, key=lambda c: coverage[c]) if any(coverage.values()) else "arm"
+
+
 def keystroke_batch(
     samples: pd.DataFrame,
     trials: pd.DataFrame,
@@ -134,7 +155,8 @@ def keystroke_batch(
         trials: `trial_id, vacuum_kpa`, optionally `distance_m` (missing or NaN: 0) and
             `status` (failed trials are skipped).
         x0_source: where the arm trace comes from: "arm", "mocap", "sim-truth" or "auto"
-            (the arm log if present, else the mocap arm marker, else the simulator's truth).
+            (the arm log if present, else the mocap arm marker, else the simulator's truth; the
+            first every keystroke has, `_arm_source`).
         max_duration_s: cut every trace after this time (None: the longest trace).
 
     Raises:
@@ -152,10 +174,7 @@ def keystroke_batch(
         )
     out_source = out_sources[0]
     if x0_source == "auto":
-        for candidate in ("arm", out_source, "mocap", "sim-truth"):
-            if ((samples["source"] == candidate) & samples["x0_m"].notna()).any():
-                x0_source = candidate
-                break
+        x0_source = _arm_source(samples, out_source)
     ok = trials
     if "status" in trials:
         ok = trials[trials["status"] != "failed"]
