@@ -12,6 +12,7 @@ behind: no `model.json.tmp`, no partial target.
 from __future__ import annotations
 
 import os
+import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
@@ -34,9 +35,21 @@ def check_output_path(path: Path | str, option: str) -> Path:
         probe = probe.parent
     if probe.exists() and not probe.is_dir():
         raise InputError(f"{probe} is a file, so {target} cannot be made", option)
-    if not os.access(probe, os.W_OK | os.X_OK):
+    if not os.access(probe, os.W_OK | os.X_OK) or (probe.is_dir() and not can_create_in(probe)):
         raise InputError(f"cannot write in {probe} (read-only?)", option)
     return target
+
+
+def can_create_in(folder: Path) -> bool:
+    """Whether a file can be made in `folder` (tried: a read-only mount or /proc passes the
+    permission check for root, and only a real attempt tells)."""
+    try:
+        handle, name = tempfile.mkstemp(dir=folder, prefix=".pianobot-check-")
+    except OSError:
+        return False
+    os.close(handle)
+    Path(name).unlink(missing_ok=True)
+    return True
 
 
 def write_output(path: Path | str, write: Callable[[Path], object], option: str = "--out") -> Path:

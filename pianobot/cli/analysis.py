@@ -21,6 +21,7 @@ from pianobot.cli.common import (
     NoProgressFlag,
     PressesOption,
     RunIds,
+    check_vacuum,
     command_progress,
     emit_json,
     output_console,
@@ -39,6 +40,10 @@ from pianobot.store import load_run
 # busy machine): each command imports only what it uses, after its progress line is up.
 
 PlotOption = Annotated[Path | None, typer.Option("--plot", help="Also write a figure here (PNG).")]
+
+
+#: Where identify's arm trace may come from (`greybox.trajectories.keystroke_batch`).
+X0_SOURCES = ("auto", "arm", "mocap", "sim-truth")
 
 
 def keystrokes_per_level(runs: list[str], data: Path, vacuum_kpa: float | None, fitted: int) -> dict[float, int]:
@@ -65,7 +70,7 @@ def register(app: typer.Typer) -> None:
         out: Annotated[Path, typer.Option("--out", help="Model file to write.")] = Path("model.json"),
         coupling: Annotated[str, typer.Option(help="tied | free | auto (BIC).")] = "auto",
         bootstrap: Annotated[int, typer.Option(min=0, help="Bootstrap refits over keystrokes.")] = 20,
-        seed: Annotated[int, typer.Option(help="Bootstrap seed.")] = 0,
+        seed: Annotated[int, typer.Option(min=0, help="Bootstrap seed.")] = 0,
         x0_source: Annotated[str, typer.Option(help="arm | mocap | sim-truth | auto.")] = "auto",
         vacuum_kpa: Annotated[float | None, typer.Option(help="Vacuum of runs that do not record it.")] = None,
         force_log: Annotated[list[str] | None, typer.Option(help="P=FILE or a folder of P.txt force logs.")] = None,
@@ -82,6 +87,9 @@ def register(app: typer.Typer) -> None:
         """Identify the keystroke model from mocap trajectories; write a model file with intervals."""
         if coupling not in ("tied", "free", "auto"):
             raise InputError(f"expected tied, free or auto, got {coupling!r}", "--coupling")
+        if x0_source not in X0_SOURCES:
+            raise InputError(f"expected {', '.join(X0_SOURCES)}, got {x0_source!r}", "--x0-source")
+        check_vacuum(vacuum_kpa)
         check_output_path(out, "--out")  # before minutes of fitting, not after
         writable(plot, "--plot")
         levels = force_log_levels(force_log or [])

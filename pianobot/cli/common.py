@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import inspect
 import json
+import math
 import os
 import re
 import sys
@@ -28,6 +29,7 @@ from rich.table import Table
 from rich.text import Text
 
 from pianobot.errors import InputError
+from pianobot.output import can_create_in
 from pianobot.progress import Progress, progress_display
 
 DataDir = Annotated[
@@ -64,6 +66,17 @@ def print_warning(message: str) -> None:
     print(f"warning: {' '.join(message.split())}", file=sys.stderr)
 
 
+def check_vacuum(value: float | None, option: str = "--vacuum-kpa") -> None:
+    """InputError unless `value` is None or a gauge vacuum a pump reaches (|value| ≤ 100 kPa; a
+    magnitude, e.g. 40, is read as −40 kPa by the commands, as the study's logs store it)."""
+    if value is not None and not (math.isfinite(value) and abs(value) <= MAX_VACUUM_KPA):
+        raise InputError(f"vacuum is a gauge pressure in [-{MAX_VACUUM_KPA:g}, 0] kPa, got {value:g}", option)
+
+
+#: The strongest gauge vacuum (kPa below atmosphere) a value may state.
+MAX_VACUUM_KPA = 100.0
+
+
 def writable(path: Path | None, option: str) -> Path | None:
     """Check before any work that `path`'s folder exists or can be made, so a long command
     does not fail at its very end (or after storing a run) on a typo in an output path."""
@@ -75,6 +88,8 @@ def writable(path: Path | None, option: str) -> Path | None:
         raise InputError(f"cannot create the folder of {path} ({exc.strerror})", option) from None
     if path.is_dir():
         raise InputError(f"{path} is a folder; give a file name", option)
+    if not can_create_in(path.parent):
+        raise InputError(f"cannot write in {path.parent} (read-only?)", option)
     return path
 
 

@@ -76,6 +76,37 @@ def test_bad_input_one_line_exit_2(cli: Callable[..., _Result], data_dir: Path, 
     assert proc.returncode == 2 and proc.stderr.startswith("error:") and proc.stderr.count("\n") == 1
 
 
+def test_odd_options_are_refused_before_any_fitting(cli: Callable[..., _Result], data_dir: Path, traj_run: str,
+                                                    tmp_path: Path) -> None:
+    out = str(tmp_path / "m.json")
+    for args, option, what in (
+        (["identify", traj_run, "--seed", "-1", "--out", out], "--seed", "greater than or equal to 0"),
+        (["identify", traj_run, "--x0-source", "banana", "--out", out], "--x0-source", "expected auto, arm"),
+        (["identify", traj_run, "--vacuum-kpa", "-1e9", "--out", out], "--vacuum-kpa", "gauge pressure"),
+        (["discover", traj_run, "--vacuum-kpa", "250"], "--vacuum-kpa", "gauge pressure"),
+        (["identify", traj_run, "--out", "/proc/pianobot-model.json"], "--out", "cannot write in /proc"),
+    ):
+        proc = cli(*args, "--data", str(data_dir))
+        assert proc.returncode == 2 and proc.stderr.count("\n") == 1, (args, proc.stderr)
+        assert option in proc.stderr and what in proc.stderr, (args, proc.stderr)
+    assert not Path(out).exists()
+
+
+def test_a_run_given_twice_counts_once(cli: Callable[..., _Result], data_dir: Path, traj_run: str,
+                                       tmp_path: Path) -> None:
+    once = cli("identify", traj_run, "--data", str(data_dir), "--json", "--bootstrap", "0", "--out", str(tmp_path / "a.json"))
+    twice = cli("identify", traj_run, traj_run[:-2], "--data", str(data_dir), "--json", "--bootstrap", "0",
+                "--out", str(tmp_path / "b.json"))
+    assert once.returncode == twice.returncode == 0, twice.stderr
+    a, b = json.loads(once.stdout), json.loads(twice.stdout)
+    assert {k: v["value"] for k, v in a["parameters"].items()} == {k: v["value"] for k, v in b["parameters"].items()}
+
+
+def test_fit_on_a_take_without_midi_says_so(cli: Callable[..., _Result], data_dir: Path, traj_run: str) -> None:
+    proc = cli("fit", traj_run, "--data", str(data_dir))
+    assert proc.returncode == 2 and "no keystroke has a MIDI outcome" in proc.stderr, proc.stderr
+
+
 def test_empty_run_is_one_line_error(cli: Callable[..., _Result], data_dir: Path, tmp_path: Path) -> None:
     writer = RunWriter.create(data_dir, name="empty", kind="import", meta={}, plan=None, fsync=False)
     writer.finish("completed")

@@ -74,6 +74,10 @@ def training_set(trials: pd.DataFrame) -> TrainingSet:
     silent = (frame["status"] == "silent").to_numpy() if "status" in frame else on.isna().to_numpy()
     silent = silent | on.isna().to_numpy()
     if silent.all():
+        said_silent = "status" in frame and bool((frame["status"] == "silent").any())
+        if not said_silent and "n_note_on" not in frame.columns[frame.notna().any()]:
+            raise InputError("no keystroke has a MIDI outcome (no on-velocity recorded: a take without MIDI?); "
+                             "fit learns loudness, hold and silence from keystrokes with MIDI", "fit")
         raise InputError("every keystroke is silent: nothing to learn on-velocity from", "fit")
     varying = _distinct_varying(full)
     X = full[list(varying)].to_numpy(float)
