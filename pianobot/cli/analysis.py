@@ -229,7 +229,12 @@ def register(app: typer.Typer) -> None:
 
             if compare:
                 from pianobot.analysis.learn.run import fit_runs
-        cv = fit_runs(runs, data, kinds=["poly", "spline"], out_dir=None, progress=progress).cv if compare else None
+        cv = None
+        if compare:
+            try:
+                cv = fit_runs(runs, data, kinds=["poly", "spline"], out_dir=None, progress=progress).cv
+            except InputError as exc:  # nothing to learn from (every keystroke silent): the rest still tells
+                print_warning(f"--compare: no model comparison ({exc.message}); the report is written without it")
         path = build_run_report(runs, data, out, model_file=model, cv_table=cv, progress=progress)
         if json_out:
             emit_json({"report": str(path)})

@@ -109,7 +109,8 @@ def _stages_section(run_ids: Sequence[str], data_dir: Path, params: MSDParams) -
     try:
         batch, _ = load_batch(run_ids, data_dir)
     except InputError as exc:
-        return section.add(paragraph(f"No trajectories: {exc.message}.", note=True))
+        text = exc.message.replace("; give --vacuum-kpa", " (import it with --vacuum-kpa to see its stages)")
+        return section.add(paragraph(f"No trajectories: {text}.", note=True))
     x1m, x2m = simulate_batch(batch, params)
     i = int(np.nanargmax(np.nanmax(np.nan_to_num(batch.x2_m, nan=-np.inf), axis=1)))
     section.add(figure_html(

@@ -107,6 +107,16 @@ def test_fit_on_a_take_without_midi_says_so(cli: Callable[..., _Result], data_di
     assert proc.returncode == 2 and "no keystroke has a MIDI outcome" in proc.stderr, proc.stderr
 
 
+def test_report_compare_on_a_silent_run_still_writes_the_report(cli: Callable[..., _Result], data_dir: Path,
+                                                                  tmp_path: Path) -> None:
+    silent = sounded_trials(0).assign(status="silent", on_velocity=float("nan"), midi_hold_s=float("nan"), n_note_on=0)
+    run = write_run(data_dir, silent, None, name="silent")
+    out = tmp_path / "r.html"
+    proc = cli("report", run, "--compare", "--data", str(data_dir), "--out", str(out), "--no-progress")
+    assert proc.returncode == 0 and out.is_file(), proc.stderr
+    assert "warning: --compare: no model comparison (every keystroke is silent" in proc.stderr
+
+
 def test_empty_run_is_one_line_error(cli: Callable[..., _Result], data_dir: Path, tmp_path: Path) -> None:
     writer = RunWriter.create(data_dir, name="empty", kind="import", meta={}, plan=None, fsync=False)
     writer.finish("completed")
