@@ -88,6 +88,16 @@ def test_a_log_whose_every_keystroke_stayed_silent_is_a_one_line_input_error(
     assert "stayed silent" in err and run_id in err
 
 
+def test_a_rigid_log_without_depths_names_what_is_missing(zhang2022: Path, tmp_path: Path, cli: Run) -> None:
+    """The rigid finger's changing-acceleration log records speeds but no press depth."""
+    data = tmp_path / "data"
+    log = zhang2022 / "data" / "rigid" / "rigid_data_angle_0_changing_acc.txt"
+    run_id = import_keystroke_log(log, data).run_id
+    code, out, err = invoke_cli(["discover", run_id, "--data", str(data)], *cli)
+    assert code == 2 and len(err.strip().splitlines()) == 1
+    assert "no commanded depth (" in err and "speed" not in err.split("no commanded", 1)[1], err
+
+
 @pytest.mark.slow
 def test_a_midi_only_log_points_at_the_saturating_velocity_curve(zhang2022: Path, tmp_path: Path) -> None:
     """soft_60 (−60 kPa): after the trapezoid's cap, the measured on-velocity grows more slowly

@@ -5,6 +5,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
+import numpy as np
+
 from pianobot.analysis.discover.loop import Settings, discover
 from pianobot.analysis.discover.result import DiscoveryResult
 from pianobot.analysis.greybox.load import load_keystrokes, read_schedule
@@ -56,7 +58,10 @@ def discover_runs(run_ids: Sequence[str], data_dir: Path, model: str = "study", 
     if batch.n < MIN_KEYSTROKES:
         raise InputError(f"discovery needs at least {MIN_KEYSTROKES} keystrokes, got {batch.n}", "RUN_ID")
     if not batch.has_motion and not batch.commanded:
-        raise InputError("the runs have MIDI but no commanded speed and depth to drive the model with",
+        lacking = [f"{name} ({int(np.sum(~np.isfinite(values)))} of {batch.n} keystrokes)"
+                   for name, values in (("speed", batch.down_velocity_mps), ("depth", batch.depth_m))
+                   if not np.all(np.isfinite(values))]
+        raise InputError(f"the runs have MIDI but no commanded {' and '.join(lacking)} to drive the model with",
                          ",".join(run_ids))
     notes = list(loaded.notes)
     if not batch.has_motion and "acceleration not recorded" in notes:

@@ -165,8 +165,8 @@ def load_keystrokes(run_ids: Sequence[str], data_dir: Path, *, x0_source: str = 
     if _has_trajectories(frame):
         batch = keystroke_batch(frame, all_trials, x0_source=x0_source)
     elif need_motion:
-        raise InputError("the run has no key trajectories (x2_m from mocap or sim-truth); "
-                         "trajectory identification needs mocap", "identify")
+        raise InputError("the run has no key trajectories (no key marker in its mocap, no simulated truth): trajectory "
+                         "identification compares the model with the key's measured motion", "identify")
     else:
         n = len(all_trials)
         batch = KeystrokeBatch(tuple(all_trials["trial_id"].astype(str)), _column(all_trials, "vacuum_kpa"),

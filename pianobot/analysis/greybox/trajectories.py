@@ -168,8 +168,8 @@ def keystroke_batch(
     out_sources = [s for s in OUTPUT_SOURCES if ((samples["source"] == s) & has_key).any()]
     if not out_sources:
         raise InputError(
-            "the run has no key trajectories (x2_m from mocap or sim-truth); "
-            "trajectory identification needs mocap",
+            "the run has no key trajectories (no key marker in its mocap, no simulated truth): trajectory "
+            "identification compares the model with the key's measured motion",
             "identify",
         )
     out_source = out_sources[0]
