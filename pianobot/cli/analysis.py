@@ -21,7 +21,7 @@ from pianobot.cli.common import (
     NoProgressFlag,
     PressesOption,
     RunIds,
-    check_vacuum,
+    check_vacuum_option,
     command_progress,
     emit_json,
     output_console,
@@ -89,7 +89,7 @@ def register(app: typer.Typer) -> None:
             raise InputError(f"expected tied, free or auto, got {coupling!r}", "--coupling")
         if x0_source not in X0_SOURCES:
             raise InputError(f"expected {', '.join(X0_SOURCES)}, got {x0_source!r}", "--x0-source")
-        check_vacuum(vacuum_kpa)
+        check_vacuum_option(vacuum_kpa)
         check_output_path(out, "--out")  # before minutes of fitting, not after
         writable(plot, "--plot")
         levels = force_log_levels(force_log or [])

@@ -66,7 +66,7 @@ def print_warning(message: str) -> None:
     print(f"warning: {' '.join(message.split())}", file=sys.stderr)
 
 
-def check_vacuum(value: float | None, option: str = "--vacuum-kpa") -> None:
+def check_vacuum_option(value: float | None, option: str = "--vacuum-kpa") -> None:
     """InputError unless `value` is None or a gauge vacuum a pump reaches (|value| ≤ 100 kPa; a
     magnitude, e.g. 40, is read as −40 kPa by the commands, as the study's logs store it)."""
     if value is not None and not (math.isfinite(value) and abs(value) <= MAX_VACUUM_KPA):

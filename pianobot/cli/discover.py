@@ -17,7 +17,7 @@ from pianobot.cli.common import (
     JsonFlag,
     NoProgressFlag,
     PressesOption,
-    check_vacuum,
+    check_vacuum_option,
     command_progress,
     emit_json,
     output_console,
@@ -104,7 +104,7 @@ def register(app: typer.Typer) -> None:
         no_progress: NoProgressFlag = False,
     ) -> None:
         """Localise where the model and the measurements disagree, name the missing effect, refit."""
-        check_vacuum(vacuum_kpa)
+        check_vacuum_option(vacuum_kpa)
         out = writable(out, "--out")
         if model_out is None and out is not None:
             model_out = out.with_suffix(".model.json")
