@@ -290,15 +290,39 @@ def _read_text(path: Path) -> str:
     return data.decode("utf-8-sig", errors="replace")
 
 
+#: The keys Motive writes on line 1 (`_metadata` finds them by name when the pairs are off).
+MOTIVE_KEYS = ("Format Version", "Take Name", "Take Notes", "Capture Frame Rate", "Export Frame Rate",
+               "Capture Start Time", "Capture Start Frame", "Total Frames in Take", "Total Exported Frames",
+               "Rotation Type", "Length Units", "Coordinate Space")
+
+
 def _metadata(line: str, where: str) -> dict[str, str]:
+    """Line 1's key/value pairs. Where a value holds an unquoted comma (a take named `a,b`),
+    the pairs shift: the keys Motive writes are then found by name, each value running to the
+    next key."""
     cells = next(csv.reader([line])) if line else []
     meta = {cells[i].strip(): cells[i + 1].strip() for i in range(0, len(cells) - 1, 2)}
     if "Format Version" not in meta:
         raise InputError("not a Motive CSV export (line 1 lacks 'Format Version')", where)
+    if not _rate_of(meta) and _rate_of(by_name := _by_name(cells)):
+        return by_name
     return meta
 
 
-def _frame_rate(meta: dict[str, str], where: str) -> float:
+def _by_name(cells: list[str]) -> dict[str, str]:
+    out: dict[str, list[str]] = {}
+    key: str | None = None
+    for cell in (c.strip() for c in cells):
+        if cell in MOTIVE_KEYS:
+            key = cell
+            out[key] = []
+        elif key is not None:
+            out[key].append(cell)
+    return {k: ",".join(v).strip(",") for k, v in out.items()}
+
+
+def _rate_of(meta: dict[str, str]) -> float | None:
+    """The export (else capture) frame rate the metadata states, if it is a positive number."""
     for key in ("Export Frame Rate", "Capture Frame Rate"):
         try:
             rate = float(meta.get(key, "nan"))
@@ -306,7 +330,14 @@ def _frame_rate(meta: dict[str, str], where: str) -> float:
             continue
         if math.isfinite(rate) and rate > 0:
             return rate
-    raise InputError("no valid 'Export Frame Rate' or 'Capture Frame Rate' in line 1", where)
+    return None
+
+
+def _frame_rate(meta: dict[str, str], where: str) -> float:
+    rate = _rate_of(meta)
+    if rate is None:
+        raise InputError("no valid 'Export Frame Rate' or 'Capture Frame Rate' in line 1", where)
+    return rate
 
 
 def _position_columns(

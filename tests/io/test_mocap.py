@@ -138,3 +138,13 @@ def test_a_missing_frame_time_is_filled_from_its_neighbours(tmp_path: Path) -> N
     expected, got = read_mocap(full), read_mocap(gaps)
     assert got.t_s == pytest.approx(expected.t_s, abs=1e-6) and expected.t_s[0] == pytest.approx(10.0)
     assert segment_take(got)["t_start_s"].to_numpy() == pytest.approx(segment_take(expected)["t_start_s"].to_numpy())
+
+
+def test_a_take_name_with_an_unquoted_comma_still_reads(synthetic_take: Path, tmp_path: Path) -> None:
+    text = synthetic_take.read_text()
+    assert "Take Name,synthetic," in text
+    named = tmp_path / "named.csv"
+    named.write_text(text.replace("Take Name,synthetic,", "Take Name,left,right hand,", 1))
+    take = read_mocap(named)
+    assert take.meta["Take Name"] == "left,right hand" and take.frame_rate_hz == 120.0
+    assert len(segment_take(take)) == len(segment_take(read_mocap(synthetic_take)))
