@@ -66,15 +66,15 @@ def print_warning(message: str) -> None:
     print(f"warning: {' '.join(message.split())}", file=sys.stderr)
 
 
+#: The strongest gauge vacuum (kPa below atmosphere) a value may state.
+MAX_VACUUM_KPA = 100.0
+
+
 def check_vacuum_option(value: float | None, option: str = "--vacuum-kpa") -> None:
     """InputError unless `value` is None or a gauge vacuum a pump reaches (|value| ≤ 100 kPa; a
     magnitude, e.g. 40, is read as −40 kPa by the commands, as the study's logs store it)."""
     if value is not None and not (math.isfinite(value) and abs(value) <= MAX_VACUUM_KPA):
         raise InputError(f"vacuum is a gauge pressure in [-{MAX_VACUUM_KPA:g}, 0] kPa, got {value:g}", option)
-
-
-#: The strongest gauge vacuum (kPa below atmosphere) a value may state.
-MAX_VACUUM_KPA = 100.0
 
 
 def writable(path: Path | None, option: str) -> Path | None:

@@ -163,6 +163,16 @@ def load_song(path: Path, *, tempo_scale: float = 1.0, transpose: int = 0, track
     return song, line.without_lead_in(MAX_LEAD_IN_S)
 
 
+#: A level whose survey heard fewer notes than this is one the warm-up cannot learn (`fit_warmup`).
+MIN_HEARD_PER_LEVEL = 3
+
+
+def _heard(survey: pd.DataFrame, level: float) -> int:
+    """How many notes the warm-up heard at a vacuum level."""
+    at = survey[np.isclose(survey["vacuum_kpa"].to_numpy(float), level)]
+    return int((at["status"] == "ok").sum())
+
+
 def play_song(
     song_path: Path,
     *,
@@ -272,7 +282,7 @@ def play_song(
         if design:
             survey, survey_s = performer.warm_up(design)
             tables, excluded = plan.tables, set[float]()
-            while predictor is not None:  # a level this piano never sounds at: plan without it
+            while predictor is not None:  # a level this piano never sounds at: plan without it (model planner)
                 deaf = {lv for lv in levels if _heard(survey, lv) < MIN_HEARD_PER_LEVEL} - excluded
                 usable = {lv: t for lv, t in tables.items() if lv not in excluded | deaf}
                 if not deaf or not usable:
@@ -319,16 +329,6 @@ def play_song(
     files = _write_outputs(performance, target, score, plan, plot, label, warm)
     warnings = (*song.warnings, *line.warnings, *plan.warnings)
     return PlayResult(song, line, plan, performance, score, warnings, files, label, warm, prior)
-
-
-#: A level whose survey heard fewer notes than this is one the warm-up cannot learn (`fit_warmup`).
-MIN_HEARD_PER_LEVEL = 3
-
-
-def _heard(survey: pd.DataFrame, level: float) -> int:
-    """How many notes the warm-up heard at a vacuum level."""
-    at = survey[np.isclose(survey["vacuum_kpa"].to_numpy(float), level)]
-    return int((at["status"] == "ok").sum())
 
 
 def _sequence_context(model: Path | StrokePredictor | SongContext | None, planner: str,

@@ -75,7 +75,8 @@ def training_set(trials: pd.DataFrame) -> TrainingSet:
     silent = silent | on.isna().to_numpy()
     if silent.all():
         said_silent = "status" in frame and bool((frame["status"] == "silent").any())
-        if not said_silent and "n_note_on" not in frame.columns[frame.notna().any()]:
+        midi_recorded = "n_note_on" in frame and bool(frame["n_note_on"].notna().any())
+        if not said_silent and not midi_recorded:
             raise InputError("no keystroke has a MIDI outcome (no on-velocity recorded: a take without MIDI?); "
                              "fit learns loudness, hold and silence from keystrokes with MIDI", "fit")
         raise InputError("every keystroke is silent: nothing to learn on-velocity from", "fit")
