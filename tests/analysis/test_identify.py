@@ -361,3 +361,19 @@ def test_a_take_with_an_effect_the_model_lacks_still_gets_a_physical_base_fit(tm
     assert 0.5 < fit.params_["k1_npm@-40kPa"] / truth["k1_npm"] < 2.0
     assert 0.5 < fit.params_["k2_npm"] / truth["k2_npm"] < 2.0
     assert fit.params_["c2_nspm"] < 20 * truth["c2_nspm"]
+
+
+def test_a_stiffness_or_damping_interval_never_crosses_zero(tmp_path: Path) -> None:
+    """The quickstart sweep identifies k0 and c0 loosely; derived from log-parameterised values,
+    their intervals are multiplicative too (the delta method on the logarithm). A slope per kPa
+    may take either sign."""
+    from pianobot.run import run_sweep
+
+    quickstart = Path(__file__).resolve().parents[2] / "experiments" / "quickstart.yaml"
+    outcome = run_sweep(quickstart, data_dir=tmp_path, progress=False)
+    fit = identify_runs([outcome.run_id], tmp_path, out=None, bootstrap=0).fit
+    positive = [e for e in fit.estimates if e.value > 0 and "_per_" not in e.name]
+    assert any(e.name.startswith("k0_npm") for e in positive)
+    wide = [e for e in positive if e.ci95[1] > 2 * e.value]
+    assert wide, "the quickstart should leave some quantity loosely identified"
+    assert all(e.ci95[0] >= 0.0 for e in positive), [(e.name, e.ci95) for e in positive if e.ci95[0] < 0]

@@ -245,7 +245,13 @@ def _delta_intervals(theta: FloatArray, cov: FloatArray, layout: Layout,
             out[n] = (point[n] * math.exp(-half), point[n] * math.exp(half)) if half < 50 else (0.0, math.inf)
         else:
             sd = math.sqrt(max(float(grads[i] @ cov @ grads[i]), 0.0))
-            out[n] = (point[n] - Z95 * sd, point[n] + Z95 * sd)
+            if point[n] > 0 and "_per_" not in n:
+                # A stiffness, damping or mass derived from log-parameterised ones: multiplicative
+                # too (the delta method on its logarithm), so its interval never crosses zero.
+                half = Z95 * sd / point[n]
+                out[n] = (point[n] * math.exp(-half), point[n] * math.exp(half)) if half < 50 else (0.0, math.inf)
+            else:  # a slope (k1's change per kPa) may take either sign
+                out[n] = (point[n] - Z95 * sd, point[n] + Z95 * sd)
     return out
 
 
