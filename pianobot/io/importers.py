@@ -229,7 +229,7 @@ def _no_keystrokes(take: MocapTake) -> str:
         down = take.down_m("arm")
         travel = 0.0 if down is None or not np.isfinite(down).any() else float(np.nanmax(down) - np.nanmin(down))
         why = f"the arm marker {arm} never moves down and back along the vertical axis ({axis}; it spans {1e3 * travel:.2f} mm)"
-    hint = axis_hint(take, take.up_axis) or "; if the export's vertical axis is another one, give --up-axis"
+    hint = axis_hint(take.positions(), take.up_axis) or "; if the export's vertical axis is another one, give --up-axis"
     return f"no keystroke found: {why}{hint}; or name the arm's marker with --marker arm=NAME"
 
 

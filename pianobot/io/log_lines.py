@@ -185,10 +185,10 @@ def literal(text: str) -> Any:
     try:
         return ast.literal_eval(_Floats().visit(tree))
     except (ValueError, TypeError, SyntaxError, MemoryError, RecursionError) as exc:
-        text = str(exc).split("\n")[0]
-        if text.startswith("malformed node"):  # literal_eval names an AST object: say what it was
-            text = "holds a call or a name, not a literal value"
-        raise ValueError(text or type(exc).__name__) from None
+        message = str(exc).split("\n")[0]
+        if message.startswith("malformed node"):  # literal_eval names an AST object: say what it was
+            message = "holds a call or a name, not a literal value"
+        raise ValueError(message or type(exc).__name__) from None
 
 
 #: A Python 2 long (`468620L`), outside a name or a decimal fraction.

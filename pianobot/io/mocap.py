@@ -89,6 +89,10 @@ class MocapTake:
         kept = set(self.markers["marker"].unique()) if not self.markers.empty else set()
         return {name: pieces for name, pieces in self.pieces.items() if len(pieces) > 1 and name in kept}
 
+    def positions(self) -> list[FloatArray]:
+        """Each kept marker's positions (frames x 3, metres) on the frames it was seen."""
+        return [group[["x", "y", "z"]].to_numpy(dtype=np.float64) for _, group in self.markers.groupby("marker")]
+
     def up_m(self, marker: str) -> FloatArray:
         """The marker's coordinate along the up axis on every frame (NaN when missing)."""
         rows = self.markers[self.markers["marker"] == marker]
@@ -214,14 +218,9 @@ def axis_motion(positions: list[FloatArray]) -> tuple[dict[str, float], float]:
     return motion, along_y
 
 
-def axis_hint(take_or_positions: MocapTake | list[FloatArray], up_axis: str) -> str:
-    """A hint for an error when the markers move farther along another axis than along the one
-    read as vertical ("" when they do not)."""
-    if isinstance(take_or_positions, MocapTake):
-        markers = take_or_positions.markers
-        positions = [group[["x", "y", "z"]].to_numpy(dtype=np.float64) for _, group in markers.groupby("marker")]
-    else:
-        positions = take_or_positions
+def axis_hint(positions: list[FloatArray], up_axis: str) -> str:
+    """A hint for an error when the markers (frames x 3 positions each) move farther along
+    another axis than along the one read as vertical ("" when they do not)."""
     motion, _ = axis_motion(positions)
     best = max(motion, key=lambda axis: motion[axis])
     if best == up_axis or motion[best] < 2.0 * motion[up_axis]:
