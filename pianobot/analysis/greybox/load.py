@@ -295,7 +295,13 @@ def _measured_distance(batch: KeystrokeBatch, rows: pd.DataFrame, notes: set[str
     if typical > HOVER_M and batch.arm_measured:
         unloaded = unloaded_travel_m(batch)[unknown]
         if np.isfinite(unloaded).any() and _median(unloaded) <= UNLOADED_M:
-            typical = 0.0
+            # Said apart: the take alone cannot always tell this from a hover (a finger whose
+            # arm was still accelerating when it touched is loaded early too), the presses can.
+            notes.add(f"distance 0 assumed where not recorded: the fingertips travelled {1e3 * typical:.2f} mm "
+                      "(median) before the key moved, but the arm loaded the finger from the start, so the "
+                      "finger is read as resting on a key held still (friction, a preload); if it hovered, "
+                      "give the lab's presses (--presses) for the commanded distance")
+            return batch
     if not typical > HOVER_M:
         notes.add("distance 0 assumed where not recorded (the finger starts on the key)")
         return batch
