@@ -4,6 +4,7 @@ already simulated: the same MIDI outcomes as simulating again, without the simul
 from __future__ import annotations
 
 import pickle
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -114,3 +115,23 @@ def test_the_compiled_crossing_scan_reads_what_the_whole_trace_masks_read() -> N
         np.testing.assert_array_equal(got, _outcomes_by_masks(x, v, piano, 1e-3))
     velocity = [commanded.midi_outcomes(x, v, piano, 1e-3)[0] for x, v in cases[:-1]]
     assert any(np.isfinite(o).any() for o in velocity) and any(np.isnan(o).any() for o in velocity)
+
+
+def test_a_sounded_note_is_never_predicted_softer_than_the_piano_sends() -> None:
+    """A piano sends a sounded note at velocity 1 at least. The commanded drive's prediction has
+    that floor, smoothly (a fit keeps a slope below it): a model whose key speeds map to tenths
+    of a unit predicts about 1, as the piano would send, and loud notes are left as they were.
+    Before, the slowest keystrokes of the study's soft log (velocity 1) read as model errors of
+    up to one unit each."""
+    study = KeystrokeModel.study()
+    drive = {"acceleration_mps2": 0.8}
+    deep = replace(_batch(), depth_m=np.full(12, 0.03))  # the study's depths: every key sounds
+    loud = Commanded(deep).predict(study, drive).on_velocity
+    soft_piano = study.piano.replace(full_scale_speed_mps=1e3 * study.piano.full_scale_speed_mps)
+    soft = Commanded(deep).predict(study.__class__(study.msd, study.effects, soft_piano), drive).on_velocity
+    sounded = np.isfinite(soft)
+    assert sounded.all() and np.all(loud / 1e3 < 0.5)  # the map is linear in speed: 1/1000 of it
+    assert np.all((soft >= 1.0) & (soft < 1.01))
+    assert np.all(np.abs(commanded.velocity_floor(loud[loud > 3]) - loud[loud > 3]) < 1e-3)
+    floor = commanded.velocity_floor(np.array([-5.0, 0.0, 1.0, 2.0, 40.0]))
+    assert np.all(np.diff(floor) > 0) and floor[0] >= 1.0 and abs(floor[-1] - 40.0) < 1e-12

@@ -79,6 +79,18 @@ def _cross_s(x2: FloatArray, valid: npt.NDArray[np.bool_], k: npt.NDArray[np.int
     return np.asarray((k - 1 + np.clip(frac, 0.0, 1.0)) * dt_s, dtype=np.float64)
 
 
+#: Width (MIDI units) of the smooth floor at velocity 1 (`velocity_floor`): within rounding.
+VELOCITY_FLOOR_WIDTH = 0.25
+
+
+def velocity_floor(velocity: FloatArray) -> FloatArray:
+    """1 + w·log(1 + e^((v − 1)/w)): v above about 2, 1 far below, smooth (with a slope) between;
+    at most w·log 2 ≈ 0.17 above max(v, 1)."""
+    w = VELOCITY_FLOOR_WIDTH
+    return np.asarray(1.0 + w * np.logaddexp(0.0, (np.asarray(velocity, dtype=np.float64) - 1.0) / w),
+                      dtype=np.float64)
+
+
 def midi_outcomes(x2_m: FloatArray, valid: npt.NDArray[np.bool_], piano: PianoParams,
                   dt_s: float) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """(on-velocity before rounding and clipping, note-on time, hold, trigger margin) of key traces.
@@ -96,8 +108,10 @@ def midi_outcomes(x2_m: FloatArray, valid: npt.NDArray[np.bool_], piano: PianoPa
     gap = piano.lower_sensor_m - piano.upper_sensor_m
     speed = gap / np.maximum(t_on - t_up, 1e-6)
     # Not clipped to the MIDI range: a fit needs the slope everywhere (measured velocities are
-    # 1–127 anyway, and a model beyond them is simply that far off).
-    velocity = on_velocity_from_speed(speed, piano, rounded=False, clipped=False)
+    # 1–127 anyway, and a model above them is simply that far off). Below, a sounded note is
+    # never sent softer than 1: a smooth floor there, or the slowest keystrokes of a soft log
+    # (the study's: a third of them at 1) read as a model error of up to one unit each.
+    velocity = velocity_floor(on_velocity_from_speed(speed, piano, rounded=False, clipped=False))
     rows = np.arange(x2_m.shape[0])
     a, b = x2_m[rows, np.maximum(k_off - 1, 0)], x2_m[rows, k_off]
     with np.errstate(divide="ignore", invalid="ignore"):
