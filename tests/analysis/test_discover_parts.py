@@ -121,6 +121,25 @@ def test_score_reads_the_best_measure_unless_another_breaks() -> None:
     assert not something_to_explain(_gap(1e-6, [1e-6]), Rule())
 
 
+def test_score_reads_a_measure_there_was_something_to_explain_in() -> None:
+    """A soft piano's notes sound at 1-3: its on-velocity error is at the rounding level before
+    any effect (0.06 MIDI systematic) and vanishes by chance after one that fixes the hold. The
+    hold is the measure read (its ratio, and its keystrokes for the consistency), not the
+    on-velocity's 0/0.06; whether the velocities broke is still judged with every measure."""
+    per = {"on_velocity": np.full(10, 0.3), "hold_s": np.full(10, 0.27)}
+    ref = Gap(math.nan, math.nan, math.nan, 0.06, 0.27, 0, 10, per)
+    fixed_hold = Gap(math.nan, math.nan, math.nan, 0.0, 0.003, 0, 10,
+                     {"on_velocity": np.array([0.2, 0.4] * 5), "hold_s": np.full(10, 0.003)})
+    ratio, measure = score(fixed_hold, ref)
+    assert measure == "hold_s" and ratio == pytest.approx(0.003 / 0.27)
+    assert consistency(fixed_hold, ref, measure) == 1.0
+    broke_velocity = Gap(math.nan, math.nan, math.nan, 30.0, 0.003, 0, 10, per)
+    assert score(broke_velocity, ref)[1] == "all outcomes"
+    quiet = Gap(math.nan, math.nan, math.nan, 0.06, 0.005, 0, 10, per)
+    assert not something_to_explain(quiet, Rule())  # both outcomes at their floors
+    assert score(fixed_hold, quiet)[1] == "on_velocity"  # nothing above: the best of all, as before
+
+
 def test_arm_side_effects_are_not_key_candidates_when_the_arm_is_measured() -> None:
     n, T = 3, 20
     traj = KeystrokeBatch(("a", "b", "c"), np.zeros(n), np.arange(T) / 120, np.zeros((n, T)), np.zeros((n, T)),

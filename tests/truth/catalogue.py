@@ -238,8 +238,8 @@ OTHER_GRID = {"accelerations_mps2": (0.2, 0.6, 1.2), "speeds_mps": tuple(float(v
 #: Sessions recorded otherwise than the suite's: (what, suite scenario, changes). Changes set the
 #: frame rate (OptiTrack's 100 and 240 Hz), the take's schedule (`take`: 10 keystrokes, faster
 #: presses, hovering, the finger resting on the key), a MIDI-only grid (`grid`: 40 keystrokes,
-#: other accelerations, speeds and depths), the lab (`base`, `vacuum_kpa`: the hidden effect on
-#: another finger and key) or the effect's parameters (`effect`: a stop a resting finger reaches
+#: other accelerations, speeds and depths), the piano (`piano`: its full-scale speed), the lab
+#: (`base`, `vacuum_kpa`: the hidden effect on another finger and key) or the effect's parameters (`effect`: a stop a resting finger reaches
 #: within a millimetre; friction that holds the key down after the first press, for good; a rest
 #: stop that a resting finger barely overcomes, so the key moves only at the bottom of a press, or
 #: a fraction of a millimetre on a stiff key). Each
@@ -271,6 +271,9 @@ VARIANTS: tuple[tuple[str, str, dict[str, Any]], ...] = (
     ("midi-clean-other-grid", "midi-clean-stiff-key-1", {"grid": OTHER_GRID}),
     ("midi-velocity_curve-tanh-strong-40-keystrokes", "midi-velocity_curve-tanh-strong", {"grid": SMALL_GRID}),
     ("midi-velocity_curve-rational-strong-other-grid", "midi-velocity_curve-rational-strong", {"grid": OTHER_GRID}),
+    # A soft piano (or a soft velocity map): many notes sound at 1-3, the softest it sends.
+    ("midi-clean-soft-piano", "midi-clean-light-key-0", {"piano": {"full_scale_mps": 0.6}}),
+    ("midi-velocity_curve-tanh-strong-soft-piano", "midi-velocity_curve-tanh-strong", {"effect": {"full_scale_mps": 0.1}}),
 )
 
 
@@ -288,7 +291,8 @@ def variant_suite() -> list[Scenario]:
                            take=replace(s.take, **changes.get("take", {})),
                            grid=replace(s.grid, **changes.get("grid", {})),
                            frame_rate_hz=changes.get("frame_rate_hz", s.frame_rate_hz),
-                           base=changes.get("base", s.base), vacuum_kpa=changes.get("vacuum_kpa", s.vacuum_kpa)))
+                           base=changes.get("base", s.base), vacuum_kpa=changes.get("vacuum_kpa", s.vacuum_kpa),
+                           piano=replace(s.piano, **changes["piano"]) if "piano" in changes else s.piano))
     return out
 
 

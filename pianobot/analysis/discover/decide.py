@@ -26,7 +26,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 from pianobot.analysis.discover.candidates import family_of
-from pianobot.analysis.discover.gap import Gap, consistency, measures, score
+from pianobot.analysis.discover.gap import Gap, above_noise, consistency, measures, score
 
 
 @dataclass(frozen=True)
@@ -97,8 +97,7 @@ def something_to_explain(gap: Gap, rule: Rule) -> bool:
     """True when the held-out gap is above the noise (module docstring, condition 2)."""
     if math.isfinite(gap.position_m):
         return gap.position_m > rule.floor_sigmas * gap.sigma_m
-    return (math.isfinite(gap.on_velocity) and gap.on_velocity > 0.5) or gap.sounded_mismatch > 0 or (
-        math.isfinite(gap.hold_s) and gap.hold_s > 0.01)
+    return bool(above_noise(gap))
 
 
 def verdict(label: str, effect: str, form: str, params: dict[str, float], intervals: dict[str, tuple[float, float]],
