@@ -138,6 +138,9 @@ def test_score_reads_a_measure_there_was_something_to_explain_in() -> None:
     quiet = Gap(math.nan, math.nan, math.nan, 0.06, 0.005, 0, 10, per)
     assert not something_to_explain(quiet, Rule())  # both outcomes at their floors
     assert score(fixed_hold, quiet)[1] == "on_velocity"  # nothing above: the best of all, as before
+    tracked = Gap(2e-4, 2e-4, 5e-6, 0.8, 0.27, 0, 10, per)  # a position gap always counts
+    better_position = Gap(1e-5, 1e-5, 5e-6, 0.8, 0.27, 0, 10, per)
+    assert score(better_position, tracked) == (pytest.approx(0.05), "position_m")
 
 
 def test_arm_side_effects_are_not_key_candidates_when_the_arm_is_measured() -> None:

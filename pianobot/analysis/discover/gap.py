@@ -144,7 +144,8 @@ def score(gap: Gap, reference: Gap) -> tuple[float, str]:
         overall = float(np.exp(np.mean(np.log(np.clip(list(ratios.values()), 1e-3, None)))))
         if overall >= 1.0:
             return overall, "all outcomes"
-    explained = above_noise(reference)
+    # A position gap is read as it is (its noise is already removed); MIDI outcomes above theirs.
+    explained = above_noise(reference) + (("position_m",) if math.isfinite(reference.position_m) else ())
     readable = [k for k in ratios if k in explained] or list(ratios)
     best = min(readable, key=lambda k: ratios[k])
     return ratios[best], best
