@@ -347,6 +347,9 @@ def _discover(batch: KeystrokeBatch, start: KeystrokeModel | None, settings: Set
             break
         label = iteration.accepted.label if iteration.accepted else "the accepted model"
         with progress.task(f"discover, iteration {index + 1}: {label} fitted to its optimum", total=None):
+            if iteration.accepted is not None:
+                accepted = CandidateSpec(iteration.accepted.effect, iteration.accepted.form)
+                chosen = search.restarted(setting, chosen, accepted)
             current = search.converged(setting, chosen)
     last = iterations[-1]
     contact, release, current, release_view = _release(setting, current, start, settings, len(iterations),
