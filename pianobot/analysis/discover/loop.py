@@ -9,8 +9,9 @@ The loop (DESIGN.md, "Discovery"):
    so that a wrong stiffness is never mistaken for missing physics;
 4. localise the disagreement on the held-out keystrokes (`localise.py`);
 5. fit every candidate effect the model lacks (`candidates.py`, `search.py`), judge each with
-   the calibrated rule (`decide.py`), accept the best that passes, and repeat with it in the
-   model until nothing passes;
+   the calibrated rule (`decide.py`), accept the best that passes (on a MIDI log refitted from
+   each of its starting points, `search.restarted`), and repeat with it in the model until
+   nothing passes;
 6. when nothing passes but the held-out error is above the noise, the sparse residual search
    names the best-supported term and the discrepancy is reported as unexplained;
 7. when the fingertips were tracked off the key, the release is judged too (`_release`): the
@@ -349,7 +350,7 @@ def _discover(batch: KeystrokeBatch, start: KeystrokeModel | None, settings: Set
         with progress.task(f"discover, iteration {index + 1}: {label} fitted to its optimum", total=None):
             if iteration.accepted is not None:
                 accepted = CandidateSpec(iteration.accepted.effect, iteration.accepted.form)
-                chosen = search.restarted(setting, chosen, accepted)
+                chosen = search.restarted(setting, chosen, accepted, mapper)
             current = search.converged(setting, chosen)
     last = iterations[-1]
     contact, release, current, release_view = _release(setting, current, start, settings, len(iterations),

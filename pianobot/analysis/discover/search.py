@@ -277,14 +277,14 @@ def joint(setting: Setting, current: GreyBoxFit, spec: CandidateSpec, screened: 
     return fit(best.theta_, JOINT_NFEV - JOINT_PROBE_NFEV)
 
 
-def restarted(setting: Setting, fit: GreyBoxFit, spec: CandidateSpec) -> GreyBoxFit:
+def restarted(setting: Setting, fit: GreyBoxFit, spec: CandidateSpec, mapper: Mapper = serial_map) -> GreyBoxFit:
     """An accepted effect of a MIDI log refitted from each of its starting points too, the best
     optimum kept (`fit` itself unless one is better).
 
     A MIDI log's misfit has many optima (docs/architecture.md), and screening carries only the
     cheapest start on: on an independent 40-keystroke log the tanh curve accepted stopped at an
     optimum 72 in ΔIC worse than the one its start nearest the truth reaches, and the next round
-    named a key friction for the difference."""
+    named a key friction for the difference. The refits are independent pieces (`mapper`)."""
     if setting.mode != "midi":
         return fit
     layout = fit.layout
@@ -297,7 +297,7 @@ def restarted(setting: Setting, fit: GreyBoxFit, spec: CandidateSpec) -> GreyBox
         return GreyBoxFit(setting.train_drive, layout, channels=fit.channels, sigma=fit.sigma,
                           max_nfev=JOINT_NFEV, tol=1e-5).fit(theta)
 
-    return min([fit, *(refit(th) for th in starts)], key=_fitted_cost)  # `fit` wins a tie
+    return min([fit, *mapper(refit, starts)], key=_fitted_cost)  # `fit` wins a tie
 
 
 def converged(setting: Setting, fit: GreyBoxFit) -> GreyBoxFit:
