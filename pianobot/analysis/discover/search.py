@@ -285,11 +285,12 @@ def restarted(setting: Setting, fit: GreyBoxFit, spec: CandidateSpec, mapper: Ma
     cheapest start on: on an independent 40-keystroke log the tanh curve accepted stopped at an
     optimum 72 in ΔIC worse than the one its start nearest the truth reaches, and the next round
     named a key friction for the difference. The refits are independent pieces (`mapper`)."""
-    if setting.mode != "midi":
-        return fit
     layout = fit.layout
+    points = [point for point in start_points(layout, spec, setting.train) if point]
+    if setting.mode != "midi" or not points:  # an effect without parameters has no other start
+        return fit
     piano = FAMILIES.get(spec.effect) == "piano"
-    starts = [layout.internal({**fit.params_, **point}) for point in start_points(layout, spec, setting.train)]
+    starts = [layout.internal({**fit.params_, **point}) for point in points]
     if piano:
         starts = [_scaled_readout(setting.train_drive, layout, th) for th in starts]
 

@@ -87,8 +87,7 @@ def velocity_floor(velocity: FloatArray) -> FloatArray:
     """1 + w·log(1 + e^((v − 1)/w)): v above about 2, 1 far below, smooth (with a slope) between;
     at most w·log 2 ≈ 0.17 above max(v, 1)."""
     w = VELOCITY_FLOOR_WIDTH
-    return np.asarray(1.0 + w * np.logaddexp(0.0, (np.asarray(velocity, dtype=np.float64) - 1.0) / w),
-                      dtype=np.float64)
+    return 1.0 + w * np.logaddexp(0.0, (velocity - 1.0) / w)
 
 
 def midi_outcomes(x2_m: FloatArray, valid: npt.NDArray[np.bool_], piano: PianoParams,
