@@ -55,8 +55,8 @@ def _print(result: DiscoveryResult, report: Path | None, model_out: Path | None)
         rows = []
         for v in it.verdicts[:12]:
             ratio = "∞" if not math.isfinite(v.ratio) else f"{v.ratio:.2g}×"
-            rows.append([v.label, f"{v.delta_ic:.1f}", gap_cell(v.gap_after), f"{100 * v.shrink:.0f} % ({ratio})",
-                         f"{100 * v.consistency:.0f} %", v.status, "; ".join(v.reasons)])
+            rows.append([v.label, f"{v.delta_ic:.1f}", gap_cell(v.gap_after), f"{round(100 * v.shrink)} % ({ratio})",
+                         f"{round(100 * v.consistency)} %", v.status, "; ".join(v.reasons)])
         print_table(CANDIDATE_COLUMNS, rows,
                     title=f"{it.heading}: held-out gap of the current model {it.gap_before.text()}")
     say(f"{result.n_train} training / {result.n_held_out} held-out keystrokes, {result.seconds:.1f} s")

@@ -89,6 +89,19 @@ def test_rule_needs_every_condition_and_prefers_the_simpler() -> None:
     assert choose([no_size], rule, True)[0] is None
 
 
+def test_a_rejected_candidate_says_how_much_the_gap_changed_in_whole_percents() -> None:
+    before = _gap(1e-4, [1e-4] * 6)
+    worse = verdict("letoff", "letoff", "default", {}, {}, (), -20.0, before, _gap(1.29e-4, [1.29e-4] * 6),
+                    False, True)
+    same = verdict("contact", "contact", "default", {}, {}, (), 0.0, before, _gap(1.00001e-4, [1.00001e-4] * 6),
+                   False, True)
+    _, judged = choose([worse, same], Rule(), True)
+    reasons = {v.label: "; ".join(v.reasons) for v in judged}
+    assert "held-out gap grows 29 %" in reasons["letoff"]
+    assert "held-out gap shrinks 0 % < 30 %" in reasons["contact"]
+    assert "-0" not in reasons["contact"]
+
+
 def test_candidate_parameters_read_in_display_units_with_bounds_flagged() -> None:
     before = _gap(1e-4, [1e-4] * 6)
     v = verdict("keybed/linear", "keybed", "linear",

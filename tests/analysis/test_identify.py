@@ -189,6 +189,8 @@ def test_recovers_linear_parameters_within_tolerance() -> None:
         tol = 0.15 if "c" in e.name.split("_")[0] else 0.05
         assert abs(e.value - truth) <= tol * abs(truth), (e.name, e.value, truth)
     assert fit.fixed == {"m1_kg": TRUTH.m1_kg, "m2_kg": TRUTH.m2_kg}
+    # Levels are named by their gauge pressure; no vacuum is 0 kPa, never "-0 kPa".
+    assert {e.name for e in fit.estimates} >= {"k1_npm@0kPa", "k1_npm@-40kPa", "k1_npm@-80kPa"}
 
 
 def test_intervals_cover_truth_in_most_repetitions() -> None:

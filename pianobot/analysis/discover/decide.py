@@ -118,9 +118,12 @@ def judge(v: Verdict, rule: Rule, explainable: bool) -> Verdict:
     if not explainable:
         reasons.append("held-out error is at the noise level")
     if not v.shrink >= rule.min_shrink:
-        reasons.append(f"held-out gap shrinks {100 * v.shrink:.0f} % < {100 * rule.min_shrink:.0f} %")
+        # Whole percents (an int has no "-0"); a gap that grew says so.
+        change = round(100 * v.shrink)
+        reasons.append(f"held-out gap grows {-change} %" if change < 0
+                       else f"held-out gap shrinks {change} % < {100 * rule.min_shrink:.0f} %")
     if not v.consistency >= rule.min_consistency:
-        reasons.append(f"improves {100 * v.consistency:.0f} % of changed held-out keystrokes "
+        reasons.append(f"improves {round(100 * v.consistency)} % of changed held-out keystrokes "
                        f"< {100 * rule.min_consistency:.0f} %")
     if not v.size_excludes_off:
         reasons.append("size interval includes 'off'")

@@ -44,9 +44,14 @@ INTERNAL_BOUND_TOLERANCE = 1e-3
 _SIZE_UNITS = {"m": "m", "s": "s", "n": "N", "npm": "N/m", "nspm": "N*s/m", "mps": "m/s", "per_m": "1/m"}
 
 
+def gauge_kpa(vacuum_kpa: float) -> float:
+    """A vacuum level as the negative gauge pressure it is named by (0 stays 0, not -0)."""
+    return -abs(float(vacuum_kpa)) + 0.0
+
+
 def k1_name(vacuum_kpa: float) -> str:
-    """Name of the per-level stiffness, e.g. `k1_npm@-40kPa`."""
-    return f"k1_npm@{-abs(vacuum_kpa):g}kPa"
+    """Name of the per-level stiffness, e.g. `k1_npm@-40kPa` (`k1_npm@0kPa` without vacuum)."""
+    return f"k1_npm@{gauge_kpa(vacuum_kpa):g}kPa"
 
 
 def k1_law(levels: FloatArray, k1: FloatArray, prior: MSDParams) -> tuple[float, float]:

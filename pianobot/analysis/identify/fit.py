@@ -45,7 +45,7 @@ from pianobot.analysis.greybox.criterion import Criterion
 from pianobot.analysis.greybox.fitter import GreyBoxFit
 from pianobot.analysis.greybox.forward import MeasuredArm, simulate_batch
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
-from pianobot.analysis.greybox.layout import Layout, base_layout, k1_law, k1_name
+from pianobot.analysis.greybox.layout import Layout, base_layout, gauge_kpa, k1_law, k1_name
 from pianobot.analysis.greybox.pieces import Mapper, serial_map
 from pianobot.analysis.greybox.split import split_holdout
 from pianobot.physics.model import KeystrokeModel
@@ -126,7 +126,7 @@ def _derived(theta: FloatArray, layout: Layout) -> dict[str, float]:
     out["k1_a_npm"], out["k1_b_npm_per_kpa"] = a, b
     if "k0_over_k1" in out:  # the arm-fingertip coupling at each level, for reading
         for p in layout.levels_kpa:
-            out[f"k0_npm@{-abs(p):g}kPa"] = out["k0_over_k1"] * out[k1_name(p)]
+            out[f"k0_npm@{gauge_kpa(p):g}kPa"] = out["k0_over_k1"] * out[k1_name(p)]
         out["c0_nspm"] = out["c0_over_c1"] * out["c1_nspm"]
     m1 = out.get("m1_kg", msd.m1_kg)
     out["c1_over_m1_per_s"] = out["c1_nspm"] / m1

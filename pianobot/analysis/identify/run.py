@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 import pianobot
+from pianobot.analysis.greybox.layout import gauge_kpa
 from pianobot.analysis.greybox.load import load_keystrokes, read_schedule
 from pianobot.analysis.greybox.split import split_holdout
 from pianobot.analysis.identify.damping import DampingCheck, damping_check
@@ -95,7 +96,7 @@ def identify_runs(
         if abs(readout.curve_exponent - 1.0) > 0.05:  # the linear readout would misread loudness
             model = model.with_effect("velocity_curve", curve_exponent=min(max(readout.curve_exponent, 0.5), 4.0),
                                       curve_saturation=0.0)
-    peaks = {f"{-abs(p):g}": peak_response(fit.params.at(-abs(p)))[0]
+    peaks = {f"{gauge_kpa(p):g}": peak_response(fit.params.at(-abs(p)))[0]
              for p in sorted(set(np.abs(batch.vacuum_kpa).tolist()))}
     path = None
     if out is not None:
