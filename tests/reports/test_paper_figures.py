@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+import warnings
 from html.parser import HTMLParser
 from pathlib import Path
 
@@ -215,3 +216,13 @@ def test_stage_edges_take_traces_as_relative_to_rest_even_when_their_first_frame
     assert edges[1] == pytest.approx(contact_s, abs=1 / 120)
     assert edges[2] == pytest.approx(key_move_s, abs=1 / 120)
     assert edges[1] < edges[2]  # the finger touches the key before the key moves
+
+
+def test_a_rigid_fingers_velocities_are_one_series_in_the_legend() -> None:
+    trials = _trials().assign(vacuum_kpa=np.nan)  # a rigid finger records no vacuum
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # matplotlib warns when a legend finds nothing to show
+        fig = figures.velocity_vs_speed(trials)
+    legend = fig.axes[0].get_legend()
+    assert legend is not None and [t.get_text() for t in legend.get_texts()] == ["none (rigid)"]
+    assert sum(len(line.get_xdata()) for line in fig.axes[0].get_lines()) == trials["on_velocity"].notna().sum()
