@@ -29,6 +29,7 @@ from pianobot.cli.common import (
     print_warning,
     say,
     say_written,
+    warn_unfinished,
     writable,
 )
 from pianobot.errors import InputError
@@ -92,6 +93,7 @@ def register(app: typer.Typer) -> None:
         check_vacuum_option(vacuum_kpa)
         check_output_path(out, "--out")  # before minutes of fitting, not after
         writable(plot, "--plot")
+        warn_unfinished(runs, data)
         levels = force_log_levels(force_log or [])
         static = static_stiffness_from_logs(levels, compression_m=compression_m) if levels else None
         from pianobot.analysis.identify.fit import Coupling
@@ -173,6 +175,7 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Cross-validate learned maps to on-velocity, hold and silence; save each as a predictor."""
         kinds = model or ["gp"]
+        warn_unfinished(runs, data)
         if "sequence" in kinds or "rnn" in kinds:
             from pianobot.cli.sequence_fit import fit_sequence_command
 
@@ -223,6 +226,7 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Write one self-contained HTML report (figures embedded, no network)."""
         check_output_path(out, "--out")
+        warn_unfinished(runs, data)
         progress = command_progress(json_out, no_progress)
         with progress.task("report: loading matplotlib" + (" and scikit-learn" if compare else "")):
             from pianobot.reports.run_report import build_run_report

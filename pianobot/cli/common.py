@@ -66,6 +66,21 @@ def print_warning(message: str) -> None:
     print(f"warning: {' '.join(message.split())}", file=sys.stderr)
 
 
+def warn_unfinished(runs: Sequence[str], data: Path) -> None:
+    """Before an analysis: a warning for each run that is still being recorded, died without
+    finishing or was stopped early (its numbers cover only what it recorded so far). A run that
+    cannot be opened is left to the command, which says why."""
+    from pianobot.store import load_run, unfinished_note
+
+    for run_id in dict.fromkeys(runs):
+        try:
+            note = unfinished_note(load_run(run_id, data, check=False))
+        except InputError:
+            continue
+        if note is not None:
+            print_warning(note)
+
+
 #: The strongest gauge vacuum (kPa below atmosphere) a value may state.
 MAX_VACUUM_KPA = 100.0
 

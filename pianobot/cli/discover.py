@@ -25,6 +25,7 @@ from pianobot.cli.common import (
     print_warning,
     say,
     say_written,
+    warn_unfinished,
     writable,
 )
 from pianobot.executor import ExecutorSettings
@@ -109,6 +110,7 @@ def register(app: typer.Typer) -> None:
         if model_out is None and out is not None:
             model_out = out.with_suffix(".model.json")
         model_out = writable(model_out, "--model-out")
+        warn_unfinished(runs, data)
         result = discover_runs(runs, data, model, seed=seed, model_out=model_out, vacuum_kpa=vacuum_kpa,
                                schedule=presses, progress=command_progress(json_out, no_progress),
                                executor=ExecutorSettings.resolve(workers=workers, scheduler=scheduler))

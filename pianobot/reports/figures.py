@@ -46,7 +46,7 @@ def velocity_vs_speed(trials: pd.DataFrame) -> Figure:
     sounded = trials.dropna(subset=["on_velocity"])
     # A rigid finger's runs record no vacuum: one series of their own, not none.
     for vacuum, group in sounded.groupby("vacuum_kpa", dropna=False):
-        label = "none (rigid)" if pd.isna(vacuum) else f"{float(vacuum) + 0.0:g} kPa"
+        label = "none (rigid)" if pd.isna(vacuum) else f"{float(str(vacuum)) + 0.0:g} kPa"
         ax.plot(speed.shown(group["down_velocity_mps"]), group["on_velocity"], "o", ms=3, label=label)
     label_axes(ax, speed, quantity("on_velocity"))
     if not sounded.empty:

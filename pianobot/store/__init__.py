@@ -24,6 +24,7 @@ if TYPE_CHECKING:
         load_run,
         rig_summary,
         summarize_run,
+        unfinished_note,
     )
     from pianobot.store.repair import RepairReport, repair_run
     from pianobot.store.schema import SCHEMA_VERSION, TABLE_SCHEMAS, empty_frame
@@ -34,7 +35,7 @@ _HOME = {
     "journal": ("read_journal",),
     "layout": ("RunDamaged", "RunPaths", "check_data_dir", "resolve_run", "runs_dir"),
     "lock": ("LockLost", "RunLock", "RunLocked", "read_holder"),
-    "reader": ("Run", "RunSummary", "list_runs", "load_run", "rig_summary", "summarize_run"),
+    "reader": ("Run", "RunSummary", "list_runs", "load_run", "rig_summary", "summarize_run", "unfinished_note"),
     "repair": ("RepairReport", "repair_run"),
     "schema": ("SCHEMA_VERSION", "TABLE_SCHEMAS", "empty_frame"),
     "writer": ("RunWriter", "StagedPart", "encode_part", "stage_part"),
@@ -80,4 +81,5 @@ __all__ = [
     "runs_dir",
     "stage_part",
     "summarize_run",
+    "unfinished_note",
 ]

@@ -185,6 +185,32 @@ def summarize_run(run: Run) -> RunSummary:
     )
 
 
+def unfinished_note(run: Run) -> str | None:
+    """What an analysis of `run` should say when the run is not a finished one: still being
+    recorded (its lock is held), left behind by a process that died, or stopped early. None for a
+    completed run or an import."""
+    from pianobot.store.lock import read_holder
+
+    meta = run.meta
+    status = str(meta.get("status", "unknown"))
+    counts = trial_counts(run, meta)
+    done = counts["ok"] + counts["silent"]
+    planned = meta.get("trials_planned")
+    of = f"{done} of {int(planned)} planned" if planned is not None else f"{done}"
+    resume = f"`pianobot sweep --resume {run.run_id}` completes it"
+    if status == "running":
+        holder = read_holder(run.paths.lock)
+        if holder is not None and not holder.is_stale():
+            return f"run {run.run_id} is still running ({holder.describe()}): only its {of} keystrokes so far are analysed"
+        return (f"run {run.run_id} did not finish (its process died or lost the connection; status still "
+                f"'running'): {of} keystrokes are analysed; {resume}")
+    if status in ("stopped", "interrupted", "failed") and (planned is None or done < int(planned)):
+        reason = meta.get("reason")
+        why = f" ({reason})" if reason else ""
+        return f"run {run.run_id} {status}{why} after {of} keystrokes: only those are analysed; {resume}"
+    return None
+
+
 def list_runs(data_dir: Path) -> list[RunSummary]:
     """Every run under `data_dir/runs`, oldest first (run ids start with their UTC time).
 

@@ -152,3 +152,34 @@ def test_identify_warns_on_implausible_keys_and_stores_the_warnings(
     proc = cli("identify", plain, "--data", str(data_dir), "--bootstrap", "3", "--out", str(out), "--json")
     assert proc.returncode == 0, proc.stderr
     assert json.loads(proc.stdout)["warnings"] == json.loads(out.read_text())["warnings"] == []
+
+
+def test_an_analysis_says_when_its_run_is_unfinished(cli: Callable[..., _Result], data_dir: Path, tmp_path: Path) -> None:
+    import pandas as pd
+
+    from pianobot.store import RunLock
+
+    trials = sounded_trials(0)
+    planned = [*trials["trial_id"], *(f"later-{i}" for i in range(20))]
+    plan = pd.DataFrame({"trial_id": planned, "index": range(len(planned))})
+    writer = RunWriter.create(data_dir, name="partial", kind="sweep", meta={"seed": 0}, plan=plan, fsync=False)
+    writer.append(trials)
+    writer.close()  # what a kill -9 leaves: status 'running', no live lock
+    report = ("report", writer.run_id, "--data", str(data_dir), "--out", str(tmp_path / "r.html"), "--no-progress")
+    proc = cli(*report)
+    assert proc.returncode == 0, proc.stderr
+    assert f"run {writer.run_id} did not finish" in proc.stderr
+    assert f"{len(trials)} of {len(trials) + 20} planned keystrokes are analysed" in proc.stderr
+    assert f"pianobot sweep --resume {writer.run_id}" in proc.stderr
+    # Still being recorded: a live process holds its lock.
+    with RunLock(writer.paths.lock, purpose="sweep"):
+        proc = cli(*report)
+    assert "is still running (pid" in proc.stderr and "(sweep)" in proc.stderr
+    # Stopped early, and said why.
+    RunWriter.reopen(data_dir, writer.run_id, fsync=False).finish("stopped", reason="stop requested (Ctrl-C)")
+    proc = cli(*report)
+    assert f"run {writer.run_id} stopped (stop requested (Ctrl-C)) after {len(trials)} of" in proc.stderr
+    # A finished run gets no such warning.
+    done = write_run(data_dir, trials, None)
+    assert "warning" not in cli("report", done, "--data", str(data_dir), "--out", str(tmp_path / "d.html"),
+                                "--no-progress").stderr
