@@ -20,6 +20,7 @@ import numpy.typing as npt
 import pandas as pd
 
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
+from pianobot.analysis.greybox.noise import noise_sigma_m
 from pianobot.analysis.greybox.stages import (
     KEY_MOTION_THRESHOLD_M,
     fill_gaps,
@@ -146,35 +147,47 @@ def features_table(
     return pd.DataFrame(rows, columns=["trial_id", *FEATURE_COLUMNS])
 
 
-#: The key has started to move once it is this far down (well above mocap noise, well below
-#: the compression of a press).
+#: The key has started to move once it is this far down (well above a few µm of mocap noise,
+#: well below the compression of a press) ...
 KEY_ONSET_M = 5e-5
+#: ... or this many σ of the key marker's noise, where that is more: in a capture with 30 µm of
+#: marker noise, 50 µm is crossed by the noise alone in the first frames, and a hovering finger
+#: then reads as resting on the key (each of four independent hover takes named a yielding finger).
+ONSET_NOISE_SIGMAS = 5.0
+
+
+def key_onset_m(batch: KeystrokeBatch) -> float:
+    """The key travel read as its onset in `batch`: `KEY_ONSET_M`, or `ONSET_NOISE_SIGMAS` σ of
+    the key marker's noise (second differences over the take) where that is more."""
+    sigma = noise_sigma_m(batch.x2_m) if batch.x2_m.size else 0.0
+    return max(KEY_ONSET_M, ONSET_NOISE_SIGMAS * sigma)
 
 
 def approach_distance_m(batch: KeystrokeBatch) -> FloatArray:
     """Per keystroke, the fingertip's travel from rest until the key started to move (NaN where
     the key never moved or the fingertip was not tracked).
 
-    Read where the key passes `KEY_ONSET_M`, between frames: by then the finger is slightly
-    compressed, so this reads a little long (measured on independent takes: 0.2-0.4 mm over a
-    5 mm hover, 0.2 mm for a finger resting on the key).
+    Read where the key passes its onset (`key_onset_m`), between frames: by then the finger is
+    slightly compressed, so this reads a little long (measured on independent takes: 0.2-0.4 mm
+    over a 5 mm hover, 0.2 mm for a finger resting on the key).
     """
+    level = key_onset_m(batch)
     out = np.full(batch.n, np.nan)
     for i in range(batch.n):
         t = batch.row_times_s(i)
         x2 = fill_gaps(t, batch.x2_m[i])
         x1 = fill_gaps(t, batch.x1_m[i])
-        j = _onset_index(x2)
+        j = _onset_index(x2, level)
         if j is None or not np.isfinite(x1).any():
             continue
-        f = (KEY_ONSET_M - x2[j - 1]) / (x2[j] - x2[j - 1])
+        f = (level - x2[j - 1]) / (x2[j] - x2[j - 1])
         out[i] = float(x1[j - 1] + f * (x1[j] - x1[j - 1]))
     return out
 
 
-def _onset_index(x2: FloatArray) -> int | None:
-    """First sample where the key is past `KEY_ONSET_M` (None if never, or from the start)."""
-    above = np.flatnonzero(x2 > KEY_ONSET_M)
+def _onset_index(x2: FloatArray, level: float) -> int | None:
+    """First sample where the key is past `level` (None if never, or from the start)."""
+    above = np.flatnonzero(x2 > level)
     return None if above.size == 0 or above[0] == 0 else int(above[0])
 
 
@@ -194,11 +207,12 @@ def unloaded_travel_m(batch: KeystrokeBatch) -> FloatArray:
     after the arm's acceleration blurs the hinge of a hovering finger (it reads 1-3 mm short
     over a 5 mm hover): this separates hovering from resting, it does not measure the hover.
     """
+    level = key_onset_m(batch)
     out = np.full(batch.n, np.nan)
     for i in range(batch.n):
         t = batch.row_times_s(i)
         x0, x1, x2 = (fill_gaps(t, x[i]) for x in (batch.x0_m, batch.x1_m, batch.x2_m))
-        j = _onset_index(x2)
+        j = _onset_index(x2, level)
         if j is None:
             continue
         u = x0[:j] - x0[0]
