@@ -6,7 +6,8 @@ Suites, reported apart:
   other functional forms, other base numbers; they write Motive CSV takes and ctrl_midi-style
   keystroke logs). The acceptance table, split by "form equals a candidate" / "form differs".
   `--truth-subset variants`: suite takes recorded otherwise (other frame rates, fewer keystrokes,
-  faster presses, an effect on another base), a check that nothing is tuned to the suite's recording. `--files take`: each
+  faster presses, an effect on another base), a check that nothing is tuned to the suite's recording;
+  `--truth-subset noisy`: the suite's takes with 30 µm of marker noise instead of 3 µm. `--files take`: each
   take alone, as Motive wrote it (no presses, no arm log); an arm lag or a mocap clock offset
   then leaves nothing to find, and those rows are counted apart (`not_observable_from_files`).
 - `own`: pianobot's own simulated world (tests/analysis/own_world.py). An inverse crime by
@@ -185,9 +186,9 @@ def truth_suite(only: list[str] | None, log: Callable[[str], None], subset: str 
     """The independent suite (tests/truth): each scenario written to disk, imported with `files`
     (FILE_SETS), discovered; on clean takes also identified as `pianobot identify` does. With
     `files="take"` only the mocap scenarios run (a keystroke log has no take)."""
-    from tests.truth import full_suite, materialise, small_suite, variant_suite
+    from tests.truth import full_suite, materialise, noisy_suite, small_suite, variant_suite
 
-    scenarios = {"full": full_suite, "small": small_suite, "variants": variant_suite}[subset]()
+    scenarios = {"full": full_suite, "small": small_suite, "variants": variant_suite, "noisy": noisy_suite}[subset]()
     takes_only = files == "take"
     if takes_only:
         scenarios = [sc for sc in scenarios if sc.kind == "mocap"]
@@ -472,8 +473,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     parser.add_argument("--suite", nargs="*", default=["truth", "own", "real"], choices=["truth", "own", "real"])
     parser.add_argument("--only", nargs="*", default=None, help="scenario names (or parts of names) to run")
-    parser.add_argument("--truth-subset", default="full", choices=["full", "small", "variants"],
-                        help="variants: suite takes recorded otherwise (100/240 Hz, 10 keystrokes, faster presses)")
+    parser.add_argument("--truth-subset", default="full", choices=["full", "small", "variants", "noisy"],
+                        help="variants: suite takes recorded otherwise (100/240 Hz, 10 keystrokes, faster presses); "
+                             "noisy: the suite's takes with 30 um of marker noise")
     parser.add_argument("--files", default="presses", choices=FILE_SETS,
                         help="what of a truth take is imported: the take alone as Motive wrote it (no commanded presses, "
                              "no vacuum), with the lab's commanded presses, or with its UR arm log as well")

@@ -1,11 +1,11 @@
-"""`python -m tests.truth OUT_DIR [--small | --variants] [--only TEXT ...] [--list]`: write the truth suite."""
+"""`python -m tests.truth OUT_DIR [--small | --variants | --noisy] [--only TEXT ...] [--list]`: write the truth suite."""
 
 from __future__ import annotations
 
 import argparse
 import sys
 
-from . import Materialised, full_suite, small_suite, variant_suite, write_suite
+from . import Materialised, full_suite, noisy_suite, small_suite, variant_suite, write_suite
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -17,11 +17,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--small", action="store_true", help="only the small test subset")
     parser.add_argument("--variants", action="store_true",
                         help="suite takes recorded otherwise (other frame rates, fewer keystrokes, faster presses)")
+    parser.add_argument("--noisy", action="store_true",
+                        help="the suite's mocap takes with 30 um of marker noise instead of 3 um")
     parser.add_argument("--only", action="append", default=[], metavar="TEXT",
                         help="only scenarios whose name contains TEXT (repeatable)")  # fmt: skip
     parser.add_argument("--list", action="store_true", help="list the scenarios and exit")
     args = parser.parse_args(argv)
-    chosen = small_suite() if args.small else variant_suite() if args.variants else full_suite()
+    chosen = (small_suite() if args.small else variant_suite() if args.variants
+              else noisy_suite() if args.noisy else full_suite())
     if args.only:
         chosen = [s for s in chosen if any(text in s.name for text in args.only)]
     if args.list:

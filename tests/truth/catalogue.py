@@ -296,9 +296,23 @@ def variant_suite() -> list[Scenario]:
     return out
 
 
+#: Marker noise of `noisy_suite`'s capture: a few times the study's zzz40 (8 µm), as markers seen
+#: by few cameras or a coarser calibration give.
+NOISY_CAPTURE_M = 30e-6
+
+
+def noisy_suite(noise_m: float = NOISY_CAPTURE_M) -> list[Scenario]:
+    """The suite's takes recorded by a noisier capture (`noise_m` of marker noise instead of
+    3 µm), named `<take>-noise<µm>um`; same seeds, effects and bases."""
+    return [replace(s, name=f"{s.name}-noise{1e6 * noise_m:g}um",
+                    description=f"{s.description}; {1e6 * noise_m:g} um of marker noise",
+                    observation=replace(s.observation, noise_m=noise_m))
+            for s in full_suite() if s.kind == "mocap"]
+
+
 def scenario(name: str) -> Scenario:
     """One scenario of the full suite or the variants by name (KeyError naming the known ones)."""
-    by_name = {s.name: s for s in full_suite() + variant_suite()}
+    by_name = {s.name: s for s in full_suite() + variant_suite() + noisy_suite()}
     if name not in by_name:
         raise KeyError(f"unknown scenario {name!r}; known: {sorted(by_name)}")
     return by_name[name]
