@@ -69,12 +69,12 @@ def print_warning(message: str) -> None:
 def warn_unfinished(runs: Sequence[str], data: Path) -> None:
     """Before an analysis: a warning for each run that is still being recorded, died without
     finishing or was stopped early (its numbers cover only what it recorded so far). A run that
-    cannot be opened is left to the command, which says why."""
+    cannot be opened or is damaged is left to the command, which refuses it in one line."""
     from pianobot.store import load_run, unfinished_note
 
     for run_id in dict.fromkeys(runs):
         try:
-            note = unfinished_note(load_run(run_id, data, check=False))
+            note = unfinished_note(load_run(run_id, data))
         except InputError:
             continue
         if note is not None:
