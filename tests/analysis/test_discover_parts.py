@@ -89,17 +89,20 @@ def test_rule_needs_every_condition_and_prefers_the_simpler() -> None:
     assert choose([no_size], rule, True)[0] is None
 
 
-def test_a_rejected_candidate_says_how_much_the_gap_changed_in_whole_percents() -> None:
+def test_a_rejected_candidate_says_how_much_the_gap_changed_in_readable_percents() -> None:
     before = _gap(1e-4, [1e-4] * 6)
     worse = verdict("letoff", "letoff", "default", {}, {}, (), -20.0, before, _gap(1.29e-4, [1.29e-4] * 6),
                     False, True)
     same = verdict("contact", "contact", "default", {}, {}, (), 0.0, before, _gap(1.00001e-4, [1.00001e-4] * 6),
                    False, True)
-    _, judged = choose([worse, same], Rule(), True)
+    nearly = verdict("key_preload", "key_preload", "default", {}, {}, (), 80.0, before, _gap(0.704e-4, [0.704e-4] * 6),
+                     False, True)
+    _, judged = choose([worse, same, nearly], Rule(), True)
     reasons = {v.label: "; ".join(v.reasons) for v in judged}
     assert "held-out gap grows 29 %" in reasons["letoff"]
     assert "held-out gap shrinks 0 % < 30 %" in reasons["contact"]
     assert "-0" not in reasons["contact"]
+    assert "held-out gap shrinks 29.6 % < 30 %" in reasons["key_preload"]  # not "30 % < 30 %"
 
 
 def test_candidate_parameters_read_in_display_units_with_bounds_flagged() -> None:

@@ -110,6 +110,13 @@ def verdict(label: str, effect: str, form: str, params: dict[str, float], interv
                    joint, measure)
 
 
+def _short_of(percent: float, limit: float) -> str:
+    """A percentage below `limit` in whole percents (an int: never "-0"), or to a tenth where
+    whole percents would round it up to the limit ("29.6 % < 30 %", not "30 % < 30 %")."""
+    whole = round(percent)
+    return str(whole) if whole < limit else f"{math.floor(10 * percent) / 10:.1f}"
+
+
 def judge(v: Verdict, rule: Rule, explainable: bool) -> Verdict:
     """Mark a candidate as passing or rejected, with every reason it fails."""
     reasons = []
@@ -118,13 +125,13 @@ def judge(v: Verdict, rule: Rule, explainable: bool) -> Verdict:
     if not explainable:
         reasons.append("held-out error is at the noise level")
     if not v.shrink >= rule.min_shrink:
-        # Whole percents (an int has no "-0"); a gap that grew says so.
-        change = round(100 * v.shrink)
-        reasons.append(f"held-out gap grows {-change} %" if change < 0
-                       else f"held-out gap shrinks {change} % < {100 * rule.min_shrink:.0f} %")
+        change = 100 * v.shrink
+        reasons.append(f"held-out gap grows {_short_of(-change, math.inf)} %" if round(change) < 0
+                       else f"held-out gap shrinks {_short_of(change, 100 * rule.min_shrink)} % < "
+                            f"{100 * rule.min_shrink:g} %")
     if not v.consistency >= rule.min_consistency:
-        reasons.append(f"improves {round(100 * v.consistency)} % of changed held-out keystrokes "
-                       f"< {100 * rule.min_consistency:.0f} %")
+        reasons.append(f"improves {_short_of(100 * v.consistency, 100 * rule.min_consistency)} % of changed "
+                       f"held-out keystrokes < {100 * rule.min_consistency:g} %")
     if not v.size_excludes_off:
         reasons.append("size interval includes 'off'")
     return replace(v, status="passes" if not reasons else "rejected", reasons=tuple(reasons))
