@@ -8,6 +8,7 @@ from typing import Annotated
 
 import typer
 
+from pianobot.analysis.discover.decide import percent_text
 from pianobot.analysis.discover.result import DiscoveryResult
 from pianobot.analysis.discover.run import discover_runs
 from pianobot.cli.common import (
@@ -54,10 +55,11 @@ def _print(result: DiscoveryResult, report: Path | None, model_out: Path | None)
                 "level, no candidate fitted")
             continue
         rows = []
+        rule = result.rule
         for v in it.verdicts[:12]:
             ratio = "∞" if not math.isfinite(v.ratio) else f"{v.ratio:.2g}×"
-            rows.append([v.label, f"{v.delta_ic:.1f}", gap_cell(v.gap_after), f"{round(100 * v.shrink)} % ({ratio})",
-                         f"{round(100 * v.consistency)} %", v.status, "; ".join(v.reasons)])
+            rows.append([v.label, f"{v.delta_ic:.1f}", gap_cell(v.gap_after), f"{percent_text(100 * v.shrink, 100 * rule.min_shrink)} % ({ratio})",
+                         f"{percent_text(100 * v.consistency, 100 * rule.min_consistency)} %", v.status, "; ".join(v.reasons)])
         print_table(CANDIDATE_COLUMNS, rows,
                     title=f"{it.heading}: held-out gap of the current model {it.gap_before.text()}")
     say(f"{result.n_train} training / {result.n_held_out} held-out keystrokes, {result.seconds:.1f} s")

@@ -14,6 +14,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
+from pianobot.analysis.discover.decide import percent_text
 from pianobot.analysis.discover.gap import Gap
 from pianobot.analysis.discover.result import DiscoveryResult, params_text
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
@@ -29,12 +30,13 @@ def gap_cell(gap: Gap) -> str:
 def candidate_frame(result: DiscoveryResult, index: int) -> pd.DataFrame:
     """One iteration's candidate table."""
     rows = []
+    rule = result.rule
     for v in result.iterations[index].verdicts:
         params = params_text(v)
         rows.append({"candidate": v.label, "family": v.family, "parameters (95 % CI)": params or "(switch)",
                      "ΔIC": round(v.delta_ic, 1), "held-out gap before": gap_cell(v.gap_before),
-                     "after": gap_cell(v.gap_after), "shrink %": round(100 * v.shrink),
-                     "consistent %": round(100 * v.consistency), "joint fit": "yes" if v.joint else "screened",
+                     "after": gap_cell(v.gap_after), "shrink %": percent_text(100 * v.shrink, 100 * rule.min_shrink),
+                     "consistent %": percent_text(100 * v.consistency, 100 * rule.min_consistency), "joint fit": "yes" if v.joint else "screened",
                      "status": v.status, "why not": "; ".join(v.reasons)})
     return pd.DataFrame(rows)
 

@@ -17,7 +17,13 @@ from pianobot.analysis.discover.candidates import (
     size_params,
     start_points,
 )
-from pianobot.analysis.discover.decide import Rule, choose, something_to_explain, verdict
+from pianobot.analysis.discover.decide import (
+    Rule,
+    choose,
+    percent_text,
+    something_to_explain,
+    verdict,
+)
 from pianobot.analysis.discover.gap import Gap, consistency, score
 from pianobot.analysis.discover.result import params_text
 from pianobot.analysis.discover.sparse import (
@@ -103,6 +109,16 @@ def test_a_rejected_candidate_says_how_much_the_gap_changed_in_readable_percents
     assert "held-out gap shrinks 0 % < 30 %" in reasons["contact"]
     assert "-0" not in reasons["contact"]
     assert "held-out gap shrinks 29.6 % < 30 %" in reasons["key_preload"]  # not "30 % < 30 %"
+
+
+def test_table_cells_read_a_percentage_as_the_reasons_do() -> None:
+    # discover's table and report show the shrink and consistency with the reasons' rule: a cell
+    # must not read "30 %" beside "shrinks 29.7 % < 30 %"
+    assert percent_text(29.7, 30) == "29.7"
+    assert percent_text(29.99, 30) == "29.9"  # short of the limit stays short of it
+    assert percent_text(30.0, 30) == "30" and percent_text(30.4, 30) == "30"  # at or past it: whole
+    assert percent_text(71.6, 70) == "72" and percent_text(12.4, 30) == "12"
+    assert percent_text(-0.3, 30) == "0"  # never "-0"
 
 
 def test_candidate_parameters_read_in_display_units_with_bounds_flagged() -> None:

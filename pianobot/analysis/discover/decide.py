@@ -110,11 +110,12 @@ def verdict(label: str, effect: str, form: str, params: dict[str, float], interv
                    joint, measure)
 
 
-def _short_of(percent: float, limit: float) -> str:
-    """A percentage below `limit` in whole percents (an int: never "-0"), or to a tenth where
-    whole percents would round it up to the limit ("29.6 % < 30 %", not "30 % < 30 %")."""
+def percent_text(percent: float, limit: float) -> str:
+    """A percentage in whole percents (an int: never "-0"), or to a tenth where it is below
+    `limit` and whole percents would round it up to the limit ("29.6 % < 30 %", not "30 % < 30 %").
+    The tables use it too, so a cell never reads "30 %" beside a reason "29.7 % < 30 %"."""
     whole = round(percent)
-    return str(whole) if whole < limit else f"{math.floor(10 * percent) / 10:.1f}"
+    return str(whole) if whole < limit or percent >= limit else f"{math.floor(10 * percent) / 10:.1f}"
 
 
 def judge(v: Verdict, rule: Rule, explainable: bool) -> Verdict:
@@ -126,11 +127,11 @@ def judge(v: Verdict, rule: Rule, explainable: bool) -> Verdict:
         reasons.append("held-out error is at the noise level")
     if not v.shrink >= rule.min_shrink:
         change = 100 * v.shrink
-        reasons.append(f"held-out gap grows {_short_of(-change, math.inf)} %" if round(change) < 0
-                       else f"held-out gap shrinks {_short_of(change, 100 * rule.min_shrink)} % < "
+        reasons.append(f"held-out gap grows {percent_text(-change, math.inf)} %" if round(change) < 0
+                       else f"held-out gap shrinks {percent_text(change, 100 * rule.min_shrink)} % < "
                             f"{100 * rule.min_shrink:g} %")
     if not v.consistency >= rule.min_consistency:
-        reasons.append(f"improves {_short_of(100 * v.consistency, 100 * rule.min_consistency)} % of changed "
+        reasons.append(f"improves {percent_text(100 * v.consistency, 100 * rule.min_consistency)} % of changed "
                        f"held-out keystrokes < {100 * rule.min_consistency:g} %")
     if not v.size_excludes_off:
         reasons.append("size interval includes 'off'")
