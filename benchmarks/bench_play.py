@@ -122,7 +122,7 @@ def _row(result: PlayResult) -> dict[str, Any]:
     skipped = int((result.plan.notes["status"] == "skip").sum())
     return {"f1": score.f1, "onset_rms_ms": score.onset_rms_ms, "velocity_mae": score.velocity_mae,
             "tempo_bpm": tempo.played_bpm, "skipped": skipped, "notes": score.notes_target,
-            "played": score.notes_played, "missed": score.notes_target - score.notes_matched - skipped,
+            "played": score.notes_played, "missed": score.notes_target - score.notes_paired - skipped,
             "note_status": score.to_dict()["note_status"],
             "f1_beat": score.f1_beat, "warmup_lab_time_s": None if result.warmup is None else result.warmup.lab_time_s}
 

@@ -24,13 +24,13 @@ from pianobot.cli.common import (
     check_vacuum_option,
     command_progress,
     emit_json,
+    figure_path,
     output_console,
     print_table,
     print_warning,
     say,
     say_written,
     warn_unfinished,
-    writable,
 )
 from pianobot.errors import InputError
 from pianobot.executor import ExecutorSettings
@@ -92,7 +92,7 @@ def register(app: typer.Typer) -> None:
             raise InputError(f"expected {', '.join(X0_SOURCES)}, got {x0_source!r}", "--x0-source")
         check_vacuum_option(vacuum_kpa)
         check_output_path(out, "--out")  # before minutes of fitting, not after
-        writable(plot, "--plot")
+        figure_path(plot, "--plot")
         warn_unfinished(runs, data)
         levels = force_log_levels(force_log or [])
         static = static_stiffness_from_logs(levels, compression_m=compression_m) if levels else None
@@ -184,7 +184,7 @@ def register(app: typer.Typer) -> None:
 
             fit_sequence_command(runs, data, kinds, out_dir, folds, context, json_out, no_progress)
             return
-        writable(plot, "--plot")
+        figure_path(plot, "--plot")
         progress = command_progress(json_out, no_progress)
         with progress.task("fit: loading scikit-learn"):
             from pianobot.analysis.learn.files import load_predictor

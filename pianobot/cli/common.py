@@ -108,14 +108,29 @@ def writable(path: Path | None, option: str) -> Path | None:
     return path
 
 
+def figure_path(path: Path | None, option: str = "--plot") -> Path | None:
+    """`writable`, and a file type matplotlib writes (png, pdf, svg, ...): checked before any
+    work, so a figure named `roll.txt` does not fail after the robot has played."""
+    if path is None:
+        return None
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    kinds = FigureCanvasBase.get_supported_filetypes()
+    kind = path.suffix.lower().lstrip(".")
+    if kind not in kinds:
+        named = f"'.{kind}'" if kind else "no extension"
+        raise InputError(f"{path} has {named}; a figure is one of .{', .'.join(sorted(kinds))}", option)
+    return writable(path, option)
+
+
 def emit_json(payload: Any) -> None:
-    """Print JSON on stdout (NaN becomes null so every consumer can parse it)."""
+    """Print JSON on stdout (NaN and ±inf become null so every consumer can parse it)."""
     print(json.dumps(_clean(payload), indent=2, default=str))
 
 
 def _clean(value: Any) -> Any:
-    if isinstance(value, float) and value != value:
-        return None
+    if isinstance(value, float) and not math.isfinite(value):
+        return None  # JSON has no NaN or Infinity: strict parsers (JSON.parse, json.loads(strict)) refuse them
     if isinstance(value, dict):
         return {str(k): _clean(v) for k, v in value.items()}
     if isinstance(value, list | tuple):

@@ -14,10 +14,10 @@ from pianobot.cli.common import (
     NoProgressFlag,
     command_progress,
     emit_json,
+    figure_path,
     print_fields,
     say,
     say_written,
-    writable,
 )
 from pianobot.errors import InputError
 from pianobot.io.force_log import (
@@ -153,7 +153,7 @@ def mocap(
     are inferred only when the evidence is clear, otherwise the candidates
     are named.
     """
-    writable(plot, "--plot")
+    figure_path(plot, "--plot")
     markers = _rig_markers(rig) if rig is not None else {}
     markers.update(_marker_options(marker or []))
     result = import_mocap(

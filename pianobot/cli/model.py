@@ -12,11 +12,12 @@ from pianobot.cli.common import (
     DataDir,
     JsonFlag,
     emit_json,
+    figure_path,
     print_fields,
     say,
     say_written,
 )
-from pianobot.errors import InputError
+from pianobot.errors import InputError, check_seed
 from pianobot.physics.linear import peak_response
 from pianobot.physics.model import KeystrokeModel, load_model
 from pianobot.physics.trajectory import Press, press_timing
@@ -50,6 +51,7 @@ def bode_command(
     json: JsonFlag = False,
 ) -> None:
     """Peak frequency and gain of the key's response to the arm, |X2/X0|."""
+    figure_path(plot)
     model = load_model(model_file) if model_file is not None else KeystrokeModel.study()
     lp = model.msd.at(_vacuum(vacuum_kpa))
     peak_hz, gain = peak_response(lp)
@@ -93,6 +95,8 @@ def simulate(
     json: JsonFlag = False,
 ) -> None:
     """Simulate one keystroke in the simulated world; print its MIDI outcome, optionally plot it."""
+    figure_path(plot)
+    check_seed(seed)
     if world not in ("default", "linear"):
         raise InputError(f"expected 'default' or 'linear', got {world!r}", "--world")
     press = press_from({"distance_m": distance_m, "depth_m": depth_m, "down_velocity_mps": down_velocity_mps,

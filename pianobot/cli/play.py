@@ -22,12 +22,14 @@ from pianobot.cli.common import (
     NoProgressFlag,
     command_progress,
     emit_json,
+    figure_path,
     print_fields,
     print_table,
     say,
     say_written,
 )
 from pianobot.play import PlayResult, play_song
+from pianobot.play.perform import PerformanceStopped
 from pianobot.play.warmup import WarmUpFailed
 
 # (column, heading with unit, scale, format, priority): priority 0 always shows, the highest
@@ -56,8 +58,8 @@ def _fmt(value: Any, scale: float = 1.0, spec: str = ".3g") -> str:
     if isinstance(value, int | float):
         if isinstance(value, float) and math.isnan(value):
             return "-"
-        if spec == "d":
-            return str(int(value))
+        if spec == "d" or (isinstance(value, int) and scale == 1.0):
+            return str(int(value))  # a count reads 3012, never 3.01e+03
         return format(float(value) * scale, spec or ".3g")
     return str(value)
 
@@ -104,9 +106,11 @@ def _print_score(result: PlayResult) -> None:
     print_fields(fields, title=f"{result.plan.planner} planner on {result.song.source}")
     if result.warmup is not None:
         w = result.warmup.summary()
+        mae, lead = w.get("velocity_mae_held_out", math.nan), w.get("lead_rmse_ms_held_out", math.nan)
+        held = (f"velocity MAE {mae:.2f}, lead RMSE {lead:.1f} ms" if math.isfinite(mae) and math.isfinite(lead)
+                else "n/a (too few sounded strokes to hold any out)")
         say(f"warm-up: {w['strokes']} keystrokes ({w['sounded']} sounded) in {w['lab_time_s']:.1f} s of lab time; "
-            f"fit on strokes held out: velocity MAE {w.get('velocity_mae_held_out', float('nan')):.2f}, "
-            f"lead RMSE {w.get('lead_rmse_ms_held_out', float('nan')):.1f} ms")
+            f"fit on strokes held out: {held}")
     say(_tempo_line(result))
     say(f"run {result.performance.run_id}: {result.performance.status}")
     for what, path in result.files.items():
@@ -139,6 +143,7 @@ def play(
         from pianobot.errors import InputError
 
         raise InputError("give either --warmup N or --no-warmup", "--no-warmup")
+    figure_path(plot)  # before anything moves: a figure it cannot write would lose the scores
     said: list[str] = []
 
     def warn(line: str) -> None:  # as soon as it is known: before the motion it concerns
@@ -153,6 +158,13 @@ def play(
     except WarmUpFailed as exc:  # the run is stored (status failed) with the warm-up's keystrokes
         print(f"error: warm-up: {exc}", file=sys.stderr)
         raise typer.Exit(1) from None
+    except PerformanceStopped as exc:  # a lost connection, a protective stop in the warm-up
+        print(f"error: the rig stopped: {exc}", file=sys.stderr)
+        raise typer.Exit(1) from None
+    except KeyboardInterrupt:
+        print("error: interrupted (Ctrl-C): what was played is kept in its run (`pianobot runs` lists it)",
+              file=sys.stderr)
+        raise typer.Exit(130) from None
     for line in result.warnings:
         if line not in said:
             warn(line)

@@ -40,7 +40,7 @@ from pianobot.play.song_plan import SongPlan
 from pianobot.play.warmup import WARMUP_SETTLE_S
 from pianobot.progress import NO_PROGRESS, Progress
 from pianobot.rig import open_rig
-from pianobot.rig.errors import ConnectionLost, SafetyStop, SafetyViolation
+from pianobot.rig.errors import ConnectionLost, RigError, SafetyStop, SafetyViolation
 from pianobot.rig.protocols import MidiEvent
 from pianobot.run import TrialData, read_keystroke
 from pianobot.run.rows import failed_trial, midi_table, samples_table, trials_table
@@ -73,6 +73,11 @@ class Performance:
 def trial_id_for(song_key: str, note_index: int) -> str:
     """A stable id per (song, note): the same song and note give the same id."""
     return hashlib.sha256(f"{song_key}|{note_index}".encode()).hexdigest()[:16]
+
+
+class PerformanceStopped(RuntimeError):
+    """The rig stopped a performance outside the song's own recovery (a protective stop in the
+    warm-up, a lost connection): the run is kept with status failed."""
 
 
 class Performer:
@@ -119,9 +124,12 @@ class Performer:
     def __exit__(self, kind: type[BaseException] | None, exc: BaseException | None, tb: object) -> None:
         try:
             if exc is not None and self.writer.meta.get("status") == "running":
-                self.writer.finish("failed", f"{type(exc).__name__}: {exc}")
+                reason = "interrupted (Ctrl-C)" if isinstance(exc, KeyboardInterrupt) else f"{type(exc).__name__}: {exc}"
+                self.writer.finish("failed", reason)
         finally:
             self._stack.close()
+        if isinstance(exc, RigError):  # the rig stopped the performance: say which run keeps what it did
+            raise PerformanceStopped(f"{exc}; run {self.run_id} keeps what was played (status failed)") from exc
 
     def replan(self, plan: pd.DataFrame) -> None:
         """Replace plan.parquet (before the song starts): the warm-up as played and the song as it

@@ -8,6 +8,7 @@ note: target, outcome, onset and velocity error, status and the planner's reason
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any
 
@@ -33,9 +34,10 @@ NOTE_COLUMNS = ("pitch", "onset_s", "target_velocity", "played_velocity", "onset
 
 
 def _fmt(value: Any) -> Any:
-    """Numbers to four significant digits (lists and dicts of them too) for the mapping tables."""
+    """Numbers to four significant digits (lists and dicts of them too) for the mapping tables;
+    "n/a" where there was nothing to measure (no note heard, no stroke held out)."""
     if isinstance(value, float):
-        return f"{value:.4g}"
+        return f"{value:.4g}" if math.isfinite(value) else "n/a"
     if isinstance(value, list | tuple):
         return ", ".join(str(_fmt(v)) for v in value)
     if isinstance(value, dict):
@@ -67,7 +69,7 @@ def _performance(performance: Performance, plan: SongPlan, score: Score, target:
         ("velocity MAE (mapped targets)", scores["velocity_mae"]),
         ("velocity MAE (written velocities)", scores["velocity_mae_unmapped"]),
         ("duration MAE (ms)", scores["duration_mae_ms"]),
-        ("notes target / played / matched", f"{score.notes_target} / {score.notes_played} / {score.notes_matched}"),
+        ("notes target / played / paired loosely", f"{score.notes_target} / {score.notes_played} / {score.notes_paired}"),
         *((f"tempo-relative {k}", v) for k, v in scores["tempo_relative"].items()),
         *((f"notes {k}", v) for k, v in scores["note_status"].items()),
         ("run status", f"{performance.status}{'' if not performance.reason else ': ' + performance.reason}"),

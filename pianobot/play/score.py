@@ -53,7 +53,7 @@ class Score:
     velocity_mae_unmapped: float  # played vs the song's written velocity
     notes_target: int
     notes_played: int
-    notes_matched: int  # by the loose timing match
+    notes_paired: int  # paired by the loose timing match (same pitch, within half the shortest gap)
     per_note: pd.DataFrame  # one row per target note: matched played note, errors, status
     tempo_bpm: float = math.nan  # the tempo the target was played at
     f1_beat: float = math.nan  # tempo-relative F1 (a tenth of a beat)
@@ -69,7 +69,7 @@ class Score:
             "duration_mae_ms": self.duration_mae_ms, "velocity_mae": self.velocity_mae,
             "velocity_mae_unmapped": self.velocity_mae_unmapped,
             "notes_target": self.notes_target, "notes_played": self.notes_played,
-            "notes_matched": self.notes_matched,
+            "notes_paired": self.notes_paired,
             "tempo_relative": {
                 "tempo_bpm": _finite(self.tempo_bpm), "f1_beat": _finite(self.f1_beat),
                 "beat_tolerance": BEAT_TOLERANCE, "onset_rms_beats": _finite(self.onset_rms_beats),
@@ -163,7 +163,7 @@ def score_performance(
         duration_mae_ms=mean_abs("duration_error_s") * 1e3,
         velocity_mae=mean_abs("velocity_error"),
         velocity_mae_unmapped=mean_abs("velocity_error_unmapped"),
-        notes_target=len(target), notes_played=len(played), notes_matched=int(onset.size),
+        notes_target=len(target), notes_played=len(played), notes_paired=int(onset.size),
         per_note=per_note, tempo_bpm=float(tempo_bpm), f1_beat=f1_beat,
         onset_rms_beats=rms / beat_s if onset.size else math.nan, heard_tempo_bpm=heard, rhythm_rms_ms=rhythm,
     )

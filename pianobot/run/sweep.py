@@ -15,7 +15,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from pianobot.errors import InputError
+from pianobot.errors import InputError, check_seed
 from pianobot.executor import IN_PROCESS, Executor, ExecutorSettings, open_executor
 from pianobot.plan import (
     DEFAULT_MAX_TRIALS,
@@ -106,8 +106,7 @@ def prepare_sweep(
     `rig_path` replaces the rig file the spec names (e.g. the faulty sim rig for a drill);
     a plan of more than `max_trials` trials is refused before it is built.
     """
-    if seed is not None and not 0 <= seed < 2**63:
-        raise InputError(f"must be a whole number from 0 to 2**63 - 1, got {seed}", "--seed")
+    check_seed(seed)
     path = Path(spec_path)
     spec = load_spec(path, rig=rig_path)
     rig = load_rig_for(spec) if rig_path is None else load_rig(rig_path)

@@ -94,6 +94,8 @@ def test_dry_run_prints_the_feasible_tempo_and_the_limiting_notes(
 @pytest.mark.parametrize(("args", "where"), [
     (["--tempo", "fast"], "--tempo"), (["--tempo", "0"], "--tempo"), (["--finger", "steel"], "--finger"),
     (["--warmup", "5", "--no-warmup"], "--no-warmup"), (["--warmup", "500"], "--warmup"),
+    (["--warmup", "2"], "--warmup"),  # a level is learnt from 3 sounded notes: 2 could never work
+    (["--seed", "-1"], "--seed"), (["--plot", "roll.txt"], "--plot"),  # both used to fail after the song
 ])
 def test_bad_play_options_are_one_line_and_exit_2(args: list[str], where: str, tmp_path: Path,
                                                   capsys: pytest.CaptureFixture[str],
@@ -119,3 +121,38 @@ def test_play_prints_the_score_the_tempo_and_the_warm_up(tmp_path: Path, capsys:
     assert "report written to" in out
     run = json.loads(next((tmp_path / "runs").glob("*/run.json")).read_text())
     assert run["rig"]["warnings"] == ["speed slider at 50 %"]
+
+
+def test_a_play_the_rig_stops_is_one_line_naming_the_kept_run(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                              monkeypatch: pytest.MonkeyPatch) -> None:
+    # A protective stop in the warm-up used to end in a traceback (the song's own stops are
+    # handled note by note); now one line names the stop and the run that keeps what was played.
+    from pianobot.rig.errors import SafetyStop
+    from pianobot.rig.station import Rig
+
+    calls = {"n": 0}
+    real = Rig.press_at
+
+    def stops_on_the_third(self: Rig, *args: object, **kwargs: object) -> object:
+        calls["n"] += 1
+        if calls["n"] == 3:
+            raise SafetyStop("protective stop (test)")
+        return real(self, *args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(Rig, "press_at", stops_on_the_third)
+    code, out, err = cli(["play", str(SONGS / "mary.mid"), "--data", str(tmp_path), "--warmup", "4"],
+                         capsys, monkeypatch)
+    errors = [line for line in err.splitlines() if line.startswith("error:")]
+    run = json.loads(next((tmp_path / "runs").glob("*/run.json")).read_text())
+    assert code == 1 and len(errors) == 1 and "Traceback" not in err
+    assert "protective stop (test)" in errors[0] and run["run_id"] in errors[0]
+    assert run["status"] == "failed"
+
+
+def test_counts_read_as_whole_numbers_and_json_has_no_infinity() -> None:
+    from pianobot.cli.common import _clean
+    from pianobot.cli.play import _fmt
+
+    assert _fmt(3012) == "3012" and _fmt(3.5) == "3.5" and _fmt(float("nan")) == "-"  # not "3.01e+03"
+    assert _clean({"hi": float("inf"), "lo": float("-inf"), "x": [float("nan"), 1.0]}) == {
+        "hi": None, "lo": None, "x": [None, 1.0]}
