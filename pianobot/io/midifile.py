@@ -14,6 +14,7 @@ Reading rules (`read_song`):
   next note-off ends the new note. A note-off with no sounding note is ignored; a note still
   sounding at the end of its track ends there. Zero-length notes are dropped.
 - Pitches outside the piano (21–108, after `transpose`) are reported, not silently dropped.
+- The sustain pedal (controller 64) is reported, not played: a note lasts until its key-up.
 
 Every such decision is counted in `Song.warnings`, so a caller can say what happened.
 `write_performance` writes played notes with 1 tick = 1 ms (1000 ticks per beat at 60 bpm).
@@ -32,6 +33,7 @@ from pianobot.output import write_output
 from pianobot.physics.keyboard import HIGHEST_NOTE, LOWEST_NOTE
 
 DRUM_CHANNEL = 9  # channel 10 in 1-based numbering
+SUSTAIN_PEDAL = 64  # the damper pedal's controller number
 DEFAULT_TEMPO_US = 500_000  # 120 bpm until the first set_tempo
 PERFORMANCE_TICKS_PER_BEAT = 1000
 PERFORMANCE_TEMPO_US = 1_000_000  # 60 bpm: with 1000 ticks per beat, 1 tick = 1 ms
@@ -175,6 +177,11 @@ def read_song(
         )
     if counts["zero_length"]:
         warnings.append(f"dropped {counts['zero_length']} zero-length note(s)")
+    pedal = sum(1 for trk in mid.tracks for msg in trk if getattr(msg, "type", "") == "control_change"
+                and int(getattr(msg, "control", -1)) == SUSTAIN_PEDAL and int(getattr(msg, "value", 0)) >= 64)
+    if pedal:
+        warnings.append(f"the sustain pedal (pressed {pedal} time(s)) is not played: each note lasts until "
+                        "its key is released")
     if track is not None:
         notes = [n for n in notes if n.track == track]
     notes = [replace(n, pitch=n.pitch + transpose) for n in notes]

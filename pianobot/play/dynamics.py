@@ -2,7 +2,8 @@
 
 A soft finger inside its safety envelope reaches only part of the MIDI velocity scale (the
 study's mostly produced 1–25). `mapped` stretches the song's velocity range linearly onto the
-reachable range, keeping the contrasts; `absolute` keeps the written velocities and clips them.
+reachable range, keeping the contrasts (a song at one loudness keeps its place on the MIDI
+scale: 127 the loudest reachable, 1 the quietest); `absolute` keeps the written velocities and clips them.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import numpy.typing as npt
 FloatArray = npt.NDArray[np.float64]
 DynamicsMode = Literal["mapped", "absolute"]
 DYNAMICS_MODES: tuple[str, ...] = ("mapped", "absolute")
+MIDI_MAX = 127.0  # the loudest MIDI velocity
 
 
 @dataclass(frozen=True)
@@ -40,15 +42,26 @@ class DynamicsMap:
         if self.mode == "absolute":
             return np.asarray(np.clip(v, lo, hi), dtype=np.float64)
         s_lo, s_hi = self.song_range
-        if s_hi - s_lo < 1e-9:  # one loudness throughout: the middle of what the finger can do
-            return np.full(v.shape, 0.5 * (lo + hi))
+        if s_hi - s_lo < 1e-9:
+            # One loudness throughout (a score exported without dynamics, or marked ff or pp all
+            # through): its place on the MIDI scale, so 127 is the loudest the finger can play,
+            # 1 the quietest and 64 the middle, where it used to be the middle whatever it said.
+            return np.full(v.shape, lo + self.one_loudness_fraction * (hi - lo))
         return np.asarray(lo + (v - s_lo) / (s_hi - s_lo) * (hi - lo), dtype=np.float64)
+
+    @property
+    def one_loudness_fraction(self) -> float:
+        """Where a song at one loudness sits in the reachable range: its place on 1–127."""
+        return float(np.clip((self.song_range[0] - 1.0) / (MIDI_MAX - 1.0), 0.0, 1.0))
 
     def describe(self) -> str:
         """The mapping as one line, e.g. `linear 25–115 → 1.8–9.4`."""
         lo, hi = self.target_range
         if self.mode == "absolute":
             return f"absolute, clipped to {lo:.1f}–{hi:.1f}"
+        if self.song_range[1] - self.song_range[0] < 1e-9:
+            at = lo + self.one_loudness_fraction * (hi - lo)
+            return f"one loudness {self.song_range[0]:g} of 127 → {at:.1f} in {lo:.1f}–{hi:.1f}"
         return f"linear {self.song_range[0]:g}–{self.song_range[1]:g} → {lo:.1f}–{hi:.1f}"
 
     def to_dict(self) -> dict[str, Any]:

@@ -23,7 +23,7 @@ import pandas as pd
 from pianobot.analysis.learn.files import load_predictor
 from pianobot.analysis.learn.physical import PhysicsPredictor
 from pianobot.analysis.learn.predictors import StrokePredictor
-from pianobot.errors import InputError
+from pianobot.errors import InputError, check_seed
 from pianobot.io.midifile import Melody, Note, Song, melody, read_song, write_performance
 from pianobot.physics.model import KeystrokeModel
 from pianobot.play.adapt import OnlineAdapter
@@ -217,8 +217,10 @@ def play_song(
         raise InputError("--adapt corrects the model planner; the naive planner has no model", "--adapt")
     if finger is not None and finger not in FINGERS:
         raise InputError(f"finger should be one of {', '.join(FINGERS)}, got {finger!r}", "--finger")
-    if warmup is not None and not 0 <= warmup <= 200:
-        raise InputError(f"warm-up keystrokes should be in [0, 200], got {warmup}", "--warmup")
+    if warmup is not None and not (warmup == 0 or MIN_HEARD_PER_LEVEL <= warmup <= 200):
+        raise InputError(f"warm-up keystrokes per vacuum level should be 0 (none) or {MIN_HEARD_PER_LEVEL} to 200 "
+                         f"(a level is learnt from {MIN_HEARD_PER_LEVEL} sounded notes), got {warmup}", "--warmup")
+    check_seed(seed)
     settings = settings or PlaySettings()
     if finger is not None:
         settings = settings.model_copy(update={"finger": finger})
@@ -305,7 +307,8 @@ def play_song(
                                   rig_spec, strokes_per_level=strokes, song_key=song_key, survey=survey)
             mapped, mapped_s = performer.warm_up(focus) if focus else (survey.iloc[:0], 0.0)
             rows = pd.concat([survey, mapped], ignore_index=True)
-            warm = fit_warmup(rows, plan.geometry, lab_time_s=survey_s + mapped_s, seed=performer.seed,  # type: ignore[arg-type]
+            # scikit-learn takes seeds below 2**32; the world's seed may be any up to 2**63 - 1
+            warm = fit_warmup(rows, plan.geometry, lab_time_s=survey_s + mapped_s, seed=performer.seed % 2**32,  # type: ignore[arg-type]
                               survey=survey_size(strokes))
             if context is not None:
                 context = context.calibrated_on(rows)
@@ -327,8 +330,27 @@ def play_song(
     score = score_performance(target, performance.notes, plan.notes["target_velocity"].to_numpy(float),
                               tempo_bpm=plan.tempo.played_bpm, skipped=list(plan.notes["status"] == "skip"))
     files = _write_outputs(performance, target, score, plan, plot, label, warm)
-    warnings = (*song.warnings, *line.warnings, *plan.warnings)
+    warnings = (*song.warnings, *line.warnings, *plan.warnings, *_poor_performance(score, plan, warm is None))
     return PlayResult(song, line, plan, performance, score, warnings, files, label, warm, prior)
+
+
+#: Below this share of the planned notes heard on time, the output says the model missed the piano.
+POOR_SHARE = 0.5
+
+
+def _poor_performance(score: Score, plan: SongPlan, no_warmup: bool) -> tuple[str, ...]:
+    """One line when most planned notes were not heard on time (a model that does not fit the
+    piano: silent strokes, or every note late), with what to do about it."""
+    status = score.per_note["status"] if len(score.per_note) else pd.Series(dtype=str)
+    planned = int((status != "skipped").sum())
+    on_time = int((status == "matched").sum())
+    if planned == 0 or on_time >= POOR_SHARE * planned:
+        return ()
+    missed, late = int((status == "missed").sum()), int(status.isin(["late", "early"]).sum())
+    hint = ("play with a warm-up (the default) so the model learns this piano" if no_warmup
+            else "the warm-up's model does not fit this piano; `pianobot play --dry-run` shows the plan")
+    return (f"only {on_time} of {planned} planned note(s) were heard on time ({missed} not heard, {late} off by "
+            f"more than 50 ms): {hint}",)
 
 
 def _sequence_context(model: Path | StrokePredictor | SongContext | None, planner: str,

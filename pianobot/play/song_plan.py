@@ -61,6 +61,8 @@ LOUDER_TEXT = "louder than asked to keep time"
 CONTEXT_PASSES = 2
 # A target this close to a level's reachable range is not worth a warning (half a MIDI step).
 CLIP_TOLERANCE = 0.5
+# A capped hold that sounds this much shorter than its note is worth a warning.
+HOLD_SHORT_S = 0.1
 
 SONG_PLAN_COLUMNS: tuple[str, ...] = (
     "note_index", "pitch", "written_onset_s", "onset_s", "offset_s", "song_velocity", "target_velocity",
@@ -252,7 +254,8 @@ def plan_model(
     frame = _frame(notes, best, choice, scheduled)
     if context is not None and context.used:
         frame = _in_context(notes, best, choice, settings, rig, moves, frame, context)
-    return SongPlan("model", frame, settings, best.dynamics, dict(best.tables), _warnings(frame, choice),
+    hold_cap = rig.envelope_for(settings.finger)["hold_s"].high
+    return SongPlan("model", frame, settings, best.dynamics, dict(best.tables), _warnings(frame, choice, hold_cap),
                     best.geometry, choice, None if context is None else context.describe())
 
 
@@ -372,7 +375,7 @@ def _reasons(prepared: _Prepared, s: Scheduled, velocity: np.ndarray) -> list[st
     return out
 
 
-def _warnings(frame: pd.DataFrame, choice: TempoChoice) -> tuple[str, ...]:
+def _warnings(frame: pd.DataFrame, choice: TempoChoice, hold_cap_s: float) -> tuple[str, ...]:
     out = []
     message = choice.message()
     if message:
@@ -392,4 +395,13 @@ def _warnings(frame: pd.DataFrame, choice: TempoChoice) -> tuple[str, ...]:
     clipped = int(frame["reason"].str.contains("clipped").sum())
     if clipped:
         out.append(f"{clipped} note(s) ask for a loudness outside the reachable range (clipped)")
+    # A note longer than the finger may hold a key sounds shorter than written (the hold is capped
+    # by the finger's safety envelope): said, as a shortened or dropped note is.
+    played = frame[frame["status"] != "skip"]
+    capped = played[(played["hold_s"] >= hold_cap_s * (1 - 1e-9))
+                    & (played["predicted_midi_hold_s"] < (played["offset_s"] - played["onset_s"]) - HOLD_SHORT_S)]
+    if len(capped):
+        longest = float((capped["offset_s"] - capped["onset_s"]).max())
+        out.append(f"{len(capped)} note(s) are held shorter than written (up to {longest:.1f} s written): the finger "
+                   f"holds a key at most {hold_cap_s:g} s (its safety envelope's hold_s)")
     return tuple(out)

@@ -29,6 +29,7 @@ from pianobot.errors import InputError
 FloatArray = npt.NDArray[np.float64]
 TempoMode = Literal["auto", "written", "bpm"]
 LIMITING_SHOWN = 3  # limiting notes named in messages
+FEW_FRACTION = 0.05  # "a few notes" slowing a whole song: at most this share of them (at least one)
 MIN_TEMPO_BPM = 1.0
 MAX_TEMPO_BPM = 1000.0
 
@@ -88,6 +89,20 @@ class Feasibility:
         order = np.lexsort((np.arange(limits.size), np.round(limits, 6)))
         return [int(i) for i in order[:count] if math.isfinite(limits[i])]
 
+    def few_limit(self, fraction: float = FEW_FRACTION) -> tuple[int, float] | None:
+        """(j, bpm) when j notes, at most `fraction` of them (at least one), alone hold the song
+        below half the tempo `bpm` the other notes allow (capped at the written tempo): a grace
+        note or a trill that slows a whole song to a crawl. None otherwise."""
+        limits = np.sort(self.tempo_limit_bpm)
+        fastest = float(limits[0]) if limits.size else math.inf
+        if not math.isfinite(fastest):
+            return None
+        for j in range(1, max(1, int(fraction * limits.size)) + 1):
+            others = min(float(limits[j]) if j < limits.size else math.inf, self.written_bpm)
+            if others >= 2 * fastest:
+                return j, others
+        return None
+
     def infeasible_at(self, bpm: float) -> int:
         """How many notes cannot be struck in time at `bpm`."""
         return int(np.sum(self.tempo_limit_bpm < bpm * (1 - 1e-9)))
@@ -113,6 +128,7 @@ class TempoChoice:
     played_bpm: float
     limiting_notes: tuple[int, ...]
     infeasible_notes: int  # notes that cannot be struck in time at the played tempo
+    few: tuple[int, float] | None = None  # `Feasibility.few_limit`: a few notes slow the whole song
 
     @property
     def scale(self) -> float:
@@ -123,10 +139,17 @@ class TempoChoice:
         """One line when the played tempo is not the written one, or notes cannot keep up."""
         limiting = ", ".join(str(i) for i in self.limiting_notes)
         if self.request.mode == "auto" and self.played_bpm < self.written_bpm * (1 - 1e-9):
+            few = ""
+            if self.few is not None:
+                count, others = self.few
+                # Rounded down as the played tempo is: at that tempo only those notes are skipped.
+                at = math.floor(others * 10) / 10
+                few = (f"; {count} note(s) alone hold it below {at:.4g} bpm, where the other notes can be "
+                       f"struck in time: --tempo {at:g} plays there and skips them")
             return (f"the written tempo {self.written_bpm:.4g} bpm is too fast for this finger: playing at "
                     f"{self.played_bpm:.4g} bpm, the fastest at which every note can be struck in time "
                     f"(limited by note(s) {limiting}; --tempo written plays at {self.written_bpm:.4g} bpm "
-                    "and skips what cannot keep up)")
+                    f"and skips what cannot keep up{few})")
         if self.infeasible_notes:
             return (f"at {self.played_bpm:.4g} bpm {self.infeasible_notes} note(s) cannot be struck in time "
                     f"(the fastest feasible tempo is {self.feasible_bpm:.4g} bpm, limited by note(s) {limiting})")
@@ -154,7 +177,7 @@ def choose_tempo(request: TempoRequest, feasibility: Feasibility | None) -> Temp
         assert request.bpm is not None
         played = float(request.bpm)
     return TempoChoice(request, written, fastest, played, tuple(feasibility.limiting()),
-                       feasibility.infeasible_at(played))
+                       feasibility.infeasible_at(played), feasibility.few_limit())
 
 
 def written_only(request: TempoRequest, written_bpm: float) -> TempoChoice:

@@ -67,6 +67,16 @@ def test_drums_velocity_zero_and_restrike(tmp_path: Path) -> None:
     assert any("re-strike" in w for w in song.warnings)
 
 
+def test_the_sustain_pedal_is_reported_not_played(tmp_path: Path) -> None:
+    pedal = [mido.Message("control_change", control=64, value=127, time=0), on(60, 0), off(60, 240),
+             mido.Message("control_change", control=64, value=0, time=480)]
+    song = read_song(_file(tmp_path / "p.mid", [pedal], type_=0))
+    assert [round(n.duration_s, 4) for n in song.notes] == [0.25]  # to the key-up, not the pedal-up
+    assert any("sustain pedal (pressed 1 time(s)) is not played" in w for w in song.warnings)
+    plain = read_song(_file(tmp_path / "q.mid", [[on(60, 0), off(60, 240)]], type_=0))
+    assert not any("pedal" in w for w in plain.warnings)
+
+
 def test_zero_length_notes_are_dropped_and_legato_repeats_kept(tmp_path: Path) -> None:
     messages = [
         on(60, 0), off(60, 0),  # zero length: its note-off follows at the same tick

@@ -146,7 +146,9 @@ def fastest_sustainable_bpm(notes: Sequence[Note], written_bpm: float, tables: S
             continue
         lo, hi = float(heard.min()), float(heard.max())
         span = song.max() - song.min()
-        targets = np.full(song.shape, 0.5 * (lo + hi)) if span <= 0 else lo + (song - song.min()) / span * (hi - lo)
+        # One loudness throughout keeps its place on the MIDI scale 1-127 (velocity 64: the middle).
+        targets = (np.full(song.shape, lo + (song[0] - 1) / 126 * (hi - lo)) if span <= 0
+                   else lo + (song - song.min()) / span * (hi - lo))
         ok = _acceptable(table, targets, tolerance)
         slow, fast = 0.0, written_bpm  # feasible at `slow` (a standstill), unknown up to `fast`
         if _feasible(1.0, onset, pitch, moves, table, ok):

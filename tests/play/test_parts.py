@@ -26,7 +26,12 @@ def test_dynamics_map_linear_and_absolute() -> None:
     absolute = DynamicsMap.fit([1, 5, 100], (2.0, 12.0), "absolute")
     assert absolute.apply([1, 5, 100]).tolist() == [2.0, 5.0, 12.0]
     flat = DynamicsMap.fit([64, 64], (2.0, 12.0), "mapped")
-    assert flat.apply([64]).tolist() == [7.0]
+    assert flat.apply([64]).tolist() == [7.0]  # mezzo-forte throughout: the middle
+    # One loudness keeps its place on the MIDI scale: fortissimo all through is the loudest the
+    # finger plays, pianissimo the quietest (both used to be the middle, as if unmarked).
+    assert DynamicsMap.fit([127] * 3, (2.0, 12.0), "mapped").apply([127]).tolist() == [12.0]
+    assert DynamicsMap.fit([1] * 3, (2.0, 12.0), "mapped").apply([1]).tolist() == [2.0]
+    assert "one loudness 127 of 127 → 12.0" in DynamicsMap.fit([127], (2.0, 12.0), "mapped").describe()
 
 
 def test_score_counts_hits_and_errors() -> None:
@@ -34,7 +39,7 @@ def test_score_counts_hits_and_errors() -> None:
     played = [Note(60, 0.01, 0.8, 5), Note(62, 2.2, 2.9, 9), Note(65, 4.0, 5.0, 9)]
     score = score_performance(target[:3], played, [4.0, 8.0, 10.0], tempo_bpm=60.0)
     assert score.f1 == pytest.approx(1 / 3)  # only the first is within 50 ms with the right pitch
-    assert score.notes_matched == 2  # the late one still counts for timing
+    assert score.notes_paired == 2  # the late one still counts for timing
     assert score.onset_mean_ms == pytest.approx((10 + 200) / 2)
     assert score.onset_rms_ms == pytest.approx(np.sqrt((0.01**2 + 0.2**2) / 2) * 1e3)
     assert score.velocity_mae == pytest.approx(1.0)

@@ -63,3 +63,21 @@ def test_the_dry_run_tempo_is_the_fastest_a_brute_force_search_finds(
         plan = plan_model(notes, predictor, settings, rig_spec, tables=tables, written_bpm=written,
                           tempo=TempoRequest("bpm", float(bpm), True))
         assert _clean(plan.notes)
+
+
+def test_a_few_notes_that_slow_a_whole_song_are_named_with_the_tempo_the_rest_allow() -> None:
+    from pianobot.play.tempo import Feasibility, TempoRequest, choose_tempo
+
+    # 40 notes at 100 bpm: 38 allow 60 bpm or more, one grace note holds everything to 3 bpm.
+    limits = np.full(40, 60.0)
+    limits[0], limits[7], limits[8] = math.inf, 3.0, 45.0
+    choice = choose_tempo(TempoRequest(), Feasibility(100.0, limits))
+    assert choice.played_bpm == 3.0 and choice.few == (1, 45.0)
+    message = choice.message()
+    assert message is not None and "1 note(s) alone hold it below 45 bpm" in message and "--tempo 45" in message
+    # Half the notes slow it (a trill): not "a few", nothing extra said.
+    limits[1::2] = 3.0
+    trill = choose_tempo(TempoRequest(), Feasibility(100.0, limits))
+    assert trill.few is None and "alone hold it" not in (trill.message() or "")
+    # A song the finger plays at its written tempo says nothing at all.
+    assert choose_tempo(TempoRequest(), Feasibility(100.0, np.full(10, 120.0))).message() is None

@@ -103,7 +103,7 @@ def test_the_lab_time_estimate_matches_the_warm_up_on_the_sim_rig(song_files: di
 
 def test_a_song_at_one_loudness_plays_by_default(tmp_path: Path) -> None:
     """Every note at velocity 80, as a notation program exports a score without dynamics. The
-    plan puts it all at one vacuum level (the middle of the reachable loudness); where this piano
+    plan puts it all at one vacuum level (63 % up the reachable loudness, 80 on 1-127); where this piano
     never sounds at that level (the default world at -40 kPa), the warm-up moves on to the level
     the plan then takes instead of giving up."""
     from pianobot.io.midifile import Note, write_song
