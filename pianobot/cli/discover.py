@@ -29,6 +29,7 @@ from pianobot.cli.common import (
     warn_unfinished,
     writable,
 )
+from pianobot.errors import check_seed
 from pianobot.executor import ExecutorSettings
 from pianobot.reports.discover_report import build_discover_report, gap_cell
 
@@ -108,6 +109,7 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Localise where the model and the measurements disagree, name the missing effect, refit."""
         check_vacuum_option(vacuum_kpa)
+        check_seed(seed)
         out = writable(out, "--out")
         if model_out is None and out is not None:
             model_out = out.with_suffix(".model.json")

@@ -16,6 +16,7 @@ from pianobot.cli.common import (
     emit_json,
     figure_path,
     print_fields,
+    print_warning,
     say,
     say_written,
 )
@@ -128,7 +129,7 @@ def mocap(
     ] = "auto",
     vacuum_kpa: Annotated[
         float | None,
-        typer.Option("--vacuum-kpa", help="Finger vacuum during the take (gauge kPa, <= 0)."),
+        typer.Option("--vacuum-kpa", help="Finger vacuum during the take (gauge kPa, <= 0; 40 reads as -40)."),
     ] = None,
     plot: Annotated[
         Path | None, typer.Option("--plot", help="Also write a figure of the take (PNG).")
@@ -224,7 +225,7 @@ def _show(result: ImportResult, json: bool, data: Path) -> None:
         emit_json(result.to_dict())
         return
     fields = [(_label(key), _shown(value))
-              for key, value in result.to_dict().items() if key not in ("skipped_lines", "run_dir")]
+              for key, value in result.to_dict().items() if key not in ("skipped_lines", "run_dir", "warnings")]
     fields.append(("skipped lines", str(len(result.skipped_lines))))
     print_fields(fields, title=f"imported {result.kind}")
     for line, reason in result.skipped_lines[:SHOWN_SKIPPED]:
@@ -232,3 +233,5 @@ def _show(result: ImportResult, json: bool, data: Path) -> None:
     if len(result.skipped_lines) > SHOWN_SKIPPED:
         say(f"  ... {len(result.skipped_lines) - SHOWN_SKIPPED} more in the run's meta (skipped_lines)")
     say_written("run", data / "runs" / result.run_id)
+    for line in result.extra.get("warnings", ()):
+        print_warning(line)

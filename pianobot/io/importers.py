@@ -18,6 +18,7 @@ import pandas as pd
 
 from pianobot.errors import InputError
 from pianobot.io.arm_log import arm_samples, read_arm_log
+from pianobot.io.arm_log_checks import check_direction, check_rate, check_travel
 from pianobot.io.force_log import BurstRule, ForceCalibration, align_to_note_ons, read_force_log
 from pianobot.io.keystroke_import import import_keystroke_log
 from pianobot.io.mocap import AUTO_AXIS, MocapTake, axis_hint, read_mocap
@@ -134,7 +135,7 @@ def import_mocap(
     Without `run_id`: trials carry the segmented keystrokes (arm speed estimate as
     down_velocity_mps, arm travel, key travel and speed) and mocap samples from motion start.
     With `run_id`: a derived run = that run's tables + mocap samples re-timed to its trials.
-    `vacuum_kpa` (gauge, ≤ 0): the finger's vacuum during the take, stored on every trial (a
+    `vacuum_kpa` (gauge, ≤ 0; a magnitude such as 40 is read as −40): the finger's vacuum during the take, stored on every trial (a
     Motive take does not record it); with `run_id` it fills only trials that lack one.
     `arm_log`: the UR arm log recorded with the take (`arm_log.read_arm_log`), stored as the
     trials' arm samples; `arm_log_start_s` is its controller timestamp at the take's first frame
@@ -145,8 +146,13 @@ def import_mocap(
     if arm_log is not None and run_id is not None:
         raise InputError("a take aligned to a run uses the run's arm trace; give --arm-log or --run, not both",
                          "--arm-log")
-    if vacuum_kpa is not None and not (math.isfinite(vacuum_kpa) and -100.0 <= vacuum_kpa <= 0.0):
+    if arm_log_start_s is not None and arm_log is None:
+        raise InputError("gives the arm log's timestamp at the take's first frame: give --arm-log too",
+                         "--arm-log-start")
+    if vacuum_kpa is not None and not (math.isfinite(vacuum_kpa) and abs(vacuum_kpa) <= 100.0):
         raise InputError(f"vacuum is a gauge pressure in [-100, 0] kPa, got {vacuum_kpa:g}", "--vacuum-kpa")
+    if vacuum_kpa is not None:
+        vacuum_kpa = -abs(vacuum_kpa) or 0.0  # a magnitude (40) is −40 kPa, as every other command reads it
     # Stages without a count: each shows its elapsed time (a long take reads for tens of seconds).
     with progress.task(f"reading the take ({_size(path)})"):
         take = read_mocap(path, markers, min_coverage, up_axis)
@@ -171,6 +177,10 @@ def import_mocap(
     }
     extra: dict[str, Any] = {"keystrokes": len(strokes), "roles": take.roles, "stitched": take.stitched,
                              "up_axis": take.up_axis}
+    if take.repeated_frames:
+        meta["repeated_frames"] = take.repeated_frames
+        extra["warnings"] = [f"{take.repeated_frames} row(s) of the take repeated the frame number and time of the "
+                             "row before: each was read once"]
     if run_id is None:
         trials = _stroke_trials(strokes, sha)
         trials["vacuum_kpa"] = math.nan if vacuum_kpa is None else float(vacuum_kpa)
@@ -241,12 +251,14 @@ def _arm_log_samples(path: Path, start_s: float | None, take: MocapTake, strokes
                      trials: pd.DataFrame, meta: dict[str, Any], extra: dict[str, Any]) -> pd.DataFrame:
     """The arm log's samples per keystroke, on the take's clock (meta and summary filled in)."""
     log = read_arm_log(path)
+    check_rate(log, str(path))
     shift = 0.0 if start_s is None else start_s - log.first_timestamp_s
     if not math.isfinite(shift):
         raise InputError(f"expected a controller timestamp in seconds, got {start_s}", "--arm-log-start")
     marker = take.down_m("arm")
     if marker is not None:
         dt = max(1.0 / take.frame_rate_hz, 1.0 / log.rate_hz)
+        check_direction(log, shift, take.t_s, marker, dt, str(path))  # a flipped log also looks shifted
         found = xcorr_offset(log.t_s - shift, log.down_m, take.t_s, marker, dt)
         if found is not None and abs(found.clock_offset_s) > MAX_START_SKEW_S:
             # x_log(t) ≈ x_marker(t − offset): the log's rows sit `offset` late on the take's clock.
@@ -260,6 +272,14 @@ def _arm_log_samples(path: Path, start_s: float | None, take: MocapTake, strokes
     if covered == 0:
         raise InputError(f"the arm log ({log.t_s[-1]:.1f} s from its first row) covers none of the take's "
                          f"{len(trials)} keystrokes; give --arm-log-start", str(path))
+    if marker is not None:
+        check_travel(log, shift, take.t_s, marker, strokes["t_start_s"].to_numpy(), strokes["t_end_s"].to_numpy(),
+                     str(path))
+    if covered < len(trials):
+        extra.setdefault("warnings", []).append(
+            f"the arm log covers {covered} of the take's {len(trials)} keystrokes (it ends {log.t_s[-1] - shift:.1f} s "
+            f"into the take): identify and discover drive the model with it only where it covers at least 90 % "
+            "of them, with the arm marker otherwise")
     meta["arm_log"] = {**log.meta(), "sha256": file_sha256(path), "start_timestamp_s": log.first_timestamp_s + shift}
     extra.update(arm_log_keystrokes=covered, arm_log_rate_hz=round(log.rate_hz, 1))
     return samples

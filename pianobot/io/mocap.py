@@ -82,6 +82,7 @@ class MocapTake:
     pieces: dict[str, list[str]] = field(default_factory=dict)  # marker -> the track pieces joined into it
     joins: tuple[Join, ...] = ()
     stitch_doubts: tuple[str, ...] = ()  # pieces left unjoined because two tracks fit them equally
+    repeated_frames: int = 0  # rows that repeated the previous one's frame number and time, read once
 
     @property
     def stitched(self) -> dict[str, list[str]]:
@@ -157,6 +158,7 @@ def _read_mocap(
     data = _data(lines[header_at + 1 :], len(next(csv.reader([lines[header_at]]))), where)
     if data.shape[0] == 0:
         raise InputError("no data rows after the header", where)
+    data, repeated = _without_repeated_frames(data)
     t = data[:, 1] if data.shape[1] > 1 else np.arange(data.shape[0]) / frame_rate
     _refuse_time_going_back(t, where)
     t = _filled_times(t, frame_rate)
@@ -178,7 +180,8 @@ def _read_mocap(
     if up_axis == AUTO_AXIS:
         up_axis = detect_up_axis(kept)
     take = MocapTake(path, meta, frame_rate, t, long, coverage, {}, up_axis, pieces=stitched.pieces,
-                     joins=tuple(stitched.joins), stitch_doubts=_doubts(stitched, kept))  # fmt: skip
+                     joins=tuple(stitched.joins), stitch_doubts=_doubts(stitched, kept),
+                     repeated_frames=repeated)  # fmt: skip
     try:
         roles = assign_roles([tr.name for tr in kept], take.up_m, markers or {}, stitched.chain_of, where)
     except InputError as exc:
@@ -274,6 +277,15 @@ def _filled_times(t: FloatArray, frame_rate_hz: float) -> FloatArray:
     return filled
 
 
+def _without_repeated_frames(data: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.float64], int]:
+    """Rows that repeat the previous row's frame number and time (a glitch of the export), read
+    once: a time step of zero divided speeds into infinities and NaN."""
+    if data.shape[0] < 2 or data.shape[1] < 2:
+        return data, 0
+    repeat = np.concatenate([[False], (np.diff(data[:, 0]) == 0) & (np.diff(data[:, 1]) == 0)])
+    return data[~repeat], int(repeat.sum())
+
+
 def _refuse_time_going_back(t: FloatArray, where: str) -> None:
     """Frames out of time order (a spliced or reversed export) would segment into nonsense."""
     rows = np.flatnonzero(np.isfinite(t))
@@ -356,12 +368,18 @@ def _position_columns(
     if named is None:
         raise InputError("no marker-name row under the type row", where)
     columns: dict[str, dict[str, int]] = {}
+    kinds: dict[tuple[str, str], tuple[str, int]] = {}  # (name, axis) -> (type, column) seen first
     for col in range(2, len(header)):
         kind = type_row[col] if col < len(type_row) else ""
         prop = prop_row[col] if col < len(prop_row) else ""
         axis = header[col].strip().lower()
         name = named[col].strip() if col < len(named) else ""
         if kind in _POSITION_TYPES and prop == "Position" and axis in _AXES and name:
+            earlier = kinds.setdefault((name, axis), (kind, col))
+            if earlier[0] == kind and earlier[1] != col:
+                # Two markers of one name: the later would silently replace the earlier.
+                raise InputError(f"two {kind.lower()}s are named {name!r} (columns {earlier[1] + 1} and {col + 1}): "
+                                 "rename one in Motive, or export the take with unique names", where)
             columns.setdefault(name, {})[axis] = col
     if not columns:
         raise InputError("no marker or rigid-body position columns", where)

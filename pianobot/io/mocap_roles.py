@@ -82,6 +82,10 @@ def assign_roles(
             raise InputError(
                 f"marker {name!r} is not a persistent marker of the take ({known})", "--marker"
             )
+        twice = next((other for other, named in roles.items() if named == chain), None)
+        if twice is not None:
+            raise InputError(f"marker {name!r} is given as both the {twice} and the {role}: each role is its own "
+                             "marker", "--marker")
         roles[role] = chain
     free = [n for n in names if n not in roles.values()]
     height = {n: float(np.nanmedian(up_m(n))) for n in free}

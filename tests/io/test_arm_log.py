@@ -176,3 +176,54 @@ def test_a_bad_arm_log_on_the_command_line_is_one_line_and_stores_nothing(
     code, _, err = invoke_cli(["import", "mocap", str(files["take"]), "--arm-log", str(files["arm_log"]),
                                "--run", "some-run", "--data", str(data)], capsys, monkeypatch)
     assert code == 2 and "not both" in err
+
+
+def _edited_log(files: dict[str, Path], tmp_path: Path, edit: str) -> Path:
+    """The suite's arm log as a lab might have saved it wrongly."""
+    import pandas as pd
+
+    log = pd.read_csv(files["arm_log"])
+    z = [c for c in log.columns if c.endswith("TCP_pose_2")]
+    pose = [c for c in log.columns if "TCP_pose" in c]
+    if edit == "millimetres":
+        log[pose] = log[pose] * 1000.0
+    elif edit == "z constant":  # the press along another pose column
+        log[z] = log[z].iloc[0].to_numpy()
+    elif edit == "z pointing down":
+        log[z] = 2 * log[z].iloc[0].to_numpy() - log[z]
+    elif edit == "milliseconds":
+        log["timestamp"] = log["timestamp"] * 1000.0
+    path = tmp_path / f"arm-{edit.replace(' ', '-')}.csv"
+    log.to_csv(path, index=False)
+    return path
+
+
+@pytest.mark.parametrize(("edit", "said"), [
+    ("millimetres", "is it in millimetres?"),
+    ("z constant", "barely moves down"),
+    ("z pointing down", "moves up where the take's arm marker moves down"),
+    ("milliseconds", "timestamps in milliseconds"),
+])
+def test_an_arm_log_that_is_not_the_arm_the_marker_saw_is_refused(edit: str, said: str, tmp_path: Path) -> None:
+    # Each used to be stored and to drive identify and discover with a wrong arm (a millimetre log:
+    # a finger 1000x too far, k0/k1 at its bound, a 101 ms mocap clock "measured").
+    files, truth = _take("mocap-clean-stiff-key-hover-1", tmp_path)
+    data = tmp_path / "data"
+    with pytest.raises(InputError, match=said):
+        import_mocap(files["take"], data, arm_log=_edited_log(files, tmp_path, edit))
+    assert not list_runs(data)
+
+
+def test_an_arm_log_that_ends_early_is_imported_with_a_warning(tmp_path: Path) -> None:
+    import pandas as pd
+
+    files, _ = _take("mocap-clean-stiff-key-hover-1", tmp_path)
+    log = pd.read_csv(files["arm_log"])
+    short = tmp_path / "short.csv"
+    log.iloc[: len(log) // 2].to_csv(short, index=False)
+    result = import_mocap(files["take"], tmp_path / "data", arm_log=short)
+    covered = result.extra["arm_log_keystrokes"]
+    assert 0 < covered < result.trials
+    assert any(f"covers {covered} of the take's {result.trials} keystrokes" in w for w in result.extra["warnings"])
+    with pytest.raises(InputError, match="give --arm-log too"):
+        import_mocap(files["take"], tmp_path / "data", arm_log_start_s=5000.0)

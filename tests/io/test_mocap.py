@@ -148,3 +148,43 @@ def test_a_take_name_with_an_unquoted_comma_still_reads(synthetic_take: Path, tm
     take = read_mocap(named)
     assert take.meta["Take Name"] == "left,right hand" and take.frame_rate_hz == 120.0
     assert len(segment_take(take)) == len(segment_take(read_mocap(synthetic_take)))
+
+
+def test_two_markers_of_one_name_or_one_marker_for_two_roles_are_refused(synthetic_take: Path,
+                                                                          tmp_path: Path) -> None:
+    # The later column of a repeated name used to replace the earlier one silently.
+    lines = synthetic_take.read_text().splitlines()
+    named = next(i for i, line in enumerate(lines) if "Unlabeled:101" in line)  # the name row
+    lines[named] = lines[named].replace("Unlabeled:101", "Unlabeled:100")
+    twice = tmp_path / "twice.csv"
+    twice.write_text("\n".join(lines) + "\n")
+    with pytest.raises(InputError, match=r"two markers are named 'Unlabeled:100' \(columns 3 and 6\)"):
+        read_mocap(twice)
+    with pytest.raises(InputError, match="given as both the arm and the fingertip"):
+        read_mocap(synthetic_take, markers={"arm": "Unlabeled:100", "fingertip": "Unlabeled:100"})
+
+
+def test_a_frame_written_twice_is_read_once(synthetic_take: Path, tmp_path: Path) -> None:
+    lines = synthetic_take.read_text().splitlines()
+    header = next(i for i, line in enumerate(lines) if line.startswith("Frame,"))
+    rows = [header + 1 + k for k in (250, 700, 1100)]  # inside presses and between them
+    doubled = [line for i, line in enumerate(lines) for _ in range(2 if i in rows else 1)]
+    path = tmp_path / "doubled.csv"
+    path.write_text("\n".join(doubled) + "\n")
+    with np.errstate(all="raise"):  # a zero time step used to divide speeds into inf and NaN
+        take = read_mocap(path)
+        strokes = segment_take(take)
+    plain = segment_take(read_mocap(synthetic_take))
+    assert take.repeated_frames == 3
+    assert strokes["arm_speed_mps"].to_numpy() == pytest.approx(plain["arm_speed_mps"].to_numpy())
+
+
+def test_a_vacuum_given_as_a_magnitude_is_stored_as_the_gauge_pressure(synthetic_take: Path, tmp_path: Path) -> None:
+    from pianobot.io.importers import import_mocap
+    from pianobot.store import load_run
+
+    # As identify and discover read `--vacuum-kpa 40` (the study's logs store magnitudes).
+    run_id = import_mocap(synthetic_take, tmp_path / "data", vacuum_kpa=40.0).run_id
+    assert set(load_run(run_id, tmp_path / "data").trials["vacuum_kpa"]) == {-40.0}
+    with pytest.raises(InputError, match=r"\[-100, 0\] kPa"):
+        import_mocap(synthetic_take, tmp_path / "data", vacuum_kpa=150.0)
