@@ -141,7 +141,7 @@ def mocap(
     ] = None,
     arm_log_start: Annotated[
         float | None,
-        typer.Option("--arm-log-start", help="The arm log's timestamp (s) at the take's first frame "
+        typer.Option("--arm-log-start", help="The arm log's timestamp (s) at the take's time 0 (its first frame, unless exported from a later one) "
                      "[default: its first row: the recordings started together]."),
     ] = None,
     data: DataDir = DEFAULT_DATA,

@@ -138,8 +138,9 @@ def import_mocap(
     `vacuum_kpa` (gauge, ≤ 0; a magnitude such as 40 is read as −40): the finger's vacuum during the take, stored on every trial (a
     Motive take does not record it); with `run_id` it fills only trials that lack one.
     `arm_log`: the UR arm log recorded with the take (`arm_log.read_arm_log`), stored as the
-    trials' arm samples; `arm_log_start_s` is its controller timestamp at the take's first frame
-    (default: its first row, i.e. the two recordings started together). Not with `run_id`, whose
+    trials' arm samples; `arm_log_start_s` is its controller timestamp at the take's time 0 (its
+    first frame, unless the export is of a range that starts later) (default: its first row, i.e.
+    the two recordings started together). Not with `run_id`, whose
     run has its own arm trace.
     """
     path, data_dir = Path(path), Path(data_dir)
@@ -147,7 +148,7 @@ def import_mocap(
         raise InputError("a take aligned to a run uses the run's arm trace; give --arm-log or --run, not both",
                          "--arm-log")
     if arm_log_start_s is not None and arm_log is None:
-        raise InputError("gives the arm log's timestamp at the take's first frame: give --arm-log too",
+        raise InputError("gives the arm log's timestamp at the take's time 0: give --arm-log too",
                          "--arm-log-start")
     if vacuum_kpa is not None and not (math.isfinite(vacuum_kpa) and abs(vacuum_kpa) <= 100.0):
         raise InputError(f"vacuum is a gauge pressure in [-100, 0] kPa, got {vacuum_kpa:g}", "--vacuum-kpa")
@@ -177,10 +178,14 @@ def import_mocap(
     }
     extra: dict[str, Any] = {"keystrokes": len(strokes), "roles": take.roles, "stitched": take.stitched,
                              "up_axis": take.up_axis}
+    warnings = list(take.notes)
     if take.repeated_frames:
         meta["repeated_frames"] = take.repeated_frames
-        extra["warnings"] = [f"{take.repeated_frames} row(s) of the take repeated the frame number and time of the "
-                             "row before: each was read once"]
+        warnings.append(f"{take.repeated_frames} row(s) of the take repeated the frame number and time of the row "
+                        "before: each was read once")
+    if warnings:
+        meta["reader_notes"] = warnings
+        extra["warnings"] = warnings
     if run_id is None:
         trials = _stroke_trials(strokes, sha)
         trials["vacuum_kpa"] = math.nan if vacuum_kpa is None else float(vacuum_kpa)
@@ -265,7 +270,7 @@ def _arm_log_samples(path: Path, start_s: float | None, take: MocapTake, strokes
             start = log.first_timestamp_s + shift + found.clock_offset_s
             raise InputError(f"the arm log and the take's arm marker are {abs(found.clock_offset_s):.3f} s apart, so the "
                              f"two recordings did not start together; give --arm-log-start {start:.3f} (the log's "
-                             "timestamp at the take's first frame, as the marker suggests)", str(path))
+                             "timestamp at the take's time 0, as the marker suggests)", str(path))
     samples = arm_samples(log, shift, trials["trial_id"].tolist(), strokes["t_start_s"].to_numpy(),
                           strokes["t_end_s"].to_numpy(), SAMPLE_PRE_S, SAMPLE_POST_S)
     covered = int(samples["trial_id"].nunique()) if not samples.empty else 0

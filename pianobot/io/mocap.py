@@ -52,6 +52,10 @@ _UNITS_M = {
 }
 _TYPES = {"Marker", "Rigid Body", "Rigid Body Marker", "Bone", "Bone Marker"}
 _POSITION_TYPES = {"Marker", "Rigid Body", "Rigid Body Marker"}
+#: Cells that say "no value" in words: gaps, not unreadable numbers.
+_GAP_WORDS = frozenset({"", "nan", "na", "n/a", "none", "null"})
+#: A header frame rate this far from the Time column's own steps is not the take's rate.
+RATE_TOLERANCE = 0.02
 _AXES = {"x": 0, "y": 1, "z": 2}
 AUTO_AXIS = "auto"
 #: y stays the vertical axis when a marker moves this far along it (`detect_up_axis`): an arm
@@ -83,6 +87,7 @@ class MocapTake:
     joins: tuple[Join, ...] = ()
     stitch_doubts: tuple[str, ...] = ()  # pieces left unjoined because two tracks fit them equally
     repeated_frames: int = 0  # rows that repeated the previous one's frame number and time, read once
+    notes: tuple[str, ...] = ()  # what the reader decided that a user should hear (an import warns)
 
     @property
     def stitched(self) -> dict[str, list[str]]:
@@ -155,13 +160,26 @@ def _read_mocap(
     scale = _UNITS_M.get(meta.get("Length Units", "Meters").strip().lower())
     if scale is None:
         raise InputError(f"unknown length units {meta.get('Length Units')!r}", where)
-    data = _data(lines[header_at + 1 :], len(next(csv.reader([lines[header_at]]))), where)
+    data, unreadable = _data(lines[header_at + 1 :], len(next(csv.reader([lines[header_at]]))), where)
     if data.shape[0] == 0:
         raise InputError("no data rows after the header", where)
+    notes = [unreadable] if unreadable else []
+    stated = meta.get("Total Exported Frames", "").strip()
+    if stated.isdigit() and int(stated) != data.shape[0]:
+        notes.append(f"the take has {data.shape[0]} frames where its header states {int(stated)}: "
+                     f"{'cut short (was the export interrupted?)' if int(stated) > data.shape[0] else 'more than exported'}")
     data, repeated = _without_repeated_frames(data)
     t = data[:, 1] if data.shape[1] > 1 else np.arange(data.shape[0]) / frame_rate
     _refuse_time_going_back(t, where)
     t = _filled_times(t, frame_rate)
+    steps = np.diff(t)
+    # (to 0.01 Hz: the Time column holds microseconds, so 120 Hz steps read as 120.005 Hz)
+    measured = round(1.0 / float(np.median(steps)), 2) if steps.size and np.median(steps) > 0 else frame_rate
+    if abs(measured / frame_rate - 1.0) > RATE_TOLERANCE:
+        # Speeds and windows follow the frames' own times: the rate must be the one they show.
+        notes.append(f"the header states {frame_rate:g} Hz but the Time column steps at {measured:.4g} Hz: read at "
+                     f"{measured:.4g} Hz")
+        frame_rate = measured
     stitched = stitch(_tracks(data, columns, scale), t)
     coverage = {track.name: track.frames.size / data.shape[0] for track in stitched.chains}
     kept = [track for track in stitched.chains if coverage[track.name] >= min_coverage]
@@ -181,7 +199,7 @@ def _read_mocap(
         up_axis = detect_up_axis(kept)
     take = MocapTake(path, meta, frame_rate, t, long, coverage, {}, up_axis, pieces=stitched.pieces,
                      joins=tuple(stitched.joins), stitch_doubts=_doubts(stitched, kept),
-                     repeated_frames=repeated)  # fmt: skip
+                     repeated_frames=repeated, notes=tuple(notes))  # fmt: skip
     try:
         roles = assign_roles([tr.name for tr in kept], take.up_m, markers or {}, stitched.chain_of, where)
     except InputError as exc:
@@ -386,11 +404,12 @@ def _position_columns(
     return columns
 
 
-def _data(lines: list[str], n_columns: int, where: str) -> npt.NDArray[np.float64]:
-    """Data rows as floats (empty or unparsable cells NaN; extra cells beyond the header ignored)."""
+def _data(lines: list[str], n_columns: int, where: str) -> tuple[npt.NDArray[np.float64], str]:
+    """Data rows as floats (empty or unparsable cells NaN; extra cells beyond the header ignored),
+    and a note on the cells that held something other than a number ("" when none did)."""
     body = "\n".join(line for line in lines if line.strip())
     if not body:
-        return np.empty((0, n_columns))
+        return np.empty((0, n_columns)), ""
     try:
         frame = pd.read_csv(
             io.StringIO(body), header=None, names=range(n_columns), usecols=range(n_columns),
@@ -398,7 +417,17 @@ def _data(lines: list[str], n_columns: int, where: str) -> npt.NDArray[np.float6
         )  # fmt: skip
     except (pd.errors.ParserError, ValueError) as exc:
         raise InputError(f"unreadable data rows ({str(exc).splitlines()[0]})", where) from None
+    bad, first = 0, None
     for column in frame.columns:
         if not pd.api.types.is_numeric_dtype(frame[column]):
-            frame[column] = pd.to_numeric(frame[column].astype(object), errors="coerce")
-    return frame.to_numpy(dtype=np.float64, na_value=np.nan)
+            raw = frame[column].astype(object)
+            numbers = pd.to_numeric(raw, errors="coerce")
+            text = raw.notna() & numbers.isna() & ~raw.astype(str).str.strip().str.lower().isin(_GAP_WORDS)
+            if text.any():
+                bad += int(text.sum())
+                row = int(np.flatnonzero(text.to_numpy())[0])
+                first = min(first or (row, int(column)), (row, int(column)))
+            frame[column] = numbers
+    note = (f"{bad} cell(s) are not numbers and are read as gaps (first: data row {first[0] + 1}, column "
+            f"{first[1] + 1})" if first is not None else "")
+    return frame.to_numpy(dtype=np.float64, na_value=np.nan), note

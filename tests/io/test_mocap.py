@@ -188,3 +188,23 @@ def test_a_vacuum_given_as_a_magnitude_is_stored_as_the_gauge_pressure(synthetic
     assert set(load_run(run_id, tmp_path / "data").trials["vacuum_kpa"]) == {-40.0}
     with pytest.raises(InputError, match=r"\[-100, 0\] kPa"):
         import_mocap(synthetic_take, tmp_path / "data", vacuum_kpa=150.0)
+
+
+def test_a_damaged_export_reads_with_what_was_wrong_said(synthetic_take: Path, tmp_path: Path) -> None:
+    lines = synthetic_take.read_text().splitlines()
+    header = next(i for i, line in enumerate(lines) if line.startswith("Frame,"))
+    frames = len(lines) - header - 1
+    # Cut short (the header states more frames), a word in a cell, a header rate twice the frames'.
+    cut = lines[: header + 1 + frames // 2]
+    cut[0] = cut[0].replace("Export Frame Rate,120.000000", "Export Frame Rate,240.000000") + \
+        f",Total Exported Frames,{frames}"
+    cells = cut[header + 100].split(",")
+    cut[header + 100] = ",".join([*cells[:3], "abc", *cells[4:]])
+    damaged = tmp_path / "damaged.csv"
+    damaged.write_text("\n".join(cut) + "\n")
+    take = read_mocap(damaged)
+    notes = " | ".join(take.notes)
+    assert f"{frames // 2} frames where its header states {frames}: cut short" in notes
+    assert "1 cell(s) are not numbers and are read as gaps (first: data row 100, column 4)" in notes
+    assert "header states 240 Hz but the Time column steps at 120 Hz" in notes and take.frame_rate_hz == 120.0
+    assert read_mocap(synthetic_take).notes == ()  # a clean export says nothing
