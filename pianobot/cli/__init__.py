@@ -121,8 +121,12 @@ def main() -> None:
             print_error(f"pianobot: {exc.format_message()} (see --help)")
             sys.exit(2)
         return
-    with loading_row(f"{command}: loading", args):
-        _register(command)
+    try:
+        with loading_row(f"{command}: loading", args):
+            _register(command)
+    except KeyboardInterrupt:  # Ctrl-C while the command's modules load: nothing has started
+        print_error("interrupted")
+        sys.exit(130)
     try:
         _refuse_non_finite_options(args)
         code = app(standalone_mode=False)

@@ -4,8 +4,8 @@ Layout: one header line naming the recorded RTDE outputs, vectors spread over `<
 `<name>_5` (`timestamp,actual_TCP_pose_0,…,actual_TCP_pose_5,…`), then one row per controller
 cycle (125 Hz on a CB3 UR5, 500 Hz on an e-Series). ur_rtde separates the fields with commas;
 the recorder of UR's own RTDE client library (`record.py`) writes the same header with spaces,
-and both are read, as is a spreadsheet's re-save with semicolons (and decimal commas) or quoted
-names. `timestamp` is the controller's clock (seconds since it started);
+and both are read, as is a spreadsheet's re-save with semicolons (and decimal commas), quoted
+or capitalised names; lines starting with `#` are notes, not data. `timestamp` is the controller's clock (seconds since it started);
 `actual_TCP_pose_2` is the tool point's height in the robot base frame (metres, up).
 
 What is kept: the time from the log's first row, the tool point's downward displacement
@@ -76,21 +76,24 @@ def read_arm_log(path: Path | str) -> ArmLog:
     where = str(path)
     text = read_input_bytes(path, KIND).decode("utf-8", errors="replace").lstrip("\ufeff")
     lines = text.splitlines()
-    header_at = next((i for i, line in enumerate(lines) if line.strip()), None)
+    # A note a person wrote above the header or between rows ("# robot 2, tool v3") is not data.
+    header_at = next((i for i, line in enumerate(lines) if line.strip() and not _comment(line)), None)
     if header_at is None:
         raise InputError("the file is empty", where)
     split = _splitter(lines[header_at])
     names = split(lines[header_at])
-    missing = [name for name in (TIME, ACTUAL_Z) if name not in names]
+    lowered = [name.lower() for name in names]  # a spreadsheet's re-save may capitalise the names
+    missing = [name for name in (TIME, ACTUAL_Z) if name.lower() not in lowered]
     if missing:
         shown = ", ".join(names[:6]) + (", …" if len(names) > 6 else "")
         raise InputError(f"not {KIND}: no column {' or '.join(missing)} in the header ({shown})",
                          f"{where}:{header_at + 1}")
-    wanted = [names.index(TIME), names.index(ACTUAL_Z)]
-    if TARGET_Z in names:
-        wanted.append(names.index(TARGET_Z))
+    wanted = [lowered.index(TIME.lower()), lowered.index(ACTUAL_Z.lower())]
+    if TARGET_Z.lower() in lowered:
+        wanted.append(lowered.index(TARGET_Z.lower()))
     rows: list[list[float]] = []
-    body = [(n, line) for n, line in enumerate(lines[header_at + 1:], start=header_at + 2) if line.strip()]
+    body = [(n, line) for n, line in enumerate(lines[header_at + 1:], start=header_at + 2)
+            if line.strip() and not _comment(line)]
     dropped = False
     for k, (number, line) in enumerate(body):
         fields = split(line)
@@ -119,6 +122,10 @@ def read_arm_log(path: Path | str) -> ArmLog:
     target = -table[:, 2] if table.shape[1] > 2 else None
     return ArmLog(path, stamps - stamps[0], -table[:, 1], target, float(stamps[0]),
                   1.0 / float(np.median(np.diff(stamps))), dropped, int(repeated.sum()))
+
+
+def _comment(line: str) -> bool:
+    return line.lstrip().startswith("#")
 
 
 def _splitter(header: str) -> Callable[[str], list[str]]:

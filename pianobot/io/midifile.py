@@ -228,8 +228,9 @@ def _midi_file(source: Path) -> Any:
     except EOFError:
         raise InputError("not a standard MIDI file (it ends inside a chunk: truncated?)", where) from None
     except (OSError, ValueError, KeyError, IndexError, meta.KeySignatureError) as exc:
-        detail = f"{type(exc).__name__}: {exc}" if str(exc) else f"{type(exc).__name__}: a malformed chunk or event"
-        raise InputError(f"not a standard MIDI file ({detail})", where) from None
+        # mido's own words, without its exception's class name (which says nothing to a musician)
+        detail = str(exc).strip("'\"") or "a malformed chunk or event"
+        raise InputError(f"not a standard MIDI file (a damaged track or header: {detail})", where) from None
 
 
 def _notes(mid: Any, tempo_scale: float) -> tuple[list[Note], dict[str, int], int]:

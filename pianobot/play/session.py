@@ -226,6 +226,9 @@ def play_song(
         settings = settings.model_copy(update={"finger": finger})
     strokes = settings.warmup_strokes if warmup is None else warmup
     request = tempo if isinstance(tempo, TempoRequest) else TempoRequest.parse(tempo)
+    if request.mode == "bpm" and tempo_scale != 1.0:  # the scale used to be ignored without a word
+        raise InputError(f"--tempo {request.describe()} sets the tempo itself; --tempo-scale scales the written one: "
+                         "give one of them", "--tempo-scale")
     if tempo is None and tempo_scale != 1.0:
         request = TempoRequest("written", None, True)  # --tempo-scale alone asks for that tempo
     rig_spec = play_rig(rig, settings.finger)

@@ -96,6 +96,7 @@ def test_dry_run_prints_the_feasible_tempo_and_the_limiting_notes(
     (["--warmup", "5", "--no-warmup"], "--no-warmup"), (["--warmup", "500"], "--warmup"),
     (["--warmup", "2"], "--warmup"),  # a level is learnt from 3 sounded notes: 2 could never work
     (["--seed", "-1"], "--seed"), (["--plot", "roll.txt"], "--plot"),  # both used to fail after the song
+    (["--tempo", "30", "--tempo-scale", "0.5"], "--tempo-scale"),  # the scale was ignored silently
 ])
 def test_bad_play_options_are_one_line_and_exit_2(args: list[str], where: str, tmp_path: Path,
                                                   capsys: pytest.CaptureFixture[str],

@@ -71,6 +71,9 @@ def test_what_recorders_and_spreadsheets_write_reads_as_the_recording(tmp_path: 
         "semicolons": [line.replace(",", ";").replace(".", ",") for line in lines],
         "quoted": [",".join(f'"{f}"' for f in lines[0].split(",")), *lines[1:]],
         "trailing separator": [lines[0], *(line + "," for line in lines[1:])],
+        # Capitalised names (a spreadsheet's re-save) and a person's notes above and between rows.
+        "capitalised": [lines[0].replace("timestamp", "Timestamp").replace("actual_TCP", "Actual_TCP"), *lines[1:]],
+        "notes": ["# robot 2, tool v3", lines[0], *lines[1:5], "# operator paused here", *lines[5:]],
     }
     for name, text in variants.items():
         path = tmp_path / f"{name}.csv"
