@@ -87,6 +87,10 @@ def read_keystroke(
     events = sorted(result.midi, key=lambda e: e.t_s)
     ons = [e for e in events if e.type == "note_on" and e.note == note and e.velocity > 0]
     on_velocity = t_on = off_velocity = t_off = math.nan
+    # A note-off of this key in the press's window with no note-on before it: the key sounded and
+    # the note-on was lost on the way (a dropped MIDI message). Silent it was not; its loudness
+    # is unknown, so the keystroke is failed (analyses leave it out) with the reason.
+    lost_on = not ons and any(_is_off(e) and e.note == note and e.t_s > t0_s for e in events)
     if ons:
         first = ons[0]
         on_velocity, t_on = float(first.velocity), first.t_s - t0_s
@@ -99,7 +103,7 @@ def read_keystroke(
         "trial_id": trial.trial_id,
         "index": int(trial.index),
         "attempt": int(attempt),
-        "status": "ok" if ons else "silent",
+        "status": "ok" if ons else "failed" if lost_on else "silent",
         **parameters_of(trial, motion=motion),
         "t_start_s": t0_s + clock_offset_s,
         "on_velocity": on_velocity,
@@ -110,7 +114,7 @@ def read_keystroke(
         "n_note_on": len(ons),
         "key_speed_at_trigger_mps": float(result.extra.get("key_speed_at_trigger_mps", math.nan)),
         "max_key_travel_m": _max_key_travel(result),
-        "error": None,
+        "error": "MIDI note-on lost: a note-off of this key came without its note-on" if lost_on else None,
     }
     wanted = {SAMPLE_STREAMS[s] for s in record if s in SAMPLE_STREAMS}
     if wanted:
