@@ -182,7 +182,11 @@ def register(app: typer.Typer) -> None:
 
 def _print_health(health: RunHealth) -> None:
     if health.ok:
-        print(f"run {health.run_id}: intact ({health.files_checked} files checked against the journal)")
+        if health.unrecorded:
+            print(f"run {health.run_id}: readable, not verified ({health.unrecorded} of {health.files_checked} "
+                  "files have no journal record to check their bytes against)")
+        else:
+            print(f"run {health.run_id}: intact ({health.files_checked} files checked against the journal)")
     else:
         print(f"run {health.run_id}: DAMAGED ({len(health.damage)} of {health.files_checked} files)")
         for damage in health.damage:

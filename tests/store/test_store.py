@@ -184,6 +184,25 @@ def test_samples_are_written_once_and_stay_committed_after_compaction(data_dir: 
     assert list(run.trials["trial_id"]) == ids and check_run(run.paths).ok
 
 
+def test_a_check_without_the_journal_says_the_bytes_were_not_verified(data_dir: Path) -> None:
+    """A missing or emptied journal leaves nothing to check SHA-256 against: the files are read,
+    and the check says so (it used to say "intact ... checked against the journal")."""
+    from pianobot.store import check_run
+
+    writer = _create(data_dir, ["a", "b"])
+    writer.append(_trials(["a", "b"]), _samples(["a", "b"]), _midi(["a", "b"]))
+    writer.finish("completed")
+    writer.close()
+    paths = RunPaths(writer.path)
+    assert check_run(paths).ok and check_run(paths).unrecorded == 0
+    paths.journal.write_text("")
+    emptied = check_run(paths)
+    assert emptied.ok and emptied.unrecorded > 0
+    assert any("journal.jsonl is empty" in note and "only read" in note for note in emptied.notes)
+    paths.journal.unlink()
+    assert any("journal.jsonl is missing" in note for note in check_run(paths).notes)
+
+
 def test_a_journal_line_naming_an_unknown_table_is_checked_not_crashed_on(data_dir: Path) -> None:
     """A flipped byte that leaves a part line readable JSON (`"tr3als"`; found by the fuzz test):
     the check and the reader go on with the tables they know."""
