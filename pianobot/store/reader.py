@@ -170,19 +170,40 @@ def summarize_run(run: Run) -> RunSummary:
     done = counts["ok"] + counts["silent"]
     lab_time = meta.get("lab_time_s")
     planned = meta.get("trials_planned")
+    status, reason = str(meta.get("status", "unknown")), meta.get("reason")
+    if status == "running" and not is_alive(run):
+        # A live run and one whose process died used to look the same in the listing.
+        status, reason = "died", f"its process died or lost the connection; {resume_command(run)} completes it"
     return RunSummary(
         run_id=run.run_id,
         name=str(meta.get("name", "")),
         kind=str(meta.get("kind", "")),
-        status=str(meta.get("status", "unknown")),
+        status=status,
         trials_done=done,
         trials_planned=None if planned is None else int(planned),
         silent_pct=100.0 * counts["silent"] / done if done else math.nan,
         failed=counts["failed"],
         lab_time_s=math.nan if lab_time is None else float(lab_time),
         start_utc=meta.get("start_utc"),
-        reason=meta.get("reason"),
+        reason=reason,
     )
+
+
+def is_alive(run: Run) -> bool:
+    """Whether a process still holds the run's lock (its lease is fresh): a run left `running`
+    by a process that died is not."""
+    from pianobot.store.lock import read_holder
+
+    holder = read_holder(run.paths.lock)
+    return holder is not None and not holder.is_stale()
+
+
+def resume_command(run: Run) -> str:
+    """`pianobot sweep --resume ID`, with `--data` where the run is not under ./data (a hint
+    without it pointed at the wrong folder)."""
+    data = run.path.parent.parent
+    here = data.resolve() == Path("data").resolve()
+    return f"pianobot sweep --resume {run.run_id}" + ("" if here else f" --data {data}")
 
 
 def unfinished_note(run: Run) -> str | None:
@@ -197,10 +218,11 @@ def unfinished_note(run: Run) -> str | None:
     done = counts["ok"] + counts["silent"]
     planned = meta.get("trials_planned")
     of = f"{done} of {int(planned)} planned" if planned is not None else f"{done}"
-    resume = f"`pianobot sweep --resume {run.run_id}` completes it"
+    resume = f"`{resume_command(run)}` completes it"
     if status == "running":
-        holder = read_holder(run.paths.lock)
-        if holder is not None and not holder.is_stale():
+        if is_alive(run):
+            holder = read_holder(run.paths.lock)
+            assert holder is not None
             return f"run {run.run_id} is still running ({holder.describe()}): only its {of} keystrokes so far are analysed"
         return (f"run {run.run_id} did not finish (its process died or lost the connection; status still "
                 f"'running'): {of} keystrokes are analysed; {resume}")

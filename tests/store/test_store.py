@@ -113,6 +113,10 @@ def test_live_run_is_readable_from_parts(data_dir: Path) -> None:
     summary = list_runs(data_dir)[0]
     assert (summary.trials_done, summary.trials_planned, summary.status) == (3, 4, "running")
     writer.close()
+    # What a kill -9 leaves: status 'running' and no live lock. The listing says the process died
+    # (it used to look like a live run) and how to resume, with the data folder it is in.
+    dead = list_runs(data_dir)[0]
+    assert dead.status == "died" and f"--resume {writer.run_id} --data {data_dir}" in str(dead.reason)
 
 
 def test_uncommitted_and_temporary_parts_are_invisible(data_dir: Path) -> None:
