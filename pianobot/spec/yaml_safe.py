@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import stat
 from pathlib import Path
 from typing import Any
@@ -98,6 +99,10 @@ def _refuse_long_number(node: yaml.ScalarNode) -> None:
 
 _BoundedLoader.add_constructor("tag:yaml.org,2002:int", _BoundedLoader.construct_yaml_int)
 _BoundedLoader.add_constructor("tag:yaml.org,2002:float", _BoundedLoader.construct_yaml_float)
+# YAML 1.2 reads `5e-2` as a number, YAML 1.1 (PyYAML) as text unless it has a dot (`5.0e-2`):
+# the spec's JSON schema and the editors that check against it take it as a number, so here too.
+_BoundedLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float", re.compile(r"^[-+]?[0-9][0-9_]*[eE][-+]?[0-9]+$"), list("-+0123456789"))
 
 
 def read_text_bounded(path: Path) -> str:

@@ -73,6 +73,15 @@ def test_good_spec_loads(tmp_path: Path) -> None:
     assert spec.source_path == tmp_path / "spec.yaml"
 
 
+def test_a_number_written_without_a_dot_in_exponent_form_loads(tmp_path: Path) -> None:
+    # `5e-2` is a number in YAML 1.2 and in the spec's JSON schema; PyYAML's YAML 1.1 read it as
+    # text ("must be a number in m, got '5e-2'").
+    text = GOOD.replace("distance_m: 0.05", "distance_m: 5e-2").replace("start: 0.01", "start: 1E-2")
+    spec = load_spec(write(tmp_path, text))
+    assert spec.sweep.fixed.distance_m == pytest.approx(0.05)
+    assert load_spec(write(tmp_path, GOOD, "plain.yaml")).sweep.params.names() == spec.sweep.params.names()
+
+
 BAD_SPECS = [
     pytest.param(
         "name: t\nfinger: soft\ncolour: red\nsweep: {mode: grid}\n",
