@@ -26,6 +26,8 @@ def format_long_duration(seconds: float) -> str:
     if not math.isfinite(seconds):
         return "unknown time"
     hours = seconds / 3600
+    if hours < 0.1:  # "0.0 h" for a plan of two minutes says nothing
+        return f"{max(seconds / 60, 0.1):.1f} min"
     if hours < 48:
         return f"{hours:.1f} h" if hours < 10 else f"{hours:.0f} h"
     days = hours / 24

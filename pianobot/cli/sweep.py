@@ -23,6 +23,7 @@ from pianobot.cli.common import (
     say,
 )
 from pianobot.durations import format_duration
+from pianobot.errors import InputError, check_seed
 from pianobot.executor import ENV_SCHEDULER, ENV_WORKERS, ExecutorSettings
 from pianobot.plan.size import DEFAULT_MAX_TRIALS
 from pianobot.run import RunOutcome, RunStarted, dry_run, run_sweep
@@ -104,6 +105,10 @@ def register(app: typer.Typer) -> None:
         if dry_run_flag:
             if spec is None:
                 raise typer.BadParameter("--dry-run needs a SPEC")
+            if resume is not None:
+                raise InputError("a dry run plans a new run; to see what a resume does, leave out --dry-run",
+                                 "--resume")
+            check_seed(seed)  # as the sweep itself would: a dry run must not pass what the run refuses
             summary = dry_run(spec, rig_path=rig, max_trials=max_trials)
             if json_out:
                 emit_json(summary.to_dict())

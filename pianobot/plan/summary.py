@@ -112,8 +112,8 @@ class PlanSummary:
             f"{self.mode} sweep, order {self.order}",
             f"lab time ≈ {format_duration(t.total_s)}: presses {format_duration(t.presses_s)}, "
             f"pauses {format_duration(t.pauses_s)}, vacuum settling {format_duration(t.vacuum_s)} "
-            f"({t.vacuum_changes} changes), key moves {format_duration(t.travel_s)} "
-            f"({t.key_changes} changes)",
+            f"({_changes(t.vacuum_changes)}), key moves {format_duration(t.travel_s)} "
+            f"({_changes(t.key_changes)})",
         ]
         both = self.lab_time_by_approach or {}
         if "as-specified" in both and "fast" in both:
@@ -135,13 +135,19 @@ class PlanSummary:
         return "\n".join(lines)
 
 
+def _changes(count: int) -> str:
+    return f"{count} change{'' if count == 1 else 's'}"
+
+
 def summarize(
     spec: ExperimentSpec,
     trials: Sequence[Trial],
     violations: Sequence[Violation],
     rig: RigSpec | None = None,
+    rig_label: str | None = None,
 ) -> PlanSummary:
-    """The dry-run summary of a plan (`rig` defaults to the one the spec names)."""
+    """The dry-run summary of a plan (`rig` defaults to the one the spec names; `rig_label`
+    names the rig given instead, e.g. `--rig`)."""
     rig = rig if rig is not None else load_rig_for(spec)
     coverage = {}
     if trials:
@@ -151,7 +157,7 @@ def summarize(
     return PlanSummary(
         name=spec.name,
         finger=spec.finger,
-        rig=spec.rig,
+        rig=spec.rig if rig_label is None else rig_label,
         mode=spec.sweep.mode,
         order=spec.sweep.order,
         trial_count=len(trials),

@@ -425,4 +425,4 @@ def dry_run(
     trials = apply_approach(spec, expand(spec, max_trials=max_trials), rig)
     label = spec.rig if rig_path is None else str(rig_path)
     violations = check_envelope(trials, spec.finger, rig, rig_label=label)
-    return summarize(spec, trials, violations, rig)
+    return summarize(spec, trials, violations, rig, rig_label=label)  # the rig in use, not the spec's

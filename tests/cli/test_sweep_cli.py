@@ -74,6 +74,16 @@ def test_dry_run_prints_the_plan_and_moves_nothing(
     assert code == 0 and payload["trials"] == 16 and payload["errors"] == 0
     assert payload["lab_time"]["total_s"] > 0
     assert _no_runs(data_dir)
+    # The rig in use is named (it named the spec's even with --rig: misleading before a lab run).
+    lab = REPO / "experiments" / "rigs" / "ur5-lab.yaml"
+    code, out, _ = cli(["sweep", str(QUICKSTART), "--dry-run", "--rig", str(lab), "--data", str(data_dir)],
+                       capsys, monkeypatch)
+    assert code == 0 and f"rig {lab}," in out.splitlines()[0] and "(2 changes)" in out
+    # What the run would refuse, the dry run refuses too; a dry run of a resume is no such thing.
+    for extra, where in ((["--seed", "-1"], "--seed"), (["--resume", "nope"], "--resume")):
+        code, out, err = cli(["sweep", str(QUICKSTART), "--dry-run", *extra, "--data", str(data_dir)],
+                             capsys, monkeypatch)
+        assert code == 2 and where in err and len(err.strip().splitlines()) == 1
 
 
 def test_sweep_json_then_runs_and_runs_show(

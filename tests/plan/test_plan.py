@@ -385,3 +385,12 @@ def test_vectorised_durations_match_the_physics(distance: float, v: float, a: fl
             + move_durations_s(travel, np.array([up]), np.array([a]))[0])
     assert ours == pytest.approx(press_duration_s(trial.press()), rel=1e-9, abs=1e-12)
     assert estimate_lab_time_s([trial], QUIET) == pytest.approx(ours, rel=1e-12)
+
+
+def test_a_long_duration_reads_at_a_glance_and_a_short_one_is_not_zero() -> None:
+    from pianobot.durations import format_long_duration
+
+    # A 16-trial plan refused by --max-trials 10 read "(≈ 0.0 h of lab time)".
+    assert format_long_duration(108.0) == "1.8 min"
+    assert format_long_duration(3 * 3600.0) == "3.0 h" and format_long_duration(20 * 86400.0) == "20 days"
+    assert format_long_duration(float("nan")) == "unknown time"
