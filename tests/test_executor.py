@@ -85,9 +85,14 @@ def test_small_work_and_one_worker_stay_in_this_process() -> None:
     assert IN_PROCESS.map(math.sqrt, [4.0, 9.0]) == [2.0, 3.0]
 
 
-def test_unreachable_scheduler_is_bad_input() -> None:
+def test_unreachable_scheduler_is_bad_input(tmp_path: Path) -> None:
     with pytest.raises(InputError, match="cannot reach"):
         open_executor(ExecutorSettings(scheduler="tcp://127.0.0.1:9", connect_timeout_s=1.0))
+    # Checked before the run folder exists: it used to leave a run 'failed 0/N' behind.
+    with pytest.raises(InputError, match="cannot reach"):
+        run_sweep(_spec(tmp_path / "spec", 20), data_dir=tmp_path / "data", progress=False,
+                  executor=ExecutorSettings(scheduler="tcp://127.0.0.1:9", connect_timeout_s=1.0))
+    assert not (tmp_path / "data" / "runs").exists() or not any((tmp_path / "data" / "runs").iterdir())
 
 
 def _bootstrap_mean(task: tuple[int, int]) -> float:

@@ -192,13 +192,16 @@ def run_sweep(
                 rig = stack.enter_context(open_rig(prepared.rig, seed=prepared.seed, world=world))
         except DeviceUnavailable as exc:
             raise InputError(f"device unavailable: {exc}", "rig") from None
+        # So does the executor: an unreachable --scheduler used to leave a failed run behind.
+        todo = sum(1 for t in prepared.trials if t.trial_id not in done_ids)
+        pool = _executor(rig, executor, todo)
         if writer is None:
             writer = stack.enter_context(_create(Path(data_dir), prepared))
         return _session(
             writer, rig, prepared, done_ids,
             resumed=resume is not None, progress=progress, subscribers=list(subscribers),
             control=control or StopControl(), batch_trials=batch_trials, batch_s=batch_s,
-            executor=executor, world=world,
+            pool=pool, world=world,
         )
     raise AssertionError("unreachable")  # for type checkers: the with block always returns
 
@@ -286,7 +289,7 @@ def _session(
     control: StopControl,
     batch_trials: int | None,
     batch_s: float,
-    executor: ExecutorSettings | None,
+    pool: Executor,
     world: Any | None,
 ) -> RunOutcome:
     """Run the trials not yet done on an open rig; the run folder records how it ended."""
@@ -312,7 +315,6 @@ def _session(
             policy = RetryPolicy(retry.max_attempts, retry.backoff_s, retry.backoff_factor)
             offset_s = float(meta.get("lab_time_s") or 0.0)
             fast = prepared.spec.approach == "fast"
-            pool = _executor(rig, executor, len(todo))
             writer.update_meta(executor=pool.describe())
             if pool.kind != "in-process":
                 # Workers of a local cluster share this file system: they write the samples
