@@ -273,10 +273,12 @@ def test_a_protective_stop_on_the_workers_stops_the_run_like_the_serial_one(tmp_
                        executor=ExecutorSettings(workers=1))
     dask = run_sweep(spec, data_dir=tmp_path / "dask", progress=False, batch_trials=8, executor=TWO)
     assert serial.status == dask.status == "stopped" and serial.reason == dask.reason
-    assert serial.trials == dask.trials == 21
+    # 21 keystrokes before the stop; a note-on the faulty MIDI link lost makes one of them failed
+    assert serial.trials == dask.trials and serial.failed == dask.failed
+    assert serial.trials + serial.failed == 21
     resumed = run_sweep(None, data_dir=tmp_path / "dask", resume=dask.run_id, progress=False,
                         batch_trials=8, executor=TWO)
-    assert resumed.status == "completed" and resumed.trials == 40
+    assert resumed.status == "completed" and resumed.trials + resumed.failed == 40
 
 
 @pytest.mark.slow
