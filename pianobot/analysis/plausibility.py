@@ -278,13 +278,30 @@ MIN_USEFUL_R2 = 0.2
 FALLING_RHO = -0.3
 
 
+def midi_outcome(frame: pd.DataFrame) -> pd.Series:
+    """Per keystroke: was its MIDI recorded (sounded, or silent by the piano's word)? False for
+    a mocap take's keystrokes, which record none."""
+    none = pd.Series(False, index=frame.index)
+    sounded = frame["on_velocity"].notna() if "on_velocity" in frame else none
+    silent = (frame["status"] == "silent") if "status" in frame else none
+    noted = frame["n_note_on"].notna() if "n_note_on" in frame else none
+    return sounded | silent | noted
+
+
 def fit_findings(trials: pd.DataFrame, cv: pd.DataFrame) -> list[Finding]:
     """Checks of `pianobot fit`: its training keystrokes and its cross-validation table."""
     frame = trials[trials["status"].isin(["ok", "silent"])] if "status" in trials else trials
     frame = frame.dropna(subset=["down_velocity_mps"])
+    found: list[Finding] = []
+    outcome = midi_outcome(frame)
+    if outcome.any() and not outcome.all():  # as `training_set` leaves them out
+        left = int((~outcome).sum())
+        found.append(Finding("no_midi", f"{left} keystroke(s) without a MIDI outcome (a take that recorded none) "
+                             "are left out", "fit learns loudness, hold and silence from keystrokes with MIDI",
+                             "keystrokes"))
+        frame = frame[outcome]
     levels = frame["vacuum_kpa"].fillna(0.0) if "vacuum_kpa" in frame else pd.Series(0.0, index=frame.index)
     sounded = frame["on_velocity"].notna() if "on_velocity" in frame else pd.Series(False, index=frame.index)
-    found: list[Finding] = []
     per_level = {float(level): int(n) for level, n in sounded.groupby(levels).sum().items()}  # type: ignore[arg-type]
     silent_levels = sorted(level for level, n in per_level.items() if n == 0)
     if silent_levels:

@@ -53,6 +53,24 @@ def test_inverse_round_trips_within_one_midi_unit(kind: str, tmp_path: Path) -> 
     np.testing.assert_allclose(again.to_numpy(), back.to_numpy())
 
 
+def test_keystrokes_of_a_take_without_midi_are_left_out_not_learnt_as_nan() -> None:
+    # `fit LOG TAKE`: the take's keystrokes have no MIDI and no acceleration or depth; they used
+    # to reach scikit-learn as NaN inputs ("Input X contains NaN", a traceback).
+    from pianobot.analysis.plausibility import fit_findings
+
+    log = sounded_trials(4)
+    take = pd.DataFrame({"trial_id": [f"take-{i}" for i in range(6)], "status": "ok",
+                         "down_velocity_mps": np.linspace(0.01, 0.06, 6), "vacuum_kpa": -40.0,
+                         "on_velocity": np.nan, "acceleration_mps2": np.nan, "depth_m": np.nan})
+    both = pd.concat([log, take], ignore_index=True)
+    data = training_set(both)
+    assert data.n == training_set(log).n and np.isfinite(data.X).all()
+    LearnedPredictor("poly").fit(data)
+    texts = [f.text() for f in fit_findings(both, pd.DataFrame())]
+    assert any("6 keystroke(s) without a MIDI outcome" in t for t in texts)
+    assert not any("is silent" in t for t in texts)  # a take without MIDI is not a silent one
+
+
 def test_all_silent_is_input_error() -> None:
     trials = sounded_trials(3).assign(status="silent", on_velocity=np.nan)
     with pytest.raises(InputError, match="silent"):

@@ -31,6 +31,7 @@ from pianobot.analysis.learn.predictors import (
     FloatArray,
     complete_inputs,
 )
+from pianobot.analysis.plausibility import midi_outcome
 from pianobot.errors import InputError
 from pianobot.executor import IN_PROCESS, Executor
 from pianobot.progress import NO_PROGRESS, Progress
@@ -69,8 +70,13 @@ def training_set(trials: pd.DataFrame) -> TrainingSet:
     frame = frame.dropna(subset=["down_velocity_mps"])
     if frame.empty:
         raise InputError("the run has no executed trials (all failed or missing parameters)", "fit")
-    full = complete_inputs(frame)
     on = frame["on_velocity"].astype(float) if "on_velocity" in frame else pd.Series(np.nan, index=frame.index)
+    outcome = midi_outcome(frame)
+    if outcome.any() and not outcome.all():
+        # Runs with MIDI and a take without it (a mocap import) together: the take's keystrokes
+        # have no outcome to learn from (they used to reach the learner as NaN inputs and crash it).
+        frame, on = frame[outcome], on[outcome]
+    full = complete_inputs(frame)
     silent = (frame["status"] == "silent").to_numpy() if "status" in frame else on.isna().to_numpy()
     silent = silent | on.isna().to_numpy()
     if silent.all():
