@@ -64,6 +64,7 @@ class Interval:
     ci95: tuple[float, float]
     bounds: tuple[float, float] | None = None
     range_kind: str = "search range"  # what `bounds` are, as the warning names them
+    at_limit: bool = False  # the fitter itself ended on a limit of this parameter (bounds unknown here)
 
 
 def _kpa(levels: Iterable[float]) -> str:
@@ -127,14 +128,14 @@ def at_bounds(estimates: Sequence[Interval], *, finger_separates: bool | None = 
     """Parameters that ended at a limit of the fitter's search range."""
     found = []
     for e in estimates:
-        if e.bounds is None or not math.isfinite(e.value):
+        if (e.bounds is None and not e.at_limit) or not math.isfinite(e.value):
             continue
-        lo, hi = e.bounds
+        lo, hi = e.bounds if e.bounds is not None else (math.nan, math.nan)
         # "At" includes beyond: a log-parameterised fit has no hard limit, only a plausible range.
         near = [side for side, limit in (("lower", lo), ("upper", hi)) if math.isfinite(limit)
                 and (abs(e.value - limit) <= BOUND_TOLERANCE * max(abs(limit), 1e-12)
                      or (e.value < limit if side == "lower" else e.value > limit))]
-        if not near:
+        if not near and not e.at_limit:
             continue
         coupling = e.name.startswith(("k0", "c0"))
         if coupling and finger_separates is False:
@@ -147,8 +148,10 @@ def at_bounds(estimates: Sequence[Interval], *, finger_separates: bool | None = 
             cause = ("the data do not constrain it, so it ran to the limit the fitter allows and its "
                      "interval means nothing; add keystrokes that excite it (other speeds, depths, vacuum "
                      "levels) or fix it from another measurement")
-        found.append(Finding("at_bound", f"{e.name} = {e.value:.4g} {e.unit} is at the {near[0]} limit of "
-                             f"its {e.range_kind} [{lo:.3g}, {hi:.3g}]", cause, e.name))
+        where = (f"the {near[0]} limit of its {e.range_kind} [{lo:.3g}, {hi:.3g}]" if near
+                 else "a limit of the fitter's search range")  # the fitter said so (`Estimate.on_bound`)
+        unit = "" if e.unit in ("", "1") else f" {e.unit}"  # a ratio has no unit to print ("0.001 1")
+        found.append(Finding("at_bound", f"{e.name} = {e.value:.4g}{unit} is at {where}", cause, e.name))
     return found
 
 
@@ -241,7 +244,8 @@ def identify_findings(params: MSDParams, estimates: Sequence[Interval], counts_b
         study = study_value(e.name)
         if e.bounds is None and study is not None and study > 0:
             e = Interval(e.name, e.value, e.unit, e.ci95, (study / LOG_RANGE_FACTOR, study * LOG_RANGE_FACTOR),
-                         f"plausible range (1/{LOG_RANGE_FACTOR:g} to {LOG_RANGE_FACTOR:g}× the study's value)")
+                         f"plausible range (1/{LOG_RANGE_FACTOR:g} to {LOG_RANGE_FACTOR:g}× the study's value)",
+                         e.at_limit)
         ranged.append(e)
     levels = sorted(counts_by_level)
     found = no_resonance(params, levels, damping_ratios=damping_ratios(params))

@@ -112,7 +112,7 @@ def register(app: typer.Typer) -> None:
                                progress=command_progress(json_out, no_progress),
                                executor=ExecutorSettings.resolve(workers=workers, scheduler=scheduler),
                                schedule=presses)
-        findings = identify_findings(result.fit.params, [Interval(e.name, e.value, e.unit, e.ci95)
+        findings = identify_findings(result.fit.params, [Interval(e.name, e.value, e.unit, e.ci95, at_limit=e.on_bound)
                                                          for e in result.fit.estimates],
                                      keystrokes_per_level(runs, data, vacuum_kpa, result.fit.n_keystrokes))
         if result.model_path is not None:

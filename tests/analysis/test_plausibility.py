@@ -145,3 +145,8 @@ def test_identify_findings_give_unbounded_fits_a_plausible_range() -> None:
     falling = [Interval("k1_b_npm_per_kpa", -0.66, "N/m/kPa", (-0.85, -0.48))]
     checks = [f.check for f in identify_findings(study, falling, {-40.0: 12, -80.0: 3})]
     assert checks == ["stiffness_slope", "few_keystrokes"]
+    # A fit the fitter itself saw end on a limit (zzz40's m1 = 0.6997 kg against 0.7, c0/c1 =
+    # 0.001): flagged even where the plausible range would not catch it (it used to pass unsaid).
+    mass = Interval("m1_kg", 0.6997, "kg", (0.01, 0.7), at_limit=True)
+    stuck = {f.subject: f for f in identify_findings(study, [mass], {-40.0: 24})}
+    assert "limit of the fitter's search range" in stuck["m1_kg"].message
