@@ -54,6 +54,9 @@ def test_a_sticking_pad_is_found_past_lift_off_and_a_finger_that_just_leaves_is_
     clean = _run(ow.release("contact", seed=44), data_dir)
     assert clean.accepted_effects == () and "contact" in clean.measured_effects
     assert "contact" in clean.final_model.effects
+    # The model written (--model-out) is the one the tables show: nothing was accepted before
+    # lift-off, so its base is the base fit, not the release's refit of it (m1 went to its limit).
+    assert clean.final_model.msd == clean.base_model.msd
     for result in (sticky, clean):  # the press-window gaps are what the summary reports
         assert result.gap_after is result.press_iterations[-1].gap_before
 
