@@ -62,6 +62,10 @@ def test_identify_recovers_the_linear_world_from_a_sweep_with_hover(hover_sweep:
     for name in ("k1_npm@-20kPa", "k1_npm@-60kPa", "k2_npm"):
         lo, hi = fit.estimate(name).ci95
         assert lo <= _truth_value(name) <= hi
+    # m2 is fixed: a ratio to it is its numerator's interval, scaled (it read [-676, 2203] 1/s).
+    m2 = TRUTH.m2_kg
+    c2_lo, c2_hi = fit.estimate("c2_nspm").ci95
+    assert fit.estimate("c2_over_m2_per_s").ci95 == pytest.approx((c2_lo / m2, c2_hi / m2), rel=1e-3)
     # The model is the one that made the data: what is left is the 3 µm mocap noise.
     assert fit.rms_m < 4.5e-6
     assert result.holdout_rms_identified_m < 0.1 * result.holdout_rms_published_m

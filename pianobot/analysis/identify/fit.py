@@ -225,6 +225,10 @@ def identify_trajectories(
     )
 
 
+#: Derived quantities that may take either sign: the slope of k1 over vacuum.
+SIGNED = frozenset({"k1_b_npm_per_kpa"})
+
+
 def _delta_intervals(theta: FloatArray, cov: FloatArray, layout: Layout,
                      point: dict[str, float]) -> dict[str, tuple[float, float]]:
     """95 % intervals of every reported quantity from the covariance of theta (delta method)."""
@@ -245,9 +249,10 @@ def _delta_intervals(theta: FloatArray, cov: FloatArray, layout: Layout,
             out[n] = (point[n] * math.exp(-half), point[n] * math.exp(half)) if half < 50 else (0.0, math.inf)
         else:
             sd = math.sqrt(max(float(grads[i] @ cov @ grads[i]), 0.0))
-            if point[n] > 0 and "_per_" not in n:
-                # A stiffness, damping or mass derived from log-parameterised ones: multiplicative
-                # too (the delta method on its logarithm), so its interval never crosses zero.
+            if point[n] > 0 and n not in SIGNED:
+                # A stiffness, damping, mass or a ratio of them (c2/m2) derived from
+                # log-parameterised ones: multiplicative too (the delta method on its logarithm),
+                # so its interval never crosses zero (c2/m2 read [-676, 2203] 1/s).
                 half = Z95 * sd / point[n]
                 out[n] = (point[n] * math.exp(-half), point[n] * math.exp(half)) if half < 50 else (0.0, math.inf)
             else:  # a slope (k1's change per kPa) may take either sign
