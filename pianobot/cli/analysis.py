@@ -31,6 +31,7 @@ from pianobot.cli.common import (
     say,
     say_written,
     warn_unfinished,
+    writable_folder,
 )
 from pianobot.errors import InputError
 from pianobot.executor import ExecutorSettings
@@ -175,6 +176,7 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Cross-validate learned maps to on-velocity, hold and silence; save each as a predictor."""
         kinds = model or ["gp"]
+        writable_folder(out_dir, "--out-dir")
         warn_unfinished(runs, data)
         if "sequence" in kinds or "rnn" in kinds:
             from pianobot.cli.sequence_fit import fit_sequence_command

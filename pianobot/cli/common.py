@@ -108,6 +108,20 @@ def writable(path: Path | None, option: str) -> Path | None:
     return path
 
 
+def writable_folder(folder: Path, option: str) -> Path:
+    """Check before any work that `folder` is, or can be made, a folder files can be written in
+    (`fit --out-dir` used to fail after its cross-validation, with the system's words)."""
+    if folder.exists() and not folder.is_dir():
+        raise InputError(f"{folder} is a file; give a folder", option)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"cannot create the folder {folder} ({exc.strerror})", option) from None
+    if not can_create_in(folder):
+        raise InputError(f"cannot write in {folder} (read-only?)", option)
+    return folder
+
+
 def figure_path(path: Path | None, option: str = "--plot") -> Path | None:
     """`writable`, and a file type matplotlib writes (png, pdf, svg, ...): checked before any
     work, so a figure named `roll.txt` does not fail after the robot has played."""

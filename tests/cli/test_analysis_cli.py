@@ -79,12 +79,16 @@ def test_bad_input_one_line_exit_2(cli: Callable[..., _Result], data_dir: Path, 
 def test_odd_options_are_refused_before_any_fitting(cli: Callable[..., _Result], data_dir: Path, traj_run: str,
                                                     tmp_path: Path) -> None:
     out = str(tmp_path / "m.json")
+    (tmp_path / "m.json.taken").write_text("")
     for args, option, what in (
         (["identify", traj_run, "--seed", "-1", "--out", out], "--seed", "greater than or equal to 0"),
         (["identify", traj_run, "--x0-source", "banana", "--out", out], "--x0-source", "expected auto, arm"),
         (["identify", traj_run, "--vacuum-kpa", "-1e9", "--out", out], "--vacuum-kpa", "gauge pressure"),
         (["discover", traj_run, "--vacuum-kpa", "250"], "--vacuum-kpa", "gauge pressure"),
         (["identify", traj_run, "--out", "/proc/pianobot-model.json"], "--out", "cannot write in /proc"),
+        # fit's folder used to be made after its cross-validation, failing in the system's words
+        (["fit", traj_run, "--out-dir", str(tmp_path / "m.json.taken")], "--out-dir", "give a folder"),
+        (["discover", traj_run, "--seed", "-1"], "--seed", "from 0 to 2**63 - 1"),
     ):
         proc = cli(*args, "--data", str(data_dir))
         assert proc.returncode == 2 and proc.stderr.count("\n") == 1, (args, proc.stderr)
