@@ -51,7 +51,8 @@ X0_SOURCES = ("auto", "arm", "mocap", "sim-truth")
 def keystrokes_per_level(runs: list[str], data: Path, vacuum_kpa: float | None, fitted: int) -> dict[float, int]:
     """Keystrokes per vacuum level (kPa) of the runs' usable trials; a single level gets the
     number the fit actually used."""
-    trials = pd.concat([load_run(run, data).trials for run in runs], ignore_index=True)
+    loaded = {run.run_id: run for run in (load_run(r, data) for r in runs)}  # a run named twice counts once
+    trials = pd.concat([run.trials for run in loaded.values()], ignore_index=True)
     if "status" in trials:
         trials = trials[trials["status"].isin(["ok", "silent"])]
     fallback = 0.0 if vacuum_kpa is None else -abs(vacuum_kpa)

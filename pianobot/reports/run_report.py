@@ -168,7 +168,7 @@ def build_run_report(run_ids: Sequence[str], data_dir: Path, out: Path, *, model
         raise InputError("give at least one run", "report")
     with progress.task("report", total=6) as task:
         task.update(note="loading runs")
-        runs = [load_run(r, data_dir) for r in run_ids]
+        runs = list({run.run_id: run for run in (load_run(r, data_dir) for r in run_ids)}.values())  # once each
         trials = pd.concat([r.trials for r in runs], ignore_index=True)
         if trials.empty:
             raise InputError("the runs have no trials", ", ".join(run_ids))

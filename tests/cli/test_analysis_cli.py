@@ -104,6 +104,13 @@ def test_a_run_given_twice_counts_once(cli: Callable[..., _Result], data_dir: Pa
     assert once.returncode == twice.returncode == 0, twice.stderr
     a, b = json.loads(once.stdout), json.loads(twice.stdout)
     assert {k: v["value"] for k, v in a["parameters"].items()} == {k: v["value"] for k, v in b["parameters"].items()}
+    # fit (and report) counted it twice: every keystroke learnt twice, a better cross-validation.
+    run = write_run(data_dir, sounded_trials(2), None)
+    fits = [json.loads(cli("fit", *ids, "--model", "poly", "--data", str(data_dir), "--json",
+                           "--out-dir", str(tmp_path / "m")).stdout)["cv"] for ids in ([run], [run, run[:-2]])]
+    timing = ("latency_ms", "fit_s")
+    assert [{k: v for k, v in row.items() if k not in timing} for row in fits[0]] == \
+        [{k: v for k, v in row.items() if k not in timing} for row in fits[1]]
 
 
 def test_fit_on_a_take_without_midi_says_so(cli: Callable[..., _Result], data_dir: Path, traj_run: str) -> None:

@@ -20,10 +20,15 @@ from pianobot.store import load_run
 
 
 def load_trials(run_ids: Sequence[str], data_dir: Path) -> pd.DataFrame:
-    """The trials of every run, concatenated."""
+    """The trials of every run, concatenated; a run named twice (or by two prefixes) counts once,
+    as in identify and discover (`fit A A` learnt every keystroke twice)."""
     frames = []
+    seen: set[str] = set()
     for run_id in run_ids:
         run = load_run(run_id, data_dir)
+        if run.run_id in seen:
+            continue
+        seen.add(run.run_id)
         trials = run.trials
         if trials.empty:
             raise InputError("the run has no trials", run.run_id)
