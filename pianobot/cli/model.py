@@ -11,6 +11,7 @@ from pianobot.cli.common import (
     DEFAULT_DATA,
     DataDir,
     JsonFlag,
+    check_vacuum_option,
     emit_json,
     figure_path,
     print_fields,
@@ -37,9 +38,10 @@ def register(app: typer.Typer) -> None:
 
 
 def _vacuum(vacuum_kpa: float) -> float:
-    if not -200.0 <= vacuum_kpa <= 0.0:
-        raise InputError(f"vacuum is gauge pressure in [-200, 0] kPa, got {vacuum_kpa}", "--vacuum-kpa")
-    return vacuum_kpa
+    """As every command reads `--vacuum-kpa`: a gauge pressure in [-100, 0] kPa, a magnitude (40)
+    read as −40 (this command took −200 and refused 40)."""
+    check_vacuum_option(vacuum_kpa)
+    return -abs(vacuum_kpa) or 0.0
 
 
 @model_app.command("bode")
@@ -53,7 +55,8 @@ def bode_command(
     """Peak frequency and gain of the key's response to the arm, |X2/X0|."""
     figure_path(plot)
     model = load_model(model_file) if model_file is not None else KeystrokeModel.study()
-    lp = model.msd.at(_vacuum(vacuum_kpa))
+    vacuum_kpa = _vacuum(vacuum_kpa)
+    lp = model.msd.at(vacuum_kpa)
     peak_hz, gain = peak_response(lp)
     if plot is not None:
         from pianobot.reports.command_figures import save_png
@@ -107,7 +110,8 @@ def simulate(
     except ValueError as exc:
         raise InputError(str(exc), "press") from None
     sim = World.default(seed) if world == "default" else World.linear(seed)
-    k = sim.keystroke(press, _vacuum(vacuum_kpa), key="cli")
+    vacuum_kpa = _vacuum(vacuum_kpa)
+    k = sim.keystroke(press, vacuum_kpa, key="cli")
     if plot is not None:
         from pianobot.reports.command_figures import save_png, simulated_keystroke
 

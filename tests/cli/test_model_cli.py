@@ -57,7 +57,7 @@ def test_simulate_prints_midi_outcome_and_plots(monkeypatch: pytest.MonkeyPatch,
 @pytest.mark.parametrize(
     ("args", "where"),
     [
-        (["--vacuum-kpa", "20"], "--vacuum-kpa"),
+        (["--vacuum-kpa", "-150"], "--vacuum-kpa"),  # 20 reads as -20 kPa, as in every command
         (["--world", "mars"], "--world"),
         (["--down-velocity-mps", "-0.1"], "press"),
     ],
