@@ -42,7 +42,7 @@ from pianobot.reports.run_tables import (
     varied_columns,
 )
 from pianobot.reports.stage_residuals import stage_residuals
-from pianobot.store import Run, load_run
+from pianobot.store import Run, load_run, unfinished_note
 
 __all__ = ["build_run_report", "sound_by_level"]
 
@@ -67,6 +67,10 @@ def _subtitle(runs: Sequence[Run], trials: pd.DataFrame) -> str:
 
 def _provenance_section(runs: Sequence[Run]) -> Section:
     section = Section("Provenance")
+    for run in runs:  # as the terminal says it: the page is read later, without the terminal
+        note = unfinished_note(run)
+        if note is not None:
+            section.add(paragraph(f"Warning: {note}", warning=True))
     tables = [provenance(r.meta, r.trials) for r in runs]
     if len(runs) == 1:
         section.add(mapping_table_html(tables[0]))

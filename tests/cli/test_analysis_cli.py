@@ -182,6 +182,7 @@ def test_an_analysis_says_when_its_run_is_unfinished(cli: Callable[..., _Result]
     assert f"run {writer.run_id} did not finish" in proc.stderr
     assert f"{len(trials)} of {len(trials) + 20} planned keystrokes are analysed" in proc.stderr
     assert f"pianobot sweep --resume {writer.run_id}" in proc.stderr
+    assert f"run {writer.run_id} did not finish" in (tmp_path / "r.html").read_text()  # the page says it too
     # Still being recorded: a live process holds its lock.
     with RunLock(writer.paths.lock, purpose="sweep"):
         proc = cli(*report)
