@@ -32,7 +32,11 @@ MODEL_PARAMETER_LABELS: dict[str, tuple[str, str]] = {
     "c2_nspm": ("key damping c2", "N·s/m"),
     "k0_npm": ("arm–fingertip stiffness k0 (blank: = k1)", "N/m"),
     "c0_nspm": ("arm–fingertip damping c0 (blank: = c1)", "N·s/m"),
+    "k0_over_k1": ("arm–fingertip stiffness as a share of the finger's, k0/k1", "1"),
+    "c0_over_c1": ("arm–fingertip damping as a share of the finger's, c0/c1", "1"),
 }
+#: A coupling given as a share of the finger's (`k0_over_k1`) leaves k0 itself blank: not shown.
+_SHARE_OF = {"k0_npm": "k0_over_k1", "c0_nspm": "c0_over_c1"}
 
 
 def parse_utc(text: Any) -> datetime | None:
@@ -146,12 +150,17 @@ def sound_by_level(trials: pd.DataFrame) -> pd.DataFrame:
 def parameter_table(params: MSDParams, intervals: Mapping[str, Any] | None) -> pd.DataFrame:
     """The model's parameters with units, and 95 % intervals where the model file has them."""
     rows = []
-    for key, value in params.to_dict().items():
+    values = params.to_dict()
+    for key, value in values.items():
         if key == "k1_table":
             for vacuum, k1 in value:
-                rows.append(_parameter_row(f"k1_npm@{vacuum:g}kPa", f"finger stiffness k1 at {vacuum:g} kPa",
+                # Stored as a magnitude (40); read, and keyed in the intervals, as the gauge −40 kPa.
+                gauge = -abs(float(vacuum)) or 0.0
+                rows.append(_parameter_row(f"k1_npm@{gauge:g}kPa", f"finger stiffness k1 at {gauge:g} kPa",
                                            "N/m", k1, intervals))
             continue
+        if value is None and values.get(_SHARE_OF.get(key, "")) is not None:
+            continue  # "blank: = k1" would say the opposite of the share given below
         label, unit = MODEL_PARAMETER_LABELS.get(key, (key, quantity(key).unit))
         rows.append(_parameter_row(key, label, unit, value, intervals))
     return pd.DataFrame(rows)

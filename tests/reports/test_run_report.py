@@ -99,3 +99,18 @@ def test_report_on_fixture_imports(zhang2022: Path, data_dir: Path, tmp_path: Pa
     text = _assert_self_contained(build_run_report([log, take], data_dir, tmp_path / "r.html"),
                                   min_figures=5, min_tables=4)
     assert log in text and take in text
+
+
+def test_the_parameter_table_reads_the_model_as_identify_wrote_it() -> None:
+    from pianobot.reports.run_tables import parameter_table
+
+    # A per-level k1 (stored as the magnitude 40) and a coupling given as shares of the finger's.
+    params = MSDParams(k1_table=((40.0, 127.4), (80.0, 190.0)), k0_over_k1=0.7449, c0_over_c1=0.8)
+    intervals = {"k1_npm@-40kPa": {"ci95": [110.0, 140.0]}, "c0_nspm": {"ci95": [0.07, 2.4]}}
+    table = parameter_table(params, intervals).set_index("parameter")
+    k1 = table.loc["finger stiffness k1 at -40 kPa"]  # it read "at 40 kPa", without its interval
+    assert (k1["value"], k1["95 % low"], k1["95 % high"]) == (127.4, 110.0, 140.0)
+    assert not any("blank: = k1" in p or "blank: = c1" in p for p in table.index)  # k0 is 0.74 k1, not k1
+    assert table.loc["arm–fingertip stiffness as a share of the finger's, k0/k1", "value"] == 0.7449
+    tied = parameter_table(MSDParams(), None).set_index("parameter")
+    assert tied.loc["arm–fingertip stiffness as a share of the finger's, k0/k1", "value"] == 1.0  # k0 = k1
