@@ -108,6 +108,7 @@ def check_run(
     meta = _check_meta(check)
     _check_plan(check, meta)
     held = _check_compacted(check)
+    _check_recorded_trials(check, meta)
     _check_parts(check, held)
     if index.garbled_lines:
         shown = ", ".join(str(n) for n in index.garbled_lines[:5])
@@ -173,6 +174,17 @@ def _check_compacted(check: _Check) -> dict[str, set[int] | None]:
             check.add(path, "has unreadable batch metadata", name)
             held[name] = None
     return held
+
+
+def _check_recorded_trials(check: _Check, meta: dict[str, Any] | None) -> None:
+    """Trials run.json counts, with no trials table nor part on disk: lost (the quick check has no
+    journal to tell; a deleted trials.parquet listed as 'completed 0/300')."""
+    counts = meta.get("trial_counts") if meta else None
+    recorded = sum(v for k, v in counts.items() if k != "batch" and isinstance(v, int)) if isinstance(counts, dict) else 0
+    path = check.paths.table("trials")
+    if recorded and not path.is_file() and not check.paths.part_batches()["trials"] and not any(
+            d.table == "trials" for d in check.damage):
+        check.add(path, f"is missing (run.json counts {recorded} trials)", "trials")
 
 
 def _check_parts(check: _Check, held: dict[str, set[int] | None]) -> None:

@@ -207,6 +207,20 @@ def test_a_check_without_the_journal_says_the_bytes_were_not_verified(data_dir: 
     assert any("journal.jsonl is missing" in note for note in check_run(paths).notes)
 
 
+def test_a_deleted_trials_table_is_damage_even_to_the_quick_check(data_dir: Path) -> None:
+    """`pianobot runs` listed a run whose trials.parquet was deleted as 'completed 0/N'."""
+    from pianobot.store import check_run
+
+    writer = _create(data_dir, ["a", "b"])
+    writer.append(_trials(["a", "b"]), _samples(["a", "b"]), _midi(["a", "b"]))
+    writer.finish("completed")
+    writer.close()
+    (writer.path / "trials.parquet").unlink()
+    quick = check_run(RunPaths(writer.path), deep=False)
+    assert not quick.ok and "trials.parquet is missing (run.json counts 2 trials)" in quick.reason
+    assert list_runs(data_dir)[0].status == "damaged"
+
+
 def test_a_journal_line_naming_an_unknown_table_is_checked_not_crashed_on(data_dir: Path) -> None:
     """A flipped byte that leaves a part line readable JSON (`"tr3als"`; found by the fuzz test):
     the check and the reader go on with the tables they know."""
