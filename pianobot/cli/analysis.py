@@ -162,7 +162,7 @@ def register(app: typer.Typer) -> None:
         runs: RunIds,
         data: DataDir = DEFAULT_DATA,
         json_out: JsonFlag = False,
-        model: Annotated[list[str] | None, typer.Option("--model", help="gp | poly | spline | mlp | physics | sequence | rnn (repeatable; with sequence, the others are its per-note baselines; rnn adds the recurrent model, extra [rnn]).")] = None,
+        model: Annotated[list[str] | None, typer.Option("--model", help="gp | poly | spline | mlp | physics | sequence | rnn (repeatable; with sequence, the others are its per-note baselines; rnn adds the recurrent model: pip extra 'rnn').")] = None,
         out_dir: Annotated[Path, typer.Option("--out-dir", help="Folder for the saved predictors.")] = Path("models"),
         folds: Annotated[int, typer.Option(min=2, help="Grouped CV folds.")] = 5,
         physics_model: Annotated[Path | None, typer.Option(help="Model file for --model physics.")] = None,

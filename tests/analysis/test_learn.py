@@ -111,3 +111,17 @@ def test_fit_on_study_soft_finger_logs(zhang2022: Path, data_dir: Path) -> None:
     speeds = curve.inverse(targets, strict=True)
     back = model.predict(pd.DataFrame({"down_velocity_mps": speeds, **fixed}))["on_velocity"].to_numpy()
     assert np.nanmax(np.abs(back - targets)) <= 1.0
+
+
+def test_the_physics_row_refuses_a_learned_predictor(data_dir: Path, tmp_path: Path) -> None:
+    # A GP trained on these keystrokes, given as --physics-model, read as a perfect physics model.
+    from _synthetic_runs import write_run
+
+    from pianobot.analysis.learn.run import fit_runs
+
+    run = write_run(data_dir, sounded_trials(5), None)
+    saved = fit_runs([run], data_dir, kinds=["poly"], out_dir=tmp_path).saved["poly"]
+    with pytest.raises(InputError, match="learned predictor, not a keystroke model"):
+        fit_runs([run], data_dir, kinds=["physics"], out_dir=None, physics_model=saved)
+    with pytest.raises(InputError, match="sequence, rnn"):
+        fit_runs([run], data_dir, kinds=["foo"], out_dir=None)

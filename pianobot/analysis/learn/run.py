@@ -57,12 +57,17 @@ def fit_runs(
     their estimated time pays for it; the table does not depend on where they ran."""
     bad = [k for k in kinds if k not in MODEL_KINDS]
     if bad:
-        raise InputError(f"unknown model {bad[0]!r}; valid: {', '.join(MODEL_KINDS)}", "--model")
+        raise InputError(f"unknown model {bad[0]!r}; valid: {', '.join(MODEL_KINDS)}, sequence, rnn", "--model")
     trials = load_trials(run_ids, data_dir)
     data = training_set(trials)
     physics = None
     if "physics" in kinds:
         physics = load_predictor(physics_model) if physics_model else PhysicsPredictor.published()
+        if not isinstance(physics, PhysicsPredictor):
+            # A learned predictor scored as "physics" on the keystrokes it was trained on read as
+            # a perfect cross-validated model (RMSE 0.00, R² 1.000).
+            raise InputError("is a learned predictor, not a keystroke model (identify or discover writes those); "
+                             "the physics row scores a model fitted elsewhere", "--physics-model")
     settings = executor if executor is not None else ExecutorSettings(workers=1)
     table, fitted = cross_validate_models(data, kinds, folds=folds, seed=seed, physics=physics,
                                           progress=progress,
