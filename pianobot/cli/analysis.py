@@ -117,6 +117,9 @@ def register(app: typer.Typer) -> None:
         findings = identify_findings(result.fit.params, [Interval(e.name, e.value, e.unit, e.ci95, at_limit=e.on_bound)
                                                          for e in result.fit.estimates],
                                      keystrokes_per_level(runs, data, vacuum_kpa, result.fit.n_keystrokes))
+        for note in result.notes:
+            if "left out" in note:  # a MIDI-only run beside a take: said, not silently dropped
+                print_warning(note)
         if result.model_path is not None:
             store_findings(result.model_path, findings)
         if plot is not None:

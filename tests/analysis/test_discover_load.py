@@ -123,3 +123,17 @@ def test_a_take_without_its_distances_gets_one_hover_where_its_travels_agree(
     else:
         assert np.all(np.abs(distance - travel) < 1e-4)
         assert any("per keystroke" in note for note in loaded.notes)
+
+
+def test_a_midi_only_run_beside_a_take_is_said_to_be_left_out(data_dir: Path) -> None:
+    # identify and discover on a take and a keystroke log together dropped the log in silence.
+    from _synthetic_runs import linear_keystrokes, sounded_trials, write_run
+
+    from pianobot.physics.msd import MSDParams
+
+    take = write_run(data_dir, *linear_keystrokes(MSDParams(), seed=3), name="take")
+    log = write_run(data_dir, sounded_trials(0), None, name="log")
+    loaded = load_keystrokes([take, log], data_dir, need_motion=True)
+    assert all(t.startswith(f"{take}/") for t in loaded.batch.trial_id)
+    assert any(f"run {log} has no key trajectories" in note and "left out" in note for note in loaded.notes)
+    assert not any("left out" in note for note in load_keystrokes([take], data_dir, need_motion=True).notes)

@@ -179,6 +179,12 @@ def load_keystrokes(run_ids: Sequence[str], data_dir: Path, *, x0_source: str = 
                              "the runs have neither key trajectories nor MIDI outcomes", ",".join(run_ids))
     rows = all_trials.set_index("trial_id").loc[list(batch.trial_id)]
     notes: set[str] = set()
+    if batch.has_motion:  # a run with MIDI only beside a take: its keystrokes have nothing to fit here
+        for run_id in hashes:
+            mine = all_trials["trial_id"].str.startswith(f"{run_id}/")
+            if mine.any() and not any(t.startswith(f"{run_id}/") for t in batch.trial_id):
+                notes.add(f"run {run_id} has no key trajectories: its {int(mine.sum())} keystrokes are left out "
+                          "(a trajectory fit compares the model with the key's measured motion)")
     if assumed:
         notes.add(f"vacuum not recorded ({', '.join(assumed)}): {assumed_vacuum_kpa:g} kPa assumed; only the finger "
                   "stiffness's starting value depends on it (the fit finds the take's own): give --vacuum-kpa to state it")

@@ -39,6 +39,7 @@ class IdentifyResult:
     damping: DampingCheck | None = None
     readout: ReadoutFit | None = None
     clock_offset_s: float = 0.0  # mocap clock behind the arm log's (the arm log was shifted by it)
+    notes: tuple[str, ...] = ()  # what the loader decided (a run left out, an assumption)
 
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {
@@ -117,4 +118,5 @@ def identify_runs(
         if static is not None:
             provenance["static_stiffness"] = static.to_dict()
         path = save_model(model, out, intervals=intervals, provenance=provenance)
-    return IdentifyResult(fit, model, rms_id, rms_pub, peaks, static, path, damping, readout, batch.clock_offset_s)
+    return IdentifyResult(fit, model, rms_id, rms_pub, peaks, static, path, damping, readout, batch.clock_offset_s,
+                          loaded.notes)
