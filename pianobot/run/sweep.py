@@ -8,6 +8,7 @@ the one in flight, and continues the run clock where it stopped.
 
 from __future__ import annotations
 
+import json
 import os
 from collections.abc import Iterable
 from contextlib import ExitStack
@@ -231,6 +232,17 @@ def _create(data_dir: Path, prepared: PreparedSweep) -> RunWriter:
     )
 
 
+def _same_resolved_spec(path: Path, meta: dict[str, Any]) -> bool:
+    """Whether the spec at `path` resolves to what the run recorded (comments and layout aside)."""
+    recorded = (meta.get("spec") or {}).get("resolved")
+    if recorded is None:
+        return False
+    try:
+        return bool(json.loads(json.dumps(resolved_spec_dict(load_spec(path)), default=str)) == recorded)
+    except InputError:
+        return False
+
+
 def _reopen(
     data_dir: Path, run_id: str, spec_path: Path | None, seed: int | None, rig_path: Path | None,
     *, max_trials: int, rig_override: bool,
@@ -245,9 +257,11 @@ def _reopen(
     path = Path(spec_path) if spec_path is not None else recorded
     if not path.is_file():
         raise InputError(f"the run's spec file {path} is gone; give the spec: pianobot sweep SPEC --resume {run.run_id}", "SPEC")
-    if spec_sha256(path) != meta.get("spec_sha256"):
+    if spec_sha256(path) != meta.get("spec_sha256") and not _same_resolved_spec(path, meta):
+        # Only a change of what the spec says refuses the resume: an edited comment, a reordered
+        # key or `5e-2` for `0.05` plan the same trials (the plan check below makes sure).
         raise InputError(
-            f"{path} differs from the spec run {run.run_id} started with (sha256 mismatch); "
+            f"{path} differs from the spec run {run.run_id} started with (its settings changed); "
             "restore it, or start a new run",
             "--resume",
         )

@@ -287,8 +287,12 @@ def test_resume_refuses_a_changed_spec_and_a_completed_run_has_nothing_to_do(
     outcome = _run(spec, data_dir)
     again = _run(spec, data_dir, resume=outcome.run_id)
     assert again.status == "completed" and again.executed == 0
-    spec.write_text(spec.read_text().replace("seed: 3", "seed: 4"))
-    with pytest.raises(InputError, match="sha256"):
+    # A comment added is no change of the experiment: the resume goes on (it used to be refused).
+    original = spec.read_text()
+    spec.write_text("# checked by M. before the second session\n" + original)
+    assert _run(spec, data_dir, resume=outcome.run_id).status == "completed"
+    spec.write_text(original.replace("seed: 3", "seed: 4"))
+    with pytest.raises(InputError, match="its settings changed"):
         _run(spec, data_dir, resume=outcome.run_id)
     with pytest.raises(InputError, match="pianobot runs"):
         _run(spec, data_dir, resume="nope")
