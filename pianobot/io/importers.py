@@ -184,8 +184,7 @@ def import_mocap(
         warnings.append(f"{take.repeated_frames} row(s) of the take repeated the frame number and time of the row "
                         "before: each was read once")
     if warnings:
-        meta["reader_notes"] = warnings
-        extra["warnings"] = warnings
+        extra["warnings"] = warnings  # the arm log's are added to them; the run records them all
     if run_id is None:
         trials = _stroke_trials(strokes, sha)
         trials["vacuum_kpa"] = math.nan if vacuum_kpa is None else float(vacuum_kpa)
@@ -196,6 +195,8 @@ def import_mocap(
             with progress.task("reading the arm log"):
                 arm = _arm_log_samples(Path(arm_log), arm_log_start_s, take, strokes, trials, meta, extra)
             samples = pd.concat([samples, arm], ignore_index=True)
+        if extra.get("warnings"):
+            meta["import_warnings"] = list(extra["warnings"])  # what the import said, kept with the run
         new_id = write_run(data_dir, f"import-{path.stem}", meta, trials, samples, None, progress=progress)
         return ImportResult(new_id, "mocap", len(trials), 0, (), extra, run_dir(data_dir, new_id))
     run = load_run(run_id, data_dir)
@@ -212,6 +213,8 @@ def import_mocap(
     samples = pd.concat([run.samples, mocap], ignore_index=True) if not run.samples.empty else mocap
     meta.update(derived_from=run.run_id, clock_offset_s=alignment.clock_offset_s,
                 alignment={"method": alignment.method, "score": alignment.score})  # fmt: skip
+    if extra.get("warnings"):
+        meta["import_warnings"] = list(extra["warnings"])
     base = trials.drop(columns=["run_id"], errors="ignore")
     if vacuum_kpa is not None:
         known = base["vacuum_kpa"] if "vacuum_kpa" in base else pd.Series(math.nan, index=base.index)

@@ -333,7 +333,7 @@ def play_song(
     score = score_performance(target, performance.notes, plan.notes["target_velocity"].to_numpy(float),
                               tempo_bpm=plan.tempo.played_bpm, skipped=list(plan.notes["status"] == "skip"))
     files = _write_outputs(performance, target, score, plan, plot, label, warm)
-    warnings = (*song.warnings, *line.warnings, *plan.warnings, *_poor_performance(score, plan, warm is None))
+    warnings = (*song.warnings, *line.warnings, *plan.warnings, *_poor_performance(score, warm is None))
     return PlayResult(song, line, plan, performance, score, warnings, files, label, warm, prior)
 
 
@@ -341,7 +341,7 @@ def play_song(
 POOR_SHARE = 0.5
 
 
-def _poor_performance(score: Score, plan: SongPlan, no_warmup: bool) -> tuple[str, ...]:
+def _poor_performance(score: Score, no_warmup: bool) -> tuple[str, ...]:
     """One line when most planned notes were not heard on time (a model that does not fit the
     piano: silent strokes, or every note late), with what to do about it."""
     status = score.per_note["status"] if len(score.per_note) else pd.Series(dtype=str)

@@ -208,3 +208,8 @@ def test_a_damaged_export_reads_with_what_was_wrong_said(synthetic_take: Path, t
     assert "1 cell(s) are not numbers and are read as gaps (first: data row 100, column 4)" in notes
     assert "header states 240 Hz but the Time column steps at 120 Hz" in notes and take.frame_rate_hz == 120.0
     assert read_mocap(synthetic_take).notes == ()  # a clean export says nothing
+    from pianobot.io.importers import import_mocap
+    from pianobot.store import load_run
+
+    result = import_mocap(damaged, tmp_path / "data")
+    assert load_run(result.run_id, tmp_path / "data").meta["import_warnings"] == result.extra["warnings"]
