@@ -106,6 +106,7 @@ class Replay:
 
     sent_s: list[float]  # note messages only
     events: list[MidiEvent]
+    ignored: int = 0  # messages the keyboard dropped during this replay (the script's clock)
 
     @property
     def timing_errors_s(self) -> list[float]:
@@ -118,6 +119,7 @@ class Replay:
 def _play_once(process: subprocess.Popen[str], keyboard: MidiKeyboard) -> Replay:
     assert process.stdin is not None and process.stdout is not None
     t_from = time.monotonic()
+    ignored_before = keyboard.ignored_messages
     process.stdin.write("go\n")
     process.stdin.flush()
     sent_all: list[float] = json.loads(process.stdout.readline())
@@ -126,7 +128,7 @@ def _play_once(process: subprocess.Popen[str], keyboard: MidiKeyboard) -> Replay
     while True:  # wait for delivery, however slow, before judging
         events = keyboard.events_between(t_from, math.inf)
         if len(events) >= len(NOTES) or time.monotonic() > deadline:
-            return Replay(sent, events)
+            return Replay(sent, events, keyboard.ignored_messages - ignored_before)
         time.sleep(0.01)
 
 
@@ -136,7 +138,9 @@ def _play(process: subprocess.Popen[str], keyboard: MidiKeyboard) -> list[Replay
     for _ in range(REPLAYS):
         replays.append(_play_once(process, keyboard))
         last = replays[-1]
-        if len(last.events) == len(NOTES) and max(map(abs, last.timing_errors_s)) < TOLERANCE_S:
+        # A cycle the loaded dummy driver drops loses MIDI, the clock message as well as a note.
+        if (len(last.events) == len(NOTES) and last.ignored >= 1
+                and max(map(abs, last.timing_errors_s)) < TOLERANCE_S):
             break
     return replays
 
@@ -188,7 +192,7 @@ def test_records_every_note_with_script_timing(
     worst_s = [max(map(abs, r.timing_errors_s)) for r in replays]
     assert worst_s[-1] < TOLERANCE_S, f"worst timing error per replay (s): {worst_s}"
     # The clock message reached the callback and was dropped (rtmidi already filters active sensing).
-    assert keyboard.ignored_messages >= len(replays)
+    assert replays[-1].ignored >= 1
 
 
 @pytest.mark.jack
