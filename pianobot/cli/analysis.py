@@ -36,7 +36,7 @@ from pianobot.cli.common import (
 from pianobot.errors import InputError
 from pianobot.executor import ExecutorSettings
 from pianobot.output import check_output_path
-from pianobot.store import load_run
+from pianobot.store import load_runs
 
 # The analysis and report modules load scikit-learn, scipy.optimize and matplotlib (seconds on a
 # busy machine): each command imports only what it uses, after its progress line is up.
@@ -51,8 +51,7 @@ X0_SOURCES = ("auto", "arm", "mocap", "sim-truth")
 def keystrokes_per_level(runs: list[str], data: Path, vacuum_kpa: float | None, fitted: int) -> dict[float, int]:
     """Keystrokes per vacuum level (kPa) of the runs' usable trials; a single level gets the
     number the fit actually used."""
-    loaded = {run.run_id: run for run in (load_run(r, data) for r in runs)}  # a run named twice counts once
-    trials = pd.concat([run.trials for run in loaded.values()], ignore_index=True)
+    trials = pd.concat([run.trials for run in load_runs(runs, data)], ignore_index=True)
     if "status" in trials:
         trials = trials[trials["status"].isin(["ok", "silent"])]
     fallback = 0.0 if vacuum_kpa is None else -abs(vacuum_kpa)

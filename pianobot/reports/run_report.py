@@ -42,7 +42,7 @@ from pianobot.reports.run_tables import (
     varied_columns,
 )
 from pianobot.reports.stage_residuals import stage_residuals
-from pianobot.store import Run, load_run, unfinished_note
+from pianobot.store import Run, load_runs, unfinished_note
 
 __all__ = ["build_run_report", "sound_by_level"]
 
@@ -172,7 +172,7 @@ def build_run_report(run_ids: Sequence[str], data_dir: Path, out: Path, *, model
         raise InputError("give at least one run", "report")
     with progress.task("report", total=6) as task:
         task.update(note="loading runs")
-        runs = list({run.run_id: run for run in (load_run(r, data_dir) for r in run_ids)}.values())  # once each
+        runs = load_runs(run_ids, data_dir)
         trials = pd.concat([r.trials for r in runs], ignore_index=True)
         if trials.empty:
             raise InputError("the runs have no trials", ", ".join(run_ids))

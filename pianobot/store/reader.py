@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -171,7 +172,7 @@ def summarize_run(run: Run) -> RunSummary:
     lab_time = meta.get("lab_time_s")
     planned = meta.get("trials_planned")
     status, reason = str(meta.get("status", "unknown")), meta.get("reason")
-    if status == "running" and not is_alive(run):
+    if status == "running" and live_holder(run) is None:
         # A live run and one whose process died used to look the same in the listing.
         status, reason = "died", f"its process died or lost the connection; {resume_command(run)} completes it"
     return RunSummary(
@@ -189,13 +190,23 @@ def summarize_run(run: Run) -> RunSummary:
     )
 
 
-def is_alive(run: Run) -> bool:
-    """Whether a process still holds the run's lock (its lease is fresh): a run left `running`
-    by a process that died is not."""
+def live_holder(run: Run) -> Any | None:
+    """The process holding the run's lock while its lease is fresh, else None (a run left
+    `running` by a process that died has none)."""
     from pianobot.store.lock import read_holder
 
     holder = read_holder(run.paths.lock)
-    return holder is not None and not holder.is_stale()
+    return holder if holder is not None and not holder.is_stale() else None
+
+
+def load_runs(run_ids: Sequence[str], data_dir: Path) -> list[Run]:
+    """The runs named, each once, in the order first named: a run given twice (or by two
+    prefixes) counts once in every analysis."""
+    runs: dict[str, Run] = {}
+    for run_id in run_ids:
+        run = load_run(run_id, data_dir)
+        runs.setdefault(run.run_id, run)
+    return list(runs.values())
 
 
 def resume_command(run: Run) -> str:
@@ -210,8 +221,6 @@ def unfinished_note(run: Run) -> str | None:
     """What an analysis of `run` should say when the run is not a finished one: still being
     recorded (its lock is held), left behind by a process that died, or stopped early. None for a
     completed run or an import."""
-    from pianobot.store.lock import read_holder
-
     meta = run.meta
     status = str(meta.get("status", "unknown"))
     counts = trial_counts(run, meta)
@@ -220,9 +229,8 @@ def unfinished_note(run: Run) -> str | None:
     of = f"{done} of {int(planned)} planned" if planned is not None else f"{done}"
     resume = f"`{resume_command(run)}` completes it"
     if status == "running":
-        if is_alive(run):
-            holder = read_holder(run.paths.lock)
-            assert holder is not None
+        holder = live_holder(run)
+        if holder is not None:
             return f"run {run.run_id} is still running ({holder.describe()}): only its {of} keystrokes so far are analysed"
         return (f"run {run.run_id} did not finish (its process died or lost the connection; status still "
                 f"'running'): {of} keystrokes are analysed; {resume}")

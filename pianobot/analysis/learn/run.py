@@ -16,19 +16,14 @@ from pianobot.analysis.plausibility import Finding, as_dicts, fit_findings
 from pianobot.errors import InputError
 from pianobot.executor import ExecutorSettings, open_executor
 from pianobot.progress import NO_PROGRESS, Progress
-from pianobot.store import load_run
+from pianobot.store import load_runs
 
 
 def load_trials(run_ids: Sequence[str], data_dir: Path) -> pd.DataFrame:
     """The trials of every run, concatenated; a run named twice (or by two prefixes) counts once,
     as in identify and discover (`fit A A` learnt every keystroke twice)."""
     frames = []
-    seen: set[str] = set()
-    for run_id in run_ids:
-        run = load_run(run_id, data_dir)
-        if run.run_id in seen:
-            continue
-        seen.add(run.run_id)
+    for run in load_runs(run_ids, data_dir):
         trials = run.trials
         if trials.empty:
             raise InputError("the run has no trials", run.run_id)
