@@ -415,7 +415,9 @@ def build_sim_rig(rig_spec: Any, seed: int, *, world: Any | None = None) -> Rig:
         station=station,
         finish=finish,
         clear_stop=clear_stop,
-        prepare=prepare,
+        # A paced sim works like the lab, one keystroke at a time: a block worked out ahead would
+        # be stored as one part at its end, and a kill would lose minutes of paced trials.
+        prepare=None if rig_spec.realtime else prepare,
         description={
             "seed": seed,
             "world": {"preset": "default", **rig_spec.world},

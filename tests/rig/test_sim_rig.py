@@ -117,6 +117,17 @@ def test_devices_satisfy_the_protocols_and_share_one_world() -> None:
         assert description["kind"] == "sim" and description["clock"]["kind"] == "virtual"
 
 
+def test_only_a_virtual_clock_sim_works_out_blocks_ahead() -> None:
+    """A paced (realtime) sim keeps the lab's one-keystroke pace and its store batches (every
+    few seconds): a block worked out ahead is stored only at its end, so a kill of a paced run
+    would lose up to a block of wall-clock trials."""
+    with open_rig(_rig(), world=FakeWorld()) as rig:
+        assert rig.batches
+    with open_rig(_rig().model_copy(update={"realtime": True}), world=FakeWorld()) as rig:
+        assert rig.describe()["clock"]["realtime"]
+        assert not rig.batches
+
+
 def test_virtual_clock_accounts_settles_moves_and_presses_without_sleeping() -> None:
     rig_spec = _rig()
     with open_rig(rig_spec, world=FakeWorld()) as rig:
