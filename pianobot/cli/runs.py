@@ -30,6 +30,7 @@ from pianobot.store import (
     list_runs,
     load_run,
     rig_summary,
+    software_summary,
     summarize_run,
 )
 from pianobot.store.reader import trial_counts
@@ -77,6 +78,7 @@ def _run_details(run_id: str, data: Path) -> dict[str, Any]:
         "rig": rig_summary(meta),
         "pianobot_version": meta.get("pianobot_version"),
         "git_commit": meta.get("git_commit"),
+        "software_sessions": meta.get("software_sessions"),
         "end_utc": meta.get("end_utc"),
         "sessions": meta.get("sessions"),
         "interruptions": meta.get("interruptions", []),
@@ -108,7 +110,7 @@ def _print_details(details: dict[str, Any]) -> None:
         ("started / ended", f"{details['start_utc']} / {details['end_utc'] or '-'}"),
         ("spec", f"{details['spec_path']} (sha256 {str(details['spec_sha256'])[:12]})"),
         ("rig / seed", f"{details['rig']} / {details['seed']}"),
-        ("pianobot / git", f"{details['pianobot_version']} / {details['git_commit'] or '-'}"),
+        ("software", software_summary(details["meta"])),
         ("folder", details["path"]),
     ]
     for item in details["interruptions"]:

@@ -19,7 +19,7 @@ from pianobot.analysis.learn.predictors import INPUT_COLUMNS
 from pianobot.durations import format_duration
 from pianobot.physics.msd import MSDParams
 from pianobot.reports.style import quantity
-from pianobot.store import rig_summary
+from pianobot.store import rig_summary, software_summary
 
 #: Model parameters as a person reads them: name, symbol, unit (stiffness stays N/m, as published).
 MODEL_PARAMETER_LABELS: dict[str, tuple[str, str]] = {
@@ -88,8 +88,6 @@ def provenance(meta: Mapping[str, Any], trials: pd.DataFrame) -> list[tuple[str,
     planned = meta.get("trials_planned")
     counted = f"{len(trials)}" + (f" of {planned} planned" if planned else "")
     lab = meta.get("lab_time_s")
-    commit = str(meta.get("git_commit") or "")[:10]
-    software = f"pianobot {meta.get('pianobot_version', '?')}" + (f" (git {commit})" if commit else "")
     start, end = parse_utc(meta.get("start_utc")), parse_utc(meta.get("end_utc"))
     when = "?" if start is None else f"{start:%Y-%m-%d %H:%M} UTC"
     if start is not None and end is not None:
@@ -103,7 +101,7 @@ def provenance(meta: Mapping[str, Any], trials: pd.DataFrame) -> list[tuple[str,
         ("keystrokes", counted),
         ("lab time", format_duration(float(lab)) if isinstance(lab, int | float) else "- (not recorded)"),
         ("seed", "-" if meta.get("seed") is None else str(meta.get("seed"))),
-        ("software", software),
+        ("software", software_summary(dict(meta))),
     ]
 
 

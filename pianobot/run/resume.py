@@ -8,6 +8,9 @@ one line before anything moves:
 - another rig than the run started with (settle pauses, envelope, world, arm): a run is one
   condition. `--rig-override` accepts it, and run.json then records the rig of every session
   (`rig_sessions`) and marks the run as mixing rigs (`rig.mixed`), which reports show.
+
+A resume by another pianobot (version or git commit) is not refused: it is recorded the same way
+(`software_sessions`), and `runs show` and reports name every version that wrote the run.
 """
 
 from __future__ import annotations
@@ -18,9 +21,11 @@ from typing import Any
 
 from pydantic import ValidationError
 
+import pianobot
 from pianobot.errors import InputError
 from pianobot.spec import RigSpec
 from pianobot.store import RunDamaged, RunPaths, RunWriter, check_run
+from pianobot.store.layout import git_commit
 
 _SHOWN_CHANGES = 3
 
@@ -76,6 +81,20 @@ def record_rig_session(writer: RunWriter, rig: RigSpec, rig_file: str, session: 
     sessions.append({"sessions_from": session, "file": rig_file, "sha256": digest, "spec": spec})
     rig_meta["mixed"] = True
     writer.update_meta(rig=rig_meta, rig_sessions=sessions)
+
+
+def record_software_session(writer: RunWriter, session: int) -> None:
+    """Note the pianobot (version, git commit) a session runs when it differs from the last one's."""
+    meta = writer.meta
+    sessions = list(meta.get("software_sessions") or [])
+    if not sessions:  # the first session's, as the run recorded it when it was created
+        sessions.append({"sessions_from": 1, "pianobot_version": meta.get("pianobot_version"),
+                         "git_commit": meta.get("git_commit")})
+    now = {"pianobot_version": pianobot.__version__, "git_commit": git_commit()}
+    if all(sessions[-1].get(k) == v for k, v in now.items()):
+        return
+    sessions.append({"sessions_from": session, **now})
+    writer.update_meta(software_sessions=sessions)
 
 
 def _digest(spec: Any) -> str:

@@ -33,7 +33,12 @@ from pianobot.rig.errors import DeviceUnavailable
 from pianobot.run.parallel import SweepSetup, run_parallel
 from pianobot.run.progress import ProgressBar, stage
 from pianobot.run.records import Subscriber
-from pianobot.run.resume import check_same_rig, record_rig_session, refuse_damaged
+from pianobot.run.resume import (
+    check_same_rig,
+    record_rig_session,
+    record_software_session,
+    refuse_damaged,
+)
 from pianobot.run.runner import BLOCK_TRIALS, RetryPolicy, Runner, SessionResult
 from pianobot.run.signals import SignalHandlers, StopControl
 from pianobot.run.sink import StoreSink
@@ -284,6 +289,7 @@ def _reopen(
         raise InputError(str(exc), "--resume") from None
     if rig_changed:
         record_rig_session(writer, prepared.rig, rig_label, int(meta.get("sessions", 1)) + 1)
+    record_software_session(writer, int(meta.get("sessions", 1)) + 1)
     trials = read_run_table(writer.paths, "trials", columns=["trial_id", "status"]).to_pydict()
     done_ids = {
         t for t, s in zip(trials["trial_id"], trials["status"], strict=True) if s in ("ok", "silent")

@@ -307,3 +307,17 @@ def rig_summary(meta: dict[str, Any]) -> str:
                  if isinstance(s, dict)]
         return f"MIXED: {len(parts)} rigs over {meta.get('sessions', '?')} sessions: " + "; ".join(parts)
     return text
+
+
+def software_summary(meta: dict[str, Any]) -> str:
+    """The pianobot that wrote a run (version and commit); every one when resumes changed it."""
+    sessions = [s for s in meta.get("software_sessions") or [] if isinstance(s, dict)]
+    if len(sessions) < 2:
+        return _software(meta.get("pianobot_version"), meta.get("git_commit"))
+    parts = [f"{_software(s.get('pianobot_version'), s.get('git_commit'))} from session {s.get('sessions_from')}"
+             for s in sessions]
+    return f"MIXED: {len(parts)} versions over {meta.get('sessions', '?')} sessions: " + "; ".join(parts)
+
+
+def _software(version: Any, commit: Any) -> str:
+    return f"pianobot {version or '?'}" + (f" (git {str(commit)[:10]})" if commit else "")

@@ -235,6 +235,32 @@ def test_protective_stop_stops_and_resume_continues(tmp_path: Path, data_dir: Pa
     run = load_run(first.run_id, data_dir)
     assert run.trials["trial_id"].is_unique and len(run.trials) == 16
     assert "stop_cleared" in [e["event"] for e in run.journal]
+    assert "software_sessions" not in run.meta  # the same pianobot resumed: nothing to record
+
+
+def test_a_resume_by_another_pianobot_is_recorded_and_shown(
+    tmp_path: Path, data_dir: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A run resumed after an upgrade holds data of two versions: run.json and the summary
+    name both (the run used to keep only its first session's version and commit)."""
+    from pianobot.run import resume
+    from pianobot.store import software_summary
+
+    first = _run(_spec(tmp_path, faults="faults: {protective_stop_at_trial: 6}"), data_dir)
+    assert first.status == "stopped"
+    recorded = load_run(first.run_id, data_dir).meta
+    assert software_summary(recorded) == (
+        f"pianobot {pianobot.__version__}"
+        + (f" (git {recorded['git_commit'][:10]})" if recorded.get("git_commit") else ""))
+    monkeypatch.setattr(pianobot, "__version__", "9.9.9")
+    monkeypatch.setattr(resume, "git_commit", lambda: "f" * 40)
+    assert _run(None, data_dir, resume=first.run_id).status == "completed"
+    meta = load_run(first.run_id, data_dir).meta
+    assert [(s["sessions_from"], s["pianobot_version"]) for s in meta["software_sessions"]] == [
+        (1, recorded["pianobot_version"]), (2, "9.9.9")]
+    assert meta["software_sessions"][1]["git_commit"] == "f" * 40
+    shown = software_summary(meta)
+    assert shown.startswith("MIXED: 2 versions over 2 sessions") and "pianobot 9.9.9 (git ffffffffff) from session 2" in shown
 
 
 def test_first_interrupt_finishes_the_trial_then_resume_matches_an_uninterrupted_run(
