@@ -30,6 +30,7 @@ import csv
 import dataclasses
 import io
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -149,7 +150,8 @@ def _read_mocap(
     path: Path, markers: dict[str, str] | None, min_coverage: float, up_axis: str
 ) -> MocapTake:
     where = str(path)
-    lines = _read_text(path).splitlines()
+    text, resaved = _with_motive_commas(_read_text(path))
+    lines = text.splitlines()
     meta = _metadata(lines[0] if lines else "", where)
     header_at = next((i for i, line in enumerate(lines[:100]) if line.startswith("Frame,")), None)
     if header_at is None:
@@ -163,7 +165,7 @@ def _read_mocap(
     data, unreadable = _data(lines[header_at + 1 :], len(next(csv.reader([lines[header_at]]))), where)
     if data.shape[0] == 0:
         raise InputError("no data rows after the header", where)
-    notes = [unreadable] if unreadable else []
+    notes = [note for note in (resaved, unreadable) if note]
     stated = meta.get("Total Exported Frames", "").strip()
     if stated.isdigit() and int(stated) != data.shape[0]:
         notes.append(f"the take has {data.shape[0]} frames where its header states {int(stated)}: "
@@ -318,6 +320,24 @@ def _read_text(path: Path) -> str:
     data = read_input_bytes(path, "a Motive CSV export")
     return data.decode("utf-8-sig", errors="replace")
 
+
+def _with_motive_commas(text: str) -> tuple[str, str]:
+    """An export a spreadsheet re-saved with ';' or tabs between fields (a European locale, whose
+    decimal commas come along) as Motive writes it: commas between fields, decimal points.
+    Returns the text and a note saying so ("" for an export as Motive wrote it)."""
+    first = text[: text.find("\n")] if "\n" in text else text
+    sep = next((s for s in (";", "\t") if first.startswith(f"Format Version{s}")), None)
+    if sep is None:
+        return text, ""
+    decimal = bool(_DECIMAL_COMMA.search(text, 0, 200_000))
+    if decimal:
+        text = _DECIMAL_COMMA.sub(".", text)
+    name = "';'" if sep == ";" else "tabs"
+    return text.replace(sep, ","), (f"read as re-saved from a spreadsheet: {name} between fields"
+                                    + (", decimal commas" if decimal else "") + " (Motive writes commas)")
+
+
+_DECIMAL_COMMA = re.compile(r"(?<=\d),(?=\d)")
 
 #: The keys Motive writes on line 1 (`_metadata` finds them by name when the pairs are off).
 MOTIVE_KEYS = ("Format Version", "Take Name", "Take Notes", "Capture Frame Rate", "Export Frame Rate",

@@ -150,6 +150,24 @@ def test_a_take_name_with_an_unquoted_comma_still_reads(synthetic_take: Path, tm
     assert len(segment_take(take)) == len(segment_take(read_mocap(synthetic_take)))
 
 
+@pytest.mark.parametrize(("sep", "decimal"), [(";", "."), (";", ","), ("\t", "."), ("\t", ",")])
+def test_an_export_a_spreadsheet_resaved_reads_as_motive_wrote_it(
+    synthetic_take: Path, tmp_path: Path, sep: str, decimal: str
+) -> None:
+    """A take opened and saved again in a spreadsheet of a European locale: ';' (or tabs) between
+    fields, decimal commas. It used to be refused as "not a Motive CSV export"."""
+    text = synthetic_take.read_text()
+    resaved = tmp_path / "resaved.csv"
+    resaved.write_text(text.replace(",", sep).replace(".", decimal))
+    take, original = read_mocap(resaved), read_mocap(synthetic_take)
+    assert take.frame_rate_hz == original.frame_rate_hz and take.roles == original.roles
+    np.testing.assert_array_equal(take.markers[["x", "y", "z"]].to_numpy(),
+                                  original.markers[["x", "y", "z"]].to_numpy())
+    assert take.notes and "re-saved from a spreadsheet" in take.notes[0]
+    assert ("decimal commas" in take.notes[0]) == (decimal == ",")
+    assert not original.notes
+
+
 def test_two_markers_of_one_name_or_one_marker_for_two_roles_are_refused(synthetic_take: Path,
                                                                           tmp_path: Path) -> None:
     # The later column of a repeated name used to replace the earlier one silently.
