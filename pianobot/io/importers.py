@@ -23,7 +23,7 @@ from pianobot.io.force_log import BurstRule, ForceCalibration, align_to_note_ons
 from pianobot.io.keystroke_import import import_keystroke_log
 from pianobot.io.mocap import AUTO_AXIS, MocapTake, axis_hint, read_mocap
 from pianobot.io.mocap_align import ClockAlignment, run_arm_trace, starts_offset, xcorr_offset
-from pianobot.io.mocap_segment import rest_level_before, segment_take
+from pianobot.io.mocap_segment import MAX_BRIDGE_S, rest_level_before, segment_take, unseen_spans
 from pianobot.io.run_output import ImportResult, file_sha256, run_dir, trial_ids, write_run
 from pianobot.progress import NO_PROGRESS, Progress
 from pianobot.store import load_run
@@ -183,6 +183,11 @@ def import_mocap(
         meta["repeated_frames"] = take.repeated_frames
         warnings.append(f"{take.repeated_frames} row(s) of the take repeated the frame number and time of the row "
                         "before: each was read once")
+    unseen = unseen_spans(take)
+    if unseen:
+        shown = ", ".join(f"{a:.1f}–{b:.1f} s" for a, b in unseen[:3]) + (" …" if len(unseen) > 3 else "")
+        warnings.append(f"the arm marker is lost for longer than the {MAX_BRIDGE_S:g} s bridged {len(unseen)} "
+                        f"time(s) ({shown}): a press in those spans is not seen")
     if warnings:
         extra["warnings"] = warnings  # the arm log's are added to them; the run records them all
     if run_id is None:

@@ -95,6 +95,25 @@ def bridge(t: FloatArray, x: FloatArray, max_gap_s: float) -> FloatArray:
     return out
 
 
+def unseen_spans(take: MocapTake) -> list[tuple[float, float]]:
+    """(from, to) times, between the arm marker's first and last frames, where it is lost for
+    longer than segmentation bridges (`MAX_BRIDGE_S`): a press there cannot be segmented."""
+    arm = take.down_m("arm")
+    if arm is None:
+        return []
+    t = take.t_s
+    lost = np.flatnonzero(~np.isfinite(arm))
+    seen = np.flatnonzero(np.isfinite(arm))
+    if lost.size == 0 or seen.size < 2:
+        return []
+    spans = []
+    for run in np.split(lost, np.flatnonzero(np.diff(lost) > 1) + 1):
+        before, after = run[0] - 1, run[-1] + 1
+        if before >= seen[0] and after <= seen[-1] and t[after] - t[before] > MAX_BRIDGE_S:
+            spans.append((float(t[before]), float(t[after])))
+    return spans
+
+
 def rolling_rest(x: FloatArray, window: int) -> FloatArray:
     """Rest level: rolling 10th percentile (presses are brief dips below the rest the arm keeps)."""
     series = pd.Series(x)

@@ -103,6 +103,24 @@ def test_mocap_without_run(synthetic_take_path: Path, data_dir: Path) -> None:
     assert first["x0_m"].max() == pytest.approx(0.0072, abs=2e-4)
 
 
+def test_a_press_lost_to_a_long_occlusion_is_said(synthetic_take_path: Path, tmp_path: Path, data_dir: Path) -> None:
+    """Every marker lost for 2 s over the fourth press (7-9 s): the press cannot be segmented,
+    and the import says where the take went unseen (it used to lose the press silently)."""
+    lines = synthetic_take_path.read_text().splitlines()
+    header = next(i for i, line in enumerate(lines) if line.startswith("Frame,"))
+    for i in range(header + 1, len(lines)):
+        cells = lines[i].split(",")
+        if 7.0 <= float(cells[1]) <= 9.0:
+            lines[i] = ",".join(cells[:2] + [""] * (len(cells) - 2))
+    occluded = tmp_path / "occluded.csv"
+    occluded.write_text("\n".join(lines) + "\n")
+    out = import_mocap(occluded, data_dir).to_dict()
+    assert out["keystrokes"] == 5
+    (said,) = [w for w in out["warnings"] if "arm marker is lost" in w]
+    assert "1 time(s) (7.0–9.0 s)" in said and "not seen" in said
+    assert not any("arm marker is lost" in w for w in import_mocap(synthetic_take_path, data_dir).to_dict().get("warnings") or [])
+
+
 def test_mocap_exported_z_up_gives_the_y_up_takes_keystrokes(tmp_path: Path, data_dir: Path) -> None:
     speeds, starts = [0.01, 0.03, 0.05], [1.0, 4.0, 7.0]
     takes = {up: motive_csv(tmp_path / f"{up}.csv", duration_s=10.0, starts_s=starts, speeds_mps=speeds, up=up)
