@@ -30,6 +30,7 @@ from pianobot.cli.common import (
 )
 from pianobot.play import PlayResult, play_song
 from pianobot.play.perform import PerformanceStopped
+from pianobot.play.tempo import note_numbers
 from pianobot.play.warmup import WarmUpFailed
 
 # (column, heading with unit, scale, format, priority): priority 0 always shows, the highest
@@ -70,7 +71,7 @@ def _tempo_line(result: PlayResult) -> str:
         return ""
     feasible = "unknown (no model)" if math.isnan(tempo.feasible_bpm) else (
         "unbounded" if math.isinf(tempo.feasible_bpm) else f"{tempo.feasible_bpm:.4g} bpm")
-    limiting = ", ".join(str(i) for i in tempo.limiting_notes) or "-"
+    limiting = note_numbers(tempo.limiting_notes) or "-"
     return (f"tempo: written {tempo.written_bpm:.4g} bpm, fastest feasible {feasible} "
             f"(limiting notes: {limiting}), playing at {tempo.played_bpm:.4g} bpm ({tempo.request.describe()})")
 
@@ -80,7 +81,9 @@ def _print_plan(result: PlayResult) -> None:
     specs = [c for c in SONG_PLAN_TABLE if c[0] in notes.columns]
     columns = [Column(head, prio, "left" if name in ("status", "reason") else "right",
                       wrap=name == "reason") for name, head, _, _, prio in specs]
-    rows = [[_fmt(row[name], scale, spec) for name, _, scale, spec, _ in specs]
+    # Notes are counted from 1 on screen, as in every message (from 0 in files and --json).
+    rows = [[_fmt(row[name] + 1 if name == "note_index" else row[name], scale, spec)
+             for name, _, scale, spec, _ in specs]
             for _, row in notes.iterrows()]
     print_table(columns, rows, title=f"{result.plan.planner} plan of {result.song.source}")
     summary = result.plan.summary()

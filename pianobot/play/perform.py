@@ -37,6 +37,7 @@ from pianobot.plan.trial import press_from
 from pianobot.play.adapt import OnlineAdapter, adapted_stroke
 from pianobot.play.geometry import stroke_trial
 from pianobot.play.song_plan import SongPlan
+from pianobot.play.tempo import note_numbers
 from pianobot.play.warmup import WARMUP_SETTLE_S
 from pianobot.progress import NO_PROGRESS, Progress
 from pianobot.rig import open_rig
@@ -191,9 +192,9 @@ class Performer:
                     try:
                         rows.append(loop.note(row, records[i + 1] if i + 1 < len(records) else None))
                     except SafetyStop as exc:
-                        status, reason = "stopped", f"safety stop at note {int(row.note_index)}: {exc}"
+                        status, reason = "stopped", f"safety stop at note {note_numbers([row.note_index])}: {exc}"
                         break
-                    task.advance(note=f"note {int(row.note_index)} (pitch {int(row.pitch)})")
+                    task.advance(note=f"note {note_numbers([row.note_index])} (pitch {int(row.pitch)})")
         self.clock.sleep(TAIL_S)
         tail = self._collect_gap()
         if self.batch:

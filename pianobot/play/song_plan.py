@@ -50,7 +50,14 @@ from pianobot.play.schedule import (
 )
 from pianobot.play.settings import PlaySettings
 from pianobot.play.strokes import StrokeTable, stroke_tables
-from pianobot.play.tempo import Feasibility, TempoChoice, TempoRequest, choose_tempo, tempo_limits
+from pianobot.play.tempo import (
+    Feasibility,
+    TempoChoice,
+    TempoRequest,
+    choose_tempo,
+    note_numbers,
+    tempo_limits,
+)
 from pianobot.spec import RigSpec
 
 # A phrase may change the vacuum only across a rest this many times the rig's settle time:
@@ -384,7 +391,7 @@ def _warnings(frame: pd.DataFrame, choice: TempoChoice, hold_cap_s: float) -> tu
     if len(skipped):
         out.append(
             f"{len(skipped)} of {len(frame)} note(s) cannot be played in time and are skipped "
-            f"(first: note {int(skipped.iloc[0].note_index)}: {skipped.iloc[0].reason})"
+            f"(first: note {note_numbers([skipped.iloc[0].note_index])}: {skipped.iloc[0].reason})"
         )
     louder = int(frame["reason"].str.contains(LOUDER_TEXT).sum())
     if louder:

@@ -18,6 +18,7 @@ note on time whenever these pairwise conditions hold (`schedule`) makes this lim
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -29,6 +30,11 @@ from pianobot.errors import InputError
 FloatArray = npt.NDArray[np.float64]
 TempoMode = Literal["auto", "written", "bpm"]
 LIMITING_SHOWN = 3  # limiting notes named in messages
+
+
+def note_numbers(indices: Iterable[int]) -> str:
+    """Notes as a musician counts them, from 1 (`note_index` in files and JSON counts from 0)."""
+    return ", ".join(str(int(i) + 1) for i in indices)
 FEW_FRACTION = 0.05  # "a few notes" slowing a whole song: at most this share of them (at least one)
 MIN_TEMPO_BPM = 1.0
 MAX_TEMPO_BPM = 1000.0
@@ -137,7 +143,7 @@ class TempoChoice:
 
     def message(self) -> str | None:
         """One line when the played tempo is not the written one, or notes cannot keep up."""
-        limiting = ", ".join(str(i) for i in self.limiting_notes)
+        limiting = note_numbers(self.limiting_notes)
         if self.request.mode == "auto" and self.played_bpm < self.written_bpm * (1 - 1e-9):
             few = ""
             if self.few is not None:

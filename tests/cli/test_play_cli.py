@@ -81,6 +81,8 @@ def test_dry_run_prints_the_feasible_tempo_and_the_limiting_notes(
     assert any("warm-up" in line for line in err.splitlines())
     code, out, _ = cli(["play", str(SONGS / "mary.mid"), "--dry-run", "--data", str(tmp_path)], capsys, monkeypatch)
     assert code == 0 and "mapping:" in out and "fastest feasible" in out and "limiting notes" in out
+    firsts = [line.split()[0] for line in out.splitlines() if line.split() and line.split()[0].isdigit()]
+    assert firsts[0] == "1" and "0" not in firsts  # the table counts notes from 1, as the messages do
     # At the written tempo, asked for: notes are skipped and reported, nothing is slowed down.
     code, out, err = cli(["play", str(SONGS / "twinkle.mid"), "--dry-run", "--json", "--tempo", "written",
                           "--data", str(tmp_path)], capsys, monkeypatch)

@@ -75,6 +75,8 @@ def test_a_few_notes_that_slow_a_whole_song_are_named_with_the_tempo_the_rest_al
     assert choice.played_bpm == 3.0 and choice.few == (1, 45.0)
     message = choice.message()
     assert message is not None and "1 note(s) alone hold it below 45 bpm" in message and "--tempo 45" in message
+    # Named as a musician counts notes (the eighth note is index 7); data keep the index.
+    assert choice.limiting_notes[0] == 7 and "limited by note(s) 8, " in message
     # Half the notes slow it (a trill): not "a few", nothing extra said.
     limits[1::2] = 3.0
     trill = choose_tempo(TempoRequest(), Feasibility(100.0, limits))
