@@ -108,9 +108,9 @@ def test_play_dry_run_table_fits_80_columns(capsys: pytest.CaptureFixture[str],
     header = out.split("─")[0]
     for heading in ("pitch", "onset", "status"):
         assert heading in header
-    # Every planned note has its row: the first cell of each row is the note index.
+    # Every planned note has its row: the first cell of each row is the note, counted from 1.
     indices = [int(m) for m in re.findall(r"^\s*(\d+)\s+\d+\s", out, flags=re.M)]
-    assert indices and indices == list(range(len(indices)))
+    assert indices and indices == list(range(1, len(indices) + 1))
 
 
 def test_columns_are_dropped_lowest_priority_first_and_numbers_are_never_cut() -> None:
