@@ -16,7 +16,7 @@ import pandas as pd
 
 from pianobot.analysis.discover.decide import percent_text
 from pianobot.analysis.discover.gap import Gap
-from pianobot.analysis.discover.result import DiscoveryResult, params_text
+from pianobot.analysis.discover.result import DiscoveryResult, dropped_text, params_text
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
 from pianobot.analysis.greybox.prediction import Prediction
 from pianobot.reports.html import Section, figure_html, paragraph, table_html, write_page
@@ -198,6 +198,8 @@ def build_discover_report(result: DiscoveryResult, path: Path, *, model_path: Pa
         else:
             sec.add(paragraph("The held-out error is at the noise level: no effect can be judged, so no candidate "
                               "was fitted.", note=True))
+        for v in it.dropped:
+            sec.add(paragraph(f"Then {dropped_text(v)}."))
         if it.proposals:
             props = pd.DataFrame([{"term": p.term, "family": p.family or "", "share": round(p.share, 3)}
                                   for p in it.proposals])

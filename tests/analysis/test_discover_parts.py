@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -25,7 +26,8 @@ from pianobot.analysis.discover.decide import (
     verdict,
 )
 from pianobot.analysis.discover.gap import Gap, consistency, score
-from pianobot.analysis.discover.result import params_text
+from pianobot.analysis.discover.localise import Localisation
+from pianobot.analysis.discover.result import Iteration, in_model, params_text, verdict_text
 from pianobot.analysis.discover.sparse import (
     KeyState,
     outcome_proposals,
@@ -93,6 +95,30 @@ def test_rule_needs_every_condition_and_prefers_the_simpler() -> None:
     no_size = verdict("keybed/linear", "keybed", "linear", {"x": 1.0}, {}, (), 200.0, before, _gap(1e-5, [1e-5] * 6),
                       False, True)
     assert choose([no_size], rule, True)[0] is None
+
+
+def test_an_effect_dropped_by_a_later_round_leaves_the_accepted_list_and_the_verdict_says_so() -> None:
+    before, middle, after = _gap(1e-4, [1e-4] * 6), _gap(3e-5, [3e-5] * 6), _gap(5e-6, [5e-6] * 6)
+    first = verdict("finger_hysteresis", "finger_hysteresis", "elastoplastic", {}, {}, (), 900.0, before, middle,
+                    True, True)
+    second = verdict("finger_stiffening/power", "finger_stiffening", "power", {}, {}, (), 500.0, middle, after,
+                     True, True)
+    # Added back onto the model refitted without it, the first effect no longer earns its place.
+    back = verdict("finger_hysteresis", "finger_hysteresis", "elastoplastic", {}, {}, (), 2.0, _gap(5.5e-6, [5.5e-6] * 6),
+                   after, True, True)
+    where = Localisation([], [], {}, {})
+    rounds = [Iteration(0, before, where, (first,), first, where, True),
+              Iteration(1, middle, where, (second,), second, where, True, dropped=(back,)),
+              Iteration(2, _gap(5.5e-6, [5.5e-6] * 6), where, (), None, None, False)]
+    assert [v.label for v in in_model(rounds)] == ["finger_stiffening/power"]
+    assert rounds[1].gap_after.position_m == 5.5e-6  # the model kept: without the dropped effect
+    assert rounds[1].to_dict()["dropped"][0]["effect"] == "finger_hysteresis"
+    text, explained = verdict_text(rounds, (), rounds[2].gap_before, None, False, ())
+    assert text.startswith("missing effects found: finger_stiffening/power (finger_hysteresis, accepted first, "
+                           "dropped") and explained
+    # Without a drop both stay, in the order found.
+    assert [v.label for v in in_model(rounds[:1] + [replace(rounds[1], dropped=())])] == [
+        "finger_hysteresis", "finger_stiffening/power"]
 
 
 def test_a_rejected_candidate_says_how_much_the_gap_changed_in_readable_percents() -> None:

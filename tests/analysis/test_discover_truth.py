@@ -496,3 +496,45 @@ def test_an_effect_in_a_take_recorded_otherwise_is_named(
     assert set(named) <= set(truth["accepted_effects"]), payload["verdict"]
     first = next(c for c in payload["iterations"][0]["candidates"] if c["status"] == "accepted")
     assert first["ratio"] is None or first["ratio"] >= 3.0, first
+
+
+def _two_effect_model(name: str, first: tuple[str, str], second: tuple[str, str], tmp_path: Path) -> Any:
+    """A truth take's base fit, then `first` and `second` fitted jointly on top, one after the
+    other, as two rounds of discovery would have accepted them."""
+    from pianobot.analysis.discover import search
+    from pianobot.analysis.discover.candidates import CandidateSpec
+    from pianobot.analysis.discover.decide import verdict
+    from pianobot.physics.model import KeystrokeModel
+
+    run_id, data, truth, _ = _imported(name, tmp_path)
+    batch = load_keystrokes([run_id], data).batch
+    train, held = holdout_indices(batch, 3, 0)
+    setting = search.Setting.of(batch.subset(train), batch.subset(held))
+    base = search.base_fit(setting, KeystrokeModel.study())
+    current, kept = base, []
+    for effect, form in (first, second):
+        spec = CandidateSpec(effect, form)
+        current = search.converged(setting, search.joint(setting, current, spec, search.screen(setting, current, spec)))
+        gap = search.evaluate(setting, current, search.criterion_of(current), 1e-6, spec.label, spec).gap
+        kept.append(verdict(spec.label, effect, form, {}, {}, (), 0.0, gap, gap, True, True))
+    return setting, base, current, kept, search.held_noise_m(setting, base)
+
+
+@pytest.mark.slow
+def test_an_effect_a_later_one_made_redundant_is_dropped_and_a_needed_one_kept(tmp_path: Path) -> None:
+    """The backward step after each acceptance (`loop._pruned`): an earlier effect is refitted out
+    of the model and kept only if it would still be accepted on top of the others."""
+    from pianobot.analysis.discover.loop import Settings, _pruned
+    from pianobot.progress import NO_PROGRESS
+
+    # A clean take: a key friction accepted first is not needed once a stop is in the model.
+    setting, base, current, kept, sigma = _two_effect_model(
+        "mocap-clean-light-finger-deep-1", ("key_friction", "coulomb"), ("keybed", "linear"), tmp_path / "clean")
+    pruned, dropped = _pruned(setting, current, base, kept, Settings(), sigma, NO_PROGRESS)
+    assert [v.label for v in dropped] == ["key_friction/coulomb"] and dropped[0].status == "dropped"
+    assert "key_friction" not in pruned.model_.effects and "keybed" in pruned.model_.effects
+    # A stop take: the stop accepted first stays when a friction joins it.
+    setting, base, current, kept, sigma = _two_effect_model(
+        "mocap-keybed-power_law-strong", ("keybed", "linear"), ("key_friction", "coulomb"), tmp_path / "stop")
+    pruned, dropped = _pruned(setting, current, base, kept, Settings(), sigma, NO_PROGRESS)
+    assert dropped == () and pruned is current

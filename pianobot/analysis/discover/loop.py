@@ -11,7 +11,9 @@ The loop (DESIGN.md, "Discovery"):
 5. fit every candidate effect the model lacks (`candidates.py`, `search.py`), judge each with
    the calibrated rule (`decide.py`), accept the best that passes (on a MIDI log refitted from
    each of its starting points, `search.restarted`), and repeat with it in the model until
-   nothing passes;
+   nothing passes; after each acceptance, an effect accepted in an earlier round is refitted out
+   of the model and dropped where it would no longer be accepted on top of the others (the
+   backward step, `_pruned`: an early effect that imitated a later one's misfit);
 6. when nothing passes but the held-out error is above the noise, the sparse residual search
    names the best-supported term and the discrepancy is reported as unexplained;
 7. when the fingertips were tracked off the key, the release is judged too (`_release`): the
@@ -27,14 +29,21 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from threadpoolctl import threadpool_limits
 
 from pianobot.analysis.discover import search
 from pianobot.analysis.discover.candidates import CandidateSpec, candidates, size_params
-from pianobot.analysis.discover.decide import Rule, Verdict, choose, something_to_explain, verdict
+from pianobot.analysis.discover.decide import (
+    Rule,
+    Verdict,
+    choose,
+    judge,
+    something_to_explain,
+    verdict,
+)
 from pianobot.analysis.discover.localise import localise
 from pianobot.analysis.discover.measured import (
     MeasuredCheck,
@@ -42,7 +51,13 @@ from pianobot.analysis.discover.measured import (
     clock_check,
     readout_check,
 )
-from pianobot.analysis.discover.result import DiscoveryResult, Iteration, ReleaseView, verdict_text
+from pianobot.analysis.discover.result import (
+    DiscoveryResult,
+    Iteration,
+    ReleaseView,
+    in_model,
+    verdict_text,
+)
 from pianobot.analysis.discover.search import Evaluated, Setting
 from pianobot.analysis.discover.sparse import Proposal, outcome_proposals, trajectory_proposals
 from pianobot.analysis.greybox.covariance import Z95
@@ -216,6 +231,36 @@ BENT_BASE_SIGMAS = 5.0
 MIN_RELEASES = 3
 
 
+def _pruned(setting: Setting, current: GreyBoxFit, base: GreyBoxFit, kept: Sequence[Verdict], settings: Settings,
+            sigma_m: float, progress: Progress) -> tuple[GreyBoxFit, tuple[Verdict, ...]]:
+    """The backward step: each effect accepted before the latest one (`kept[:-1]`) is refitted out
+    of the model, and judged as a candidate added back to that refit. The one with the least ΔIC
+    among those that would not pass (no ΔIC, no held-out shrink, or nothing left to explain) is
+    dropped: the model and the verdict that dropped it are returned.
+
+    Seen on an independent take whose finger stiffens as a tangent of its compression: the power
+    form's screening stalled at its exponent's bound in the first round, and a yielding finger
+    body (`finger_hysteresis`) was accepted for part of the misfit; in the second round the power
+    form explained the rest, and all of it."""
+    rule = settings.rule
+    criterion = search.criterion_of(current)
+    with_all = search.evaluate(setting, current, criterion, sigma_m, "current", None)
+    weak: list[tuple[Verdict, GreyBoxFit]] = []
+    with progress.task("discover: is each earlier effect still needed?", total=len(kept) - 1) as task:
+        for v in kept[:-1]:
+            spec = CandidateSpec(v.effect, v.form)
+            fit = search.without(setting, current, v.effect, base)
+            out = search.evaluate(setting, fit, criterion, sigma_m, v.label, None)
+            back = _verdict(Evaluated(v.label, spec, current, with_all.ic, with_all.gap), out, rule, False)
+            if not (_evidence(back, rule) and something_to_explain(out.gap, rule)):
+                weak.append((judge(back, rule, something_to_explain(out.gap, rule)), fit))
+            task.advance(note=v.label)
+    if not weak:
+        return current, ()
+    verdict_, fit = min(weak, key=lambda w: w[0].delta_ic)
+    return search.converged(setting, fit), (replace(verdict_, status="dropped"),)
+
+
 def _release(setting: Setting, current: GreyBoxFit, start: KeystrokeModel, settings: Settings, index: int,
              progress: Progress, mapper: Mapper) -> tuple[MeasuredCheck | None, list[Iteration], GreyBoxFit,
                                                           ReleaseView | None]:
@@ -352,6 +397,11 @@ def _discover(batch: KeystrokeBatch, start: KeystrokeModel | None, settings: Set
                 accepted = CandidateSpec(iteration.accepted.effect, iteration.accepted.form)
                 chosen = search.restarted(setting, chosen, accepted, mapper)
             current = search.converged(setting, chosen)
+        if iteration.accepted is not None and len(kept := in_model(iterations)) > 1:
+            current, dropped = _pruned(setting, current, base, kept, settings, sigma_m, progress)
+            if dropped:
+                iterations[-1] = replace(iteration, dropped=dropped,
+                                         after=localise(search.on_held(setting, current), sigma_m))
     last = iterations[-1]
     press = current
     contact, release, current, release_view = _release(setting, current, start, settings, len(iterations),
@@ -365,7 +415,7 @@ def _discover(batch: KeystrokeBatch, start: KeystrokeModel | None, settings: Set
     final = press.model_.replace(effects=current.model_.effects)
     timings["candidates_s"] = time.perf_counter() - t0 - timings["base_fit_s"]
     held_final = search.on_held(setting, press)
-    final_gap = last.accepted.gap_after if last.accepted else last.gap_before
+    final_gap = last.gap_after
     explainable = something_to_explain(final_gap, settings.rule)
     final_loc = last.after if last.accepted and last.after is not None else last.before
     iterations += release

@@ -34,6 +34,17 @@ class Iteration:
     explainable: bool  # the current model's held-out error is above the noise
     proposals: tuple[Proposal, ...] = ()  # the residual search, when nothing was accepted
     window: str = "press"  # trajectories modelled until lift-off, or through the release
+    # Effects accepted in earlier rounds and dropped after this round's acceptance: each judged
+    # as a candidate added back to the model refitted without it (its `gap_before` is the
+    # held-out gap of the model kept).
+    dropped: tuple[Verdict, ...] = ()
+
+    @property
+    def gap_after(self) -> Gap:
+        """The held-out gap of the model this round leaves (after any effect it dropped)."""
+        if self.dropped:
+            return self.dropped[-1].gap_before
+        return self.accepted.gap_after if self.accepted else self.gap_before
 
     @property
     def heading(self) -> str:
@@ -48,7 +59,8 @@ class Iteration:
             "accepted_form": self.accepted.form if self.accepted else None,
             "accepted_family": self.accepted.family if self.accepted else None,
             "gap_before": self.gap_before.to_dict(),
-            "gap_after": (self.accepted.gap_after if self.accepted else self.gap_before).to_dict(),
+            "gap_after": self.gap_after.to_dict(),
+            "dropped": [{**v.to_dict(), "text": dropped_text(v)} for v in self.dropped],
             "explainable": self.explainable,
             "candidates": [v.to_dict() for v in self.verdicts],
             "residual_search": [{"term": p.term, "family": p.family, "coefficient": p.coefficient, "share": p.share}
@@ -96,7 +108,13 @@ class DiscoveryResult:
 
     @property
     def accepted(self) -> tuple[Verdict, ...]:
-        return tuple(it.accepted for it in self.iterations if it.accepted)
+        """The accepted effects the final model holds, in the order they were found (an effect a
+        later round dropped is not among them)."""
+        return in_model(self.iterations)
+
+    @property
+    def dropped(self) -> tuple[Verdict, ...]:
+        return tuple(v for it in self.iterations for v in it.dropped)
 
     @property
     def accepted_effects(self) -> tuple[str, ...]:
@@ -120,8 +138,7 @@ class DiscoveryResult:
 
     @property
     def gap_after(self) -> Gap:
-        last = self.press_iterations[-1]
-        return last.accepted.gap_after if last.accepted else last.gap_before
+        return self.press_iterations[-1].gap_after
 
     @property
     def decision_line(self) -> str:
@@ -136,6 +153,8 @@ class DiscoveryResult:
             "decision": self.decision_line,
             "accepted_effects": list(self.accepted_effects),
             "accepted": [{"effect": v.effect, "form": v.form, "family": v.family} for v in self.accepted],
+            "dropped": [{"effect": v.effect, "form": v.form, "family": v.family, "text": dropped_text(v)}
+                        for v in self.dropped],
             "measured": [f.to_dict() for f in self.findings],
             "measured_effects": list(self.measured_effects),
             "unexplained_term": None if self.unexplained is None else {
@@ -181,6 +200,23 @@ def params_text(v: Verdict) -> str:
     return ", ".join(parts)
 
 
+def in_model(iterations: Sequence[Iteration]) -> tuple[Verdict, ...]:
+    """The accepted effects still in the model after `iterations`, in the order found."""
+    kept: list[Verdict] = []
+    for it in iterations:
+        if it.accepted:
+            kept.append(it.accepted)
+        gone = {v.label for v in it.dropped}
+        kept = [v for v in kept if v.label not in gone or v is it.accepted]
+    return tuple(kept)
+
+
+def dropped_text(v: Verdict) -> str:
+    """Why an effect accepted earlier left the model."""
+    return (f"{v.label} dropped: no longer needed with the effects found after it (refitted without it: "
+            f"ΔIC {v.delta_ic:.1f}, held-out {v.gap_before.text()} without it, {v.gap_after.text()} with it)")
+
+
 def decision_line(result: DiscoveryResult) -> str:
     """One line per accepted effect: parameters with 95 % intervals, held-out gap before → after."""
     lines = []
@@ -189,15 +225,19 @@ def decision_line(result: DiscoveryResult) -> str:
         ratio = "to the noise floor" if not math.isfinite(v.ratio) else f"{v.ratio:.1f}×"
         lines.append(f"Missing effect: {v.label}" + (f" ({params})" if params else "")
                      + f"; held-out {v.gap_before.text()} → {v.gap_after.text()} ({ratio}); ΔIC {v.delta_ic:.0f}")
+    lines += [f"Dropped: {dropped_text(v)}" for v in result.dropped]
     return "\n".join(lines) if lines else "No missing effect found."
 
 
 def verdict_text(iterations: Sequence[Iteration], findings: Sequence[MeasuredCheck], final: Gap,
                  unexplained: Proposal | None, explainable: bool, worst: Sequence[str]) -> tuple[str, bool]:
     """The closing sentence, and whether what is left is at the noise level."""
-    accepted = [it.accepted.label + (" (seen after lift-off)" if it.window == "release" else "")
-                for it in iterations if it.accepted]
+    after_lift_off = {it.accepted.label for it in iterations if it.accepted and it.window == "release"}
+    accepted = [v.label + (" (seen after lift-off)" if v.label in after_lift_off else "") for v in in_model(iterations)]
     text = ("missing effects found: " + ", ".join(accepted)) if accepted else "no missing effect found"
+    dropped = [v.label for it in iterations for v in it.dropped]
+    if dropped:
+        text += f" ({', '.join(dropped)}, accepted first, dropped: not needed once the later effects were in)"
     measured = [f.effect for f in findings if f.accepted]
     if measured:
         text += "; measured on the set-up: " + ", ".join(measured)
