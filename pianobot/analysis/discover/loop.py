@@ -63,6 +63,7 @@ from pianobot.analysis.discover.sparse import Proposal, outcome_proposals, traje
 from pianobot.analysis.greybox.covariance import Z95
 from pianobot.analysis.greybox.fitter import GreyBoxFit
 from pianobot.analysis.greybox.forward import lifts_off
+from pianobot.analysis.greybox.hover import corrected_hover, read_hover
 from pianobot.analysis.greybox.keystrokes import KeystrokeBatch
 from pianobot.analysis.greybox.pieces import Mapper, serial_map
 from pianobot.analysis.greybox.split import holdout_indices
@@ -373,6 +374,13 @@ def _discover(batch: KeystrokeBatch, start: KeystrokeModel | None, settings: Set
     timings: dict[str, float] = {}
     with progress.task("discover: base fit", total=None):
         base = search.base_fit(setting, start, mapper)
+        # A hover read from the take reads long: corrected by reading the fitted model the same way.
+        hover = corrected_hover(batch, base.model_) if setting.mode == "trajectories" and read_hover(batch) else None
+        if hover is not None:
+            batch = hover.batch
+            notes = [*notes, hover.note()]
+            setting = Setting.of(batch.subset(train_idx), batch.subset(held_idx))
+            base = search.base_fit(setting, start, mapper)
     timings["base_fit_s"] = time.perf_counter() - t0
     sigma_m = search.held_noise_m(setting, base)
     held_base = search.on_held(setting, base)

@@ -37,8 +37,8 @@ COMMAND_FIELDS: tuple[str, ...] = tuple(n for n in PRESS_PARAMETERS if n != "dis
 _FACT_FIELDS = (*COMMAND_FIELDS, "command_start_s", "motion_start_s", "on_velocity", "t_on_s", "hold_midi_s",
                 "sounded")
 #: Per-keystroke arrays (n,) of a batch; `subset` indexes these and the (n, ...) trajectories.
-_ROW_FIELDS = ("vacuum_kpa", "x0_m", "x1_m", "x2_m", "distance_m", "key_start_m", "t_offset_s", "input_x0_m",
-               *_FACT_FIELDS)
+_ROW_FIELDS = ("vacuum_kpa", "x0_m", "x1_m", "x2_m", "distance_m", "distance_read_m", "key_start_m", "t_offset_s",
+               "input_x0_m", *_FACT_FIELDS)
 
 
 def _empty() -> FloatArray:
@@ -90,12 +90,17 @@ class KeystrokeBatch:
     t_on_s: FloatArray = field(default_factory=_empty)  # note-on after motion start
     hold_midi_s: FloatArray = field(default_factory=_empty)  # note-off minus note-on
     sounded: FloatArray = field(default_factory=_empty)  # 1 sounded, 0 silent, NaN unknown
+    # (n,) where the distance was not recorded, the hover the loader read from the take (the
+    # fingertip's travel until the key moved; `greybox.hover` corrects it); NaN where recorded.
+    distance_read_m: FloatArray = field(default_factory=_empty)
 
     def __post_init__(self) -> None:
         n = len(self.trial_id)
         for name in ("distance_m", "key_start_m", "t_offset_s"):
             if getattr(self, name).size == 0:
                 object.__setattr__(self, name, np.zeros(n))
+        if self.distance_read_m.size == 0:
+            object.__setattr__(self, "distance_read_m", np.full(n, np.nan))
         for name in _FACT_FIELDS:
             if getattr(self, name).size == 0:
                 object.__setattr__(self, name, np.full(n, np.nan))

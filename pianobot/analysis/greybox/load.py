@@ -316,8 +316,10 @@ def _measured_distance(batch: KeystrokeBatch, rows: pd.DataFrame, notes: set[str
     measured = np.full(batch.n, typical) if one else np.where(np.isfinite(travel), travel, typical)
     how = "one hover for the take, their median" if one else "per keystroke, median"
     notes.add(f"distance not recorded: measured from the take as the fingertip's travel before the key moved "
-              f"({how} {1e3 * typical:.2f} mm; reads about 0.3 mm long: give the lab's presses for the commanded one)")
-    return replace(batch, distance_m=np.where(unknown, measured, batch.distance_m))
+              f"({how} {1e3 * typical:.2f} mm; it reads long by the pad's compression, which identify and discover "
+              "correct: the lab's presses give the commanded one)")
+    return replace(batch, distance_m=np.where(unknown, measured, batch.distance_m),
+                   distance_read_m=np.where(unknown, measured, np.nan))
 
 
 #: Columns of a commanded schedule (a lab script's log of what it told the arm).
@@ -351,7 +353,7 @@ def attach_schedule(batch: KeystrokeBatch, rows: pd.DataFrame, schedule: pd.Data
     starts = schedule["t_start_s"].to_numpy(dtype=np.float64)
     order = np.argsort(starts)
     starts = starts[order]
-    out = {name: getattr(batch, name).copy() for name in ("command_start_s", *SCHEDULE_COLUMNS[1:])}
+    out = {name: getattr(batch, name).copy() for name in ("command_start_s", "distance_read_m", *SCHEDULE_COLUMNS[1:])}
     matched = 0
     for i, t in enumerate(observed):
         k = int(np.searchsorted(starts, t + 0.05, side="right")) - 1  # a command up to 50 ms late
@@ -359,6 +361,7 @@ def attach_schedule(batch: KeystrokeBatch, rows: pd.DataFrame, schedule: pd.Data
             continue
         row = schedule.iloc[order[k]]
         out["command_start_s"][i] = float(starts[k] - t)
+        out["distance_read_m"][i] = np.nan  # the commanded distance replaces the one read from the take
         for name in SCHEDULE_COLUMNS[1:]:
             out[name][i] = float(row[name])
         matched += 1

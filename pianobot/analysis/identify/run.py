@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 import pianobot
+from pianobot.analysis.greybox.hover import corrected_hover, read_hover
 from pianobot.analysis.greybox.layout import gauge_kpa
 from pianobot.analysis.greybox.load import load_keystrokes, read_schedule
 from pianobot.analysis.greybox.split import split_holdout
@@ -77,11 +78,20 @@ def identify_runs(
     loaded = load_keystrokes(run_ids, data_dir, x0_source=x0_source, vacuum_kpa=vacuum_kpa, need_motion=True,
                              schedule=None if schedule is None else read_schedule(schedule))
     batch, hashes, trials = loaded.batch, loaded.hashes, loaded.trials
+    notes = list(loaded.notes)
     published = MSDParams()
     train, test = split_holdout(batch)
     started = time.perf_counter()
     with progress.task("identify: held-out fit", total=None):
         held = identify_trajectories(train, prior=published, coupling=coupling)
+        # A hover read from the take reads long: corrected by reading the fitted model the same way.
+        hover = corrected_hover(batch, KeystrokeModel(msd=held.params)) if read_hover(batch) else None
+        if hover is not None:
+            batch = hover.batch
+            notes.append(hover.note())
+            train, test = split_holdout(batch)
+            started = time.perf_counter()
+            held = identify_trajectories(train, prior=published, coupling=coupling)
     refit_s = (time.perf_counter() - started) / (2 if coupling == "auto" else 1)  # auto fits tied and free
     rms_id = rms_x2_m(test, held.params)
     rms_pub = rms_x2_m(test, published)
@@ -119,4 +129,4 @@ def identify_runs(
             provenance["static_stiffness"] = static.to_dict()
         path = save_model(model, out, intervals=intervals, provenance=provenance)
     return IdentifyResult(fit, model, rms_id, rms_pub, peaks, static, path, damping, readout, batch.clock_offset_s,
-                          loaded.notes)
+                          tuple(notes))
