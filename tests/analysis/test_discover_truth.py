@@ -432,6 +432,39 @@ def test_an_arm_that_follows_its_command_through_a_servo_is_measured_as_lagging(
     assert freq == pytest.approx(servo[0], rel=0.15) and zeta == pytest.approx(servo[1], abs=0.15)
 
 
+@pytest.mark.parametrize(("freq_hz", "claimed"), [(58.0, False), (10.0, True)])
+def test_a_servo_as_fast_as_the_fastest_tried_is_not_claimed(
+        freq_hz: float, claimed: bool, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A servo fit that ends at the top of the frequencies tried cannot be told from following the
+    command exactly: whatever its ΔIC, the arm is not said to lag (a clean arm's log, put on the
+    input grid by linear interpolation, once read as a 60 Hz servo)."""
+    from pianobot.analysis.discover import measured
+
+    made = materialise(scenario("mocap-clean-stiff-key-deep-0"), tmp_path / "files")
+    run_id = import_mocap(made.files["take"], tmp_path / "data", vacuum_kpa=float(made.truth["vacuum_kpa"])).run_id
+    batch = load_keystrokes([run_id], tmp_path / "data", schedule=read_schedule(made.files["presses"])).batch
+    monkeypatch.setattr(measured, "_servo", lambda *_: measured._Servo(freq_hz, 0.7, 470.0, 4e-5, 5.9e-4))
+    lag = next(c for c in arm_checks(batch) if c.effect == "arm_lag")
+    assert lag.accepted is claimed, lag.text
+
+
+def test_the_arm_acceleration_is_measured_to_its_interval_from_a_log_or_a_marker(tmp_path: Path) -> None:
+    """The truth lab's arms accelerate at 1.0 m/s². Read through a parabola over the scanned grid
+    and a linearly interpolated log, they measured 0.970-0.986 m/s² with intervals that excluded
+    it; refined by a bounded search, with the log put on the grid by a spline, every interval
+    holds it."""
+    made = materialise(scenario("mocap-clean-stiff-key-hover-1"), tmp_path / "files")
+    for files in ("log", "take"):
+        data = tmp_path / files
+        run_id = import_mocap(made.files["take"], data, vacuum_kpa=float(made.truth["vacuum_kpa"]),
+                              arm_log=made.files["arm_log"] if files == "log" else None).run_id
+        batch = load_keystrokes([run_id], data).batch
+        assert batch.arm_source == ("arm" if files == "log" else "mocap")
+        check = next(c for c in arm_checks(batch) if c.effect == "arm_acceleration")
+        assert check.ci95[0] <= made.truth["presses"][0]["acceleration_mps2"] <= check.ci95[1], check.text
+        assert check.ci95[1] - check.ci95[0] < 0.01
+
+
 # Suite takes recorded otherwise (tests/truth `variant_suite`): nothing in discovery may be tuned to
 # the suite's 120 Hz, 24-keystroke recording. Imported as the lab records them: the take with its
 # UR arm log, and the script's presses.
