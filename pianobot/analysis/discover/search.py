@@ -322,9 +322,9 @@ def without(setting: Setting, current: GreyBoxFit, effect: str, base: GreyBoxFit
     backward step of the loop: is an effect accepted earlier still needed now that a later one is
     in the model?). Two starts race as in `joint`: where `current` has the parameters, and on the
     base fit's base values with the other effects' current ones. The effect's share of the model
-    may be large (a yielding finger body carrying half of k0), and a base bent around it is a
-    basin the refit may not leave from its own values: on an independent take, from `current`
-    alone k1 fell from 162 to 40 N/m and the held-out gap grew 19x over the start on the base."""
+    may be large (a yielding finger body carrying half of k0), and the base parameters bent
+    around it may be a poor start once it is gone; the base fit's values, chosen before any
+    effect, are the other start, and the better of the two short fits carries on."""
     layout = current.layout.rebased(current.model_, current.drive_)
     prior = layout.prior.replace(effects=layout.prior.effects.without(effect))
     layout = Layout(prior, tuple(p for p in layout.params if p.group != effect), layout.levels_kpa,

@@ -12,7 +12,7 @@ The bias is the reading's, so the model that was fitted with the read hover is r
 way: its predicted fingertip and key give a reading whose excess over the hover it was given is
 the bias, and the hover is the reading less that excess. One correction suffices where the bias
 changes slowly with the hover (on that take: 4.33 mm read, 4.07 mm corrected, 4.0 mm true; the
-held-out misfit at the noise).
+held-out systematic error 0.0298 mm before, 0.0077 mm after, against 0.0068 mm of noise).
 """
 
 from __future__ import annotations
