@@ -84,15 +84,19 @@ def bridge(t: FloatArray, x: FloatArray, max_gap_s: float) -> FloatArray:
     if good.sum() < 2:
         return out
     filled = np.interp(t, t[good], x[good])
-    bad = np.flatnonzero(~good)
-    if bad.size == 0:
-        return out
-    runs = np.split(bad, np.flatnonzero(np.diff(bad) > 1) + 1)
-    for run in runs:
-        before, after = run[0] - 1, run[-1] + 1
+    for before, after in gaps(x):
         if before >= 0 and after < x.size and t[after] - t[before] <= max_gap_s:
-            out[run] = filled[run]
+            out[before + 1 : after] = filled[before + 1 : after]
     return out
+
+
+def gaps(x: FloatArray) -> list[tuple[int, int]]:
+    """Each run of NaN in `x` as (the sample before it, the sample after it): -1 or `x.size`
+    where the run touches an end."""
+    bad = np.flatnonzero(~np.isfinite(x))
+    if bad.size == 0:
+        return []
+    return [(int(run[0]) - 1, int(run[-1]) + 1) for run in np.split(bad, np.flatnonzero(np.diff(bad) > 1) + 1)]
 
 
 def unseen_spans(take: MocapTake) -> list[tuple[float, float]]:
@@ -102,16 +106,8 @@ def unseen_spans(take: MocapTake) -> list[tuple[float, float]]:
     if arm is None:
         return []
     t = take.t_s
-    lost = np.flatnonzero(~np.isfinite(arm))
-    seen = np.flatnonzero(np.isfinite(arm))
-    if lost.size == 0 or seen.size < 2:
-        return []
-    spans = []
-    for run in np.split(lost, np.flatnonzero(np.diff(lost) > 1) + 1):
-        before, after = run[0] - 1, run[-1] + 1
-        if before >= seen[0] and after <= seen[-1] and t[after] - t[before] > MAX_BRIDGE_S:
-            spans.append((float(t[before]), float(t[after])))
-    return spans
+    return [(float(t[before]), float(t[after])) for before, after in gaps(arm)
+            if before >= 0 and after < arm.size and t[after] - t[before] > MAX_BRIDGE_S]
 
 
 def rolling_rest(x: FloatArray, window: int) -> FloatArray:
