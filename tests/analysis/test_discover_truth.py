@@ -85,6 +85,26 @@ def test_an_effect_in_a_form_no_candidate_has_is_named_by_its_family(
     assert payload["accepted_effects"][0] in truth["accepted_effects"]
     first = next(c for c in payload["iterations"][0]["candidates"] if c["status"] == "accepted")
     assert first["ratio"] is None or first["ratio"] >= 3.0, first  # null: the gap fell to the noise
+    _intervals_within_physical_ranges(payload)
+
+
+def _intervals_within_physical_ranges(payload: dict[str, Any]) -> None:
+    """Every candidate's 95 % intervals stay within its parameters' physical ranges (a force or a
+    stiffness never reaches below 0), and hold the value."""
+    from pianobot.physics.effects import effect_spec
+
+    checked = 0
+    for it in payload["iterations"]:
+        for c in it["candidates"]:
+            spec = effect_spec(c["effect"])
+            for name, p in c["params"].items():
+                lo, hi = p["ci95"]
+                if lo is None or hi is None or not np.isfinite([lo, hi]).all():
+                    continue
+                bound = spec.param(name.split(".", 1)[1])
+                assert bound.lower <= lo <= p["value"] <= hi <= bound.upper, (c["label"], name, p)
+                checked += 1
+    assert checked, "no candidate had an interval"
 
 
 @pytest.mark.parametrize("strength", ["strong", "weak"])

@@ -87,7 +87,10 @@ class Settings:
 
 
 def _intervals(fit: GreyBoxFit, names: Sequence[str]) -> dict[str, tuple[float, float]]:
-    """95 % intervals of named parameters from the fitter's covariance."""
+    """95 % intervals of named parameters from the fitter's covariance, within each parameter's
+    physical range: a force or a stiffness never reaches below 0 (an interval "[-0.028, 0.039] N"
+    for a friction force said nothing the clipped "[0, 0.039] N" does not, and read as nonsense;
+    an interval that reaches "off" still includes it)."""
     cov = fit.covariance()
     out = {}
     for name in names:
@@ -95,7 +98,11 @@ def _intervals(fit: GreyBoxFit, names: Sequence[str]) -> dict[str, tuple[float, 
         p = fit.layout.params[j]
         sd = math.sqrt(max(float(cov[j, j]), 0.0))
         u = float(fit.theta_[j])
-        out[name] = (p.from_internal(u - Z95 * sd), p.from_internal(u + Z95 * sd)) if sd < 50 else (-math.inf, math.inf)
+        if sd < 50:
+            lo, hi = p.from_internal(u - Z95 * sd), p.from_internal(u + Z95 * sd)
+            out[name] = (max(lo, p.lower), min(hi, p.upper))
+        else:
+            out[name] = (-math.inf, math.inf)
     return out
 
 
