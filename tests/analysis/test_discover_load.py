@@ -137,3 +137,30 @@ def test_a_midi_only_run_beside_a_take_is_said_to_be_left_out(data_dir: Path) ->
     assert all(t.startswith(f"{take}/") for t in loaded.batch.trial_id)
     assert any(f"run {log} has no key trajectories" in note and "left out" in note for note in loaded.notes)
     assert not any("left out" in note for note in load_keystrokes([take], data_dir, need_motion=True).notes)
+
+
+def _levels(*values_um: float) -> np.ndarray:
+    return np.asarray(values_um, dtype=float) * 1e-6
+
+
+def test_a_key_left_down_and_creeping_back_between_presses_is_read_as_held() -> None:
+    """Key levels (µm below the take's highest) before and after each press. A key whose
+    friction cannot hold it still is left down by each press and rises part of the way back
+    before the next (an independent tanh-friction take: 226 µm after a press, 68 µm before the
+    next): its spring is still loaded when the next press starts. A marker or the arm's pose
+    wanders both ways between presses (zzz40's levels: the key "sinks" 25-35 µm between presses
+    and ends 75 µm above its highest level before a press): taken at rest."""
+    from pianobot.analysis.greybox.load import _left_by_presses
+
+    before = _levels(0, 68, 12, 15, 51, 35, 53, 22, 11, 13)
+    after = _levels(226, 34, 34, 176, 113, 172, 70, 32, 32, 32)
+    assert _left_by_presses(before, after)
+    # The same levels, left where the presses left them: the rule of a key that sticks.
+    assert _left_by_presses(np.concatenate([[0.0], after[:-1]]), after)
+    wander_before = _levels(16, 25, 35, 22, 13, 41, 38, 47, 40, 40, 9, 0, 12)
+    wander_after = _levels(27, 37, 27, -12, 6, 21, 5, -15, -19, -28, -75, -55, -30)
+    assert not _left_by_presses(wander_before, wander_after)
+    # A key that drifts down between presses is not relaxing either, however it moved in them.
+    assert not _left_by_presses(_levels(0, 40, 80, 120, 160), _levels(20, 60, 100, 140, 180))
+    # Nor one that barely moves (within the marker's noise): nothing was left down.
+    assert not _left_by_presses(_levels(0, 5, 3, 8, 2), _levels(9, 12, 10, 14, 9))
