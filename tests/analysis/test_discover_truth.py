@@ -543,6 +543,26 @@ def test_a_key_a_rest_stop_holds_nearly_still_is_found_and_the_preload_named(
     assert "at the noise level" in payload["verdict"]
 
 
+def test_a_hover_is_read_again_through_the_model_with_the_effects_found(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """A take whose finger starts 5 mm above a key a felt rail holds, without the lab's presses
+    file. The hover read from the take is corrected first through the base model, which has no
+    preload: the pad's compression while the rail still holds the key is left in it. Once the
+    preload is in the model, the hover is read through it again, nearer the truth, and the next
+    round and the final gap are judged there (4.97 mm against 5.05, final gap 0.0036 mm
+    against 0.0047)."""
+    run_id, data, truth, files = _imported("variant-preload-felt_rail-weak-hover", tmp_path)
+    payload = _discover([run_id, "--data", str(data)], (capsys, monkeypatch))
+    assert payload["accepted_effects"] and family_of(payload["accepted_effects"][0]) == truth["family"]
+    hover_mm = 1e3 * float(np.median(read_schedule(files["presses"])["distance_m"]))
+    note = next(n for n in payload["notes"] if n.startswith("the hover read from the take"))
+    assert "read through the model with key_preload" in note, note
+    readings = [float(v) for v in re.findall(r"(\d+\.\d+) mm", note)]
+    read, through_base, through_model = readings[0], readings[1], readings[-1]
+    assert read - hover_mm > through_base - hover_mm > abs(through_model - hover_mm), note
+    assert abs(through_model - hover_mm) < 0.1, note
+
+
 @pytest.mark.parametrize("name", ["variant-clean-240hz", "variant-clean-100hz", "variant-clean-10-keystrokes"])
 def test_a_clean_take_recorded_otherwise_accepts_nothing(
         name: str, tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:

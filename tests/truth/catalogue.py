@@ -265,6 +265,9 @@ VARIANTS: tuple[tuple[str, str, dict[str, Any]], ...] = (
     ("preload-rest_stop-strong-resting", "mocap-key_preload-rest_stop-strong", {"take": asdict(SHALLOW)}),
     ("preload-rest_stop-strong-resting-stiff-key", "mocap-key_preload-rest_stop-strong",
      {"take": asdict(SHALLOW), "base": "stiff-key"}),
+    # A hover above a key a preload holds: the pad compresses by the preload's share before the
+    # key moves, so a hover read from the take reads long by far more than on a free key.
+    ("preload-felt_rail-weak-hover", "mocap-key_preload-felt_rail-weak", {"take": asdict(HOVER)}),
     # A preload only the 40 mm presses overcome: the split's fixed position held out exactly those.
     ("midi-preload-rest_stop-only-deepest-sound", "midi-key_preload-rest_stop-weak", {"effect": {"preload_n": 0.8}}),
     ("midi-clean-40-keystrokes", "midi-clean-light-finger-0", {"grid": SMALL_GRID}),

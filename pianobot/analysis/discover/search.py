@@ -317,6 +317,13 @@ def converged(setting: Setting, fit: GreyBoxFit) -> GreyBoxFit:
                       max_nfev=CONVERGE_NFEV, tol=1e-5, central=True).fit(fit.theta_)
 
 
+def refitted(setting: Setting, fit: GreyBoxFit) -> GreyBoxFit:
+    """`fit`'s model carried on to its optimum on another setting's keystrokes (the same ones,
+    read otherwise: a hover read again), from its values, with central differences."""
+    return GreyBoxFit(setting.train_drive, fit.layout, channels=fit.channels, sigma=fit.sigma,
+                      max_nfev=CONVERGE_NFEV, tol=1e-5, central=True).fit(fit.theta_)
+
+
 def without(setting: Setting, current: GreyBoxFit, effect: str, base: GreyBoxFit) -> GreyBoxFit:
     """`current` refitted with one of its effects switched off, every other parameter free (the
     backward step of the loop: is an effect accepted earlier still needed now that a later one is

@@ -38,10 +38,15 @@ class HoverCorrection:
     batch: KeystrokeBatch
     read_m: float  # median hover read from the take
     corrected_m: float  # median hover after the correction
+    why: str = ""  # how it was corrected (default: by the fitted model's reading)
 
     def note(self) -> str:
-        return (f"the hover read from the take ({1e3 * self.read_m:.2f} mm) corrected for the pad's compression "
-                f"when the key starts to move, read the same way on the fitted model: {1e3 * self.corrected_m:.2f} mm")
+        how = self.why or f"read the same way on the fitted model: {1e3 * self.corrected_m:.2f} mm"
+        return f"{HOVER_NOTE_START} ({1e3 * self.read_m:.2f} mm) corrected for the pad's compression when the key starts to move, {how}"
+
+
+#: How the note on a corrected hover starts (a later correction replaces the earlier note).
+HOVER_NOTE_START = "the hover read from the take"
 
 
 def read_hover(batch: KeystrokeBatch) -> bool:
