@@ -374,8 +374,8 @@ def _hover_reread(batch: KeystrokeBatch, setting: Setting, hover: HoverCorrectio
 
     The base model's reading leaves out what an effect adds to the bias: a friction or a preload
     that holds the key back lets the pad compress further before the key is seen to move. On an
-    independent weak-friction take (5.0 mm hover) the base model's correction left 5.50 mm; the
-    model with the friction reads 5.37 mm. The hover is a value the model reads, so each round
+    independent weak-friction take (5.0 mm hover, read as 5.50 mm) the base model's correction
+    left 5.38 mm; read through the model with the friction, 5.05 mm. The hover is a value the model reads, so each round
     judges its candidates on the current model's hover, and its gaps are those of that hover."""
     again = corrected_hover(batch, current.model_)
     if again is None or abs(again.corrected_m - hover.corrected_m) < HOVER_REREAD_M:

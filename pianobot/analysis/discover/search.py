@@ -311,15 +311,13 @@ def converged(setting: Setting, fit: GreyBoxFit) -> GreyBoxFit:
     forward difference's error is why. Seen on an independent Hunt–Crossley stop (a fifth base
     set, the finger resting on the key): 400 evaluations with forward differences took the cost
     from 8.61 to 8.42 and still ran out; central ones reached 8.32 in 10."""
-    if fit.converged_:
-        return fit
-    return GreyBoxFit(setting.train_drive, fit.layout, channels=fit.channels, sigma=fit.sigma,
-                      max_nfev=CONVERGE_NFEV, tol=1e-5, central=True).fit(fit.theta_)
+    return fit if fit.converged_ else refitted(setting, fit)
 
 
 def refitted(setting: Setting, fit: GreyBoxFit) -> GreyBoxFit:
-    """`fit`'s model carried on to its optimum on another setting's keystrokes (the same ones,
-    read otherwise: a hover read again), from its values, with central differences."""
+    """`fit`'s model carried on to its optimum from its values, with central differences, on
+    `setting`'s keystrokes (those it was fitted on, or the same ones read otherwise: a hover
+    read again)."""
     return GreyBoxFit(setting.train_drive, fit.layout, channels=fit.channels, sigma=fit.sigma,
                       max_nfev=CONVERGE_NFEV, tol=1e-5, central=True).fit(fit.theta_)
 
