@@ -138,7 +138,7 @@ def test_a_take_captured_at_240_hz_says_so_and_imports_at_that_rate(tmp_path: Pa
 def test_variants_are_suite_takes_recorded_otherwise() -> None:
     by_name = {s.name: s for s in full_suite()}
     variants = variant_suite()
-    assert len(variants) == len({v.name for v in variants}) == 22
+    assert len(variants) == len({v.name for v in variants}) == 23
     assert {v.frame_rate_hz for v in variants} == {100.0, 120.0, 240.0}
     assert sum(v.effect is None for v in variants) == 8
     # One moves its hidden effect to another finger and key.
@@ -150,6 +150,9 @@ def test_variants_are_suite_takes_recorded_otherwise() -> None:
     reached = next(v for v in variants if v.name == "variant-keybed-hunt_crossley-strong-resting")
     assert reached.effect is not None and reached.effect.params["depth_m"] == 0.0008
     assert reached.take.key_target_m is None and reached.take.distance_m == 0.0
+    # One records a weak felt rail from a finger that hovers before each press.
+    hovering = next(v for v in variants if v.name == "variant-preload-felt_rail-weak-hover")
+    assert hovering.take.distance_m == 0.005 and by_name["mocap-key_preload-felt_rail-weak"].take.distance_m == 0.0
     # One plays a clean log on a soft piano: its full-scale speed, nothing else.
     soft = next(v for v in variants if v.name == "variant-midi-clean-soft-piano")
     assert soft.piano.full_scale_mps == 0.6 != by_name["midi-clean-light-key-0"].piano.full_scale_mps
