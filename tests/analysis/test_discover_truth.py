@@ -129,6 +129,22 @@ def test_a_power_law_finger_gets_its_exponent(
 
 
 @pytest.mark.slow
+def test_a_finger_that_stiffens_exponentially_is_named_in_that_form(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """The truth lab's pad spring stiffening as exp(s/s0). Screened from the base fit, the
+    exponential form ranked below the top three and only the power form was refitted with the
+    base: the power form was named. The other forms of an effect whose form is refitted are
+    refitted too, and the form the finger has wins."""
+    run_id, data, truth, _ = _imported("mocap-finger_stiffening-exponential-strong", tmp_path)
+    payload = _discover([run_id, "--data", str(data)], (capsys, monkeypatch))
+    assert truth["form"] == "exponential"
+    assert [(e["effect"], e["form"]) for e in payload["accepted"]] == [("finger_stiffening", "exponential")], \
+        payload["verdict"]
+    joint = {c["label"] for c in payload["iterations"][0]["candidates"] if c["joint_fit"]}
+    assert {"finger_stiffening/power", "finger_stiffening/exponential"} <= joint
+
+
+@pytest.mark.slow
 def test_a_finger_body_that_yields_is_named_by_its_family(
         tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
     """The truth lab's finger body is a Bouc–Wen spring (yield 8 mm, 40 % of k0 yielding,
@@ -623,3 +639,42 @@ def test_an_effect_a_later_one_made_redundant_is_dropped_and_a_needed_one_kept(t
         "mocap-keybed-power_law-strong", ("keybed", "linear"), ("key_friction", "coulomb"), tmp_path / "stop")
     pruned, dropped = _pruned(setting, current, base, kept, Settings(), sigma, NO_PROGRESS)
     assert dropped == () and pruned is current
+
+
+@pytest.mark.slow
+def test_a_candidate_with_evidence_in_the_last_round_is_refitted_with_the_base(tmp_path: Path) -> None:
+    """Screened on a fixed base, a candidate that lost the last round may show nothing until the
+    base moves with it: one that had evidence there is refitted jointly in the next, wherever it
+    screens. A candidate without evidence and without an effect refitted ahead of it is not."""
+    from pianobot.analysis.discover import search
+    from pianobot.analysis.discover.loop import Settings, _iterate
+    from pianobot.analysis.greybox.pieces import serial_map
+    from pianobot.physics.model import KeystrokeModel
+    from pianobot.progress import NO_PROGRESS
+
+    run_id, data, _, _ = _imported("mocap-keybed-power_law-strong", tmp_path)
+    batch = load_keystrokes([run_id], data).batch
+    train, held = holdout_indices(batch, 3, 0)
+    setting = search.Setting.of(batch.subset(train), batch.subset(held))
+    start = KeystrokeModel.study()
+    base = search.base_fit(setting, start)
+    sigma = search.held_noise_m(setting, base)
+    def refitted_with(earlier: dict[str, dict[str, float]]) -> tuple[set[str], list[str]]:
+        """The candidates refitted with the base in one round (the mapper sees their labels),
+        and every candidate of the round in the order they screened."""
+        labels: set[str] = set()
+
+        def mapper(function: Any, items: Any, /) -> Any:
+            items = list(items)
+            labels.update(i for i in items if isinstance(i, str))
+            return serial_map(function, items)
+
+        iteration, _, _ = _iterate(setting, base, start, Settings(), sigma, 1, NO_PROGRESS, mapper, earlier)
+        return labels, [v.label for v in iteration.verdicts]
+
+    plain, every = refitted_with({})
+    outside = [label for label in every if label not in plain]
+    assert len(plain) >= Settings().joint_refits and outside, (plain, every)
+    chosen = outside[-1]
+    again, _ = refitted_with({chosen: {}})
+    assert again == plain | {chosen}
