@@ -191,9 +191,16 @@ def _iterate(setting: Setting, current: GreyBoxFit, start: KeystrokeModel, setti
             return joint if joint.ic <= e.ic else e
 
         refitted: dict[str, Evaluated] = {}
-        for e in mapper(refit, order[: settings.joint_refits]):
-            refitted[e.label] = e
-            task.advance(note=f"{e.label} (joint)")
+
+        def refit_all(labels: list[str]) -> None:
+            """Refit `labels` jointly with the base, the progress bar's total grown to hold them."""
+            if labels:
+                task.update(total=max(total, len(specs) + len(refitted) + len(labels)))
+            for e in mapper(refit, labels):
+                refitted[e.label] = e
+                task.advance(note=f"{e.label} (joint)")
+
+        refit_all(order[: settings.joint_refits])
         # Refitted with the base too: the other forms of an effect refitted with evidence, and the
         # candidates that had evidence in the last round. Screened on a fixed base, the forms of
         # one effect rank poorly from a base that bent to imitate one of them (the truth lab's
@@ -206,21 +213,14 @@ def _iterate(setting: Setting, current: GreyBoxFit, start: KeystrokeModel, setti
                    if e.spec is not None and _evidence(_verdict(e, reference, rule, False), rule)}
         also = [k for k in order[settings.joint_refits :]
                 if ((s := by_label[k].spec) is not None and s.effect in effects) or k in earlier]
-        if also:
-            task.update(total=total + len(also))
-            for e in mapper(refit, also):
-                refitted[e.label] = e
-                task.advance(note=f"{e.label} (joint)")
+        refit_all(also)
         rest = [k for k in order[settings.joint_refits :] if k not in also]
         if rest and _bent_base(setting, reference, list(refitted.values()) + [by_label[k] for k in rest], index, rule):
             # A misfit well above the noise, and no candidate has evidence of its own, screened or
             # refitted: the base fit may have bent to imitate the missing effect, so far that no
             # effect helps on top of it (a rest stop read as a finger 9x softer than it is, where
             # the preload screened last). The other candidates are then refitted too.
-            task.update(total=total + len(also) + len(rest))
-            for e in mapper(refit, rest):
-                refitted[e.label] = e
-                task.advance(note=f"{e.label} (joint)")
+            refit_all(rest)
     final = [refitted.get(e.label, e) for e in evaluated]
     verdicts = [_verdict(e, reference, rule, False) for e in final]
     # A candidate with evidence of its own (ΔIC and held-out shrink) that was not accepted keeps
