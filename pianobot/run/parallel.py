@@ -45,7 +45,7 @@ from pianobot.run.records import (
     TrialStarted,
     TrialStopped,
 )
-from pianobot.run.rows import TrialData, midi_table, samples_table, trials_table
+from pianobot.run.rows import NOTE_ON_LOST, TrialData, midi_table, samples_table, trials_table
 from pianobot.run.runner import RetryPolicy, Runner, SessionResult
 from pianobot.run.signals import StopControl
 from pianobot.store import StagedPart, encode_part, stage_part
@@ -77,6 +77,7 @@ class BlockTask:
     start: Any  # sim_blocks.SimSnapshot
     prelude: tuple[Any, ...]  # sim_blocks.KeystrokeCall
     worker: str | None = None  # where the block's truths are kept (`block_times`)
+    attempts: tuple[tuple[str, int], ...] = ()  # first attempts of keys pressed again
 
 
 @dataclass(frozen=True)
@@ -125,7 +126,7 @@ def run_block(task: BlockTask) -> BlockResult:
             world.adopt(kept)
         rig.prepare(task.trials)
         counts = {"executed": 0, "silent": 0, "retries": 0, "done": 0}
-        outcome = runner.run_block(task.trials, counts)
+        outcome = runner.run_block(task.trials, counts, dict(task.attempts))
         end = sim_blocks.snapshot(rig)
     # The heavy part of storing, encoding the Parquet parts, happens here; the driver only
     # writes the bytes (or renames the samples part staged here) and journals them. The records
@@ -240,32 +241,20 @@ def run_parallel(
             started=started,
         )
         sim_blocks.restore(timeline_rig, sim_blocks.snapshot(rig))
-        times = executor.imap(block_times, ((setup, _keystrokes(b)) for b in blocks), ahead=2)
-        tasks = _tasks(timeline, setup, blocks, times)
+        by_id = {t.trial_id: t for t in trials}
+        attempts: dict[str, int] = {}
         try:
-            # Each block runs where its times were worked out, if that worker is free to: its
-            # truths are kept there.
-            for number, result in enumerate(executor.imap(run_block, tasks, where=lambda t: t.worker)):
-                if result.end != timeline.expected_end.pop(number):
-                    raise RuntimeError(f"block {number} of run {run_id} ended in another state on "
-                                       "its worker than in the driver's timeline")
-                # A stop ends the block after its last keystroke: the part goes first.
-                stops = [r for r in result.records if isinstance(r, TrialStopped)]
-                for record in result.records:
-                    if not isinstance(record, TrialStopped):
-                        _count(record, counts)
-                        publish(record)
-                publish(BlockEnded(sum(isinstance(r, TrialDone) for r in result.records),
-                                   result.end.clock_s + setup.clock_offset_s,
-                                   result.parts if "trials" in result.parts else None))
-                for record in stops:
-                    publish(record)
-                if result.outcome is not None:
-                    status, reason = result.outcome
+            while blocks:
+                redo: list[tuple[str, int]] = []
+                outcome = _run_pass(timeline, setup, executor, blocks, attempts, publish, counts, redo)
+                if outcome is not None:
+                    status, reason = outcome
                     break
-            else:
-                if timeline.outcome is not None:  # stopped before any trial of a block ran
-                    status, reason = timeline.outcome
+                # Keys whose note-on was lost are pressed again, in plan order (`Runner.run`).
+                again = [by_id[trial_id] for trial_id, _ in redo]
+                blocks = [tuple(again[i : i + block_trials])
+                          for i in range(0, len(again), max(1, block_trials))]
+                attempts = dict(redo)
         except KeyboardInterrupt as exc:
             status, reason = "interrupted", str(exc) or "interrupted: stopped at once, rig made safe"
         except DeviceUnavailable as exc:
@@ -279,8 +268,50 @@ def run_parallel(
                          retries=counts["retries"], lab_time_s=lab_time_s)
 
 
+def _run_pass(
+    timeline: _Timeline,
+    setup: SweepSetup,
+    executor: Executor,
+    blocks: list[tuple[TrialLike, ...]],
+    attempts: dict[str, int],
+    publish: Subscriber,
+    counts: dict[str, int],
+    redo: list[tuple[str, int]],
+) -> tuple[str, str] | None:
+    """Run `blocks` on the workers, publishing their records in plan order; (status, reason) if
+    the run must end. Trials to press again are added to `redo` as (trial id, next attempt)."""
+    times = executor.imap(block_times, ((setup, _keystrokes(b)) for b in blocks), ahead=2)
+    tasks = _tasks(timeline, setup, blocks, times, attempts)
+    # Each block runs where its times were worked out, if that worker is free to: its truths
+    # are kept there.
+    for number, result in enumerate(executor.imap(run_block, tasks, where=lambda t: t.worker)):
+        if result.end != timeline.expected_end.pop(number):
+            raise RuntimeError(f"block {number} of run {setup.run_id} ended in another state on "
+                               "its worker than in the driver's timeline")
+        # A stop ends the block after its last keystroke: the part goes first.
+        stops = [r for r in result.records if isinstance(r, TrialStopped)]
+        for record in result.records:
+            if not isinstance(record, TrialStopped):
+                _count(record, counts)
+                publish(record)
+            if isinstance(record, TrialRetried) and record.error == NOTE_ON_LOST:
+                redo.append((record.trial_id, record.attempt + 1))
+        publish(BlockEnded(sum(isinstance(r, TrialDone) for r in result.records),
+                           result.end.clock_s + setup.clock_offset_s,
+                           result.parts if "trials" in result.parts else None))
+        for record in stops:
+            publish(record)
+        if result.outcome is not None:
+            return result.outcome
+    return timeline.outcome  # stopped before any trial of a block ran, or None
+
+
 def _tasks(
-    timeline: _Timeline, setup: SweepSetup, blocks: list[tuple[TrialLike, ...]], times: Iterator[Any]
+    timeline: _Timeline,
+    setup: SweepSetup,
+    blocks: list[tuple[TrialLike, ...]],
+    times: Iterator[Any],
+    attempts: dict[str, int],
 ) -> Iterator[BlockTask]:
     """Run each block's timeline and yield the worker's task for it (lazily, as workers free up)."""
     from pianobot.rig import sim_blocks
@@ -295,13 +326,14 @@ def _tasks(
         world.calls = list(prelude)  # older keystrokes can no longer reach a window
         timeline.started.clear()
         scratch = {"executed": 0, "silent": 0, "retries": 0, "done": 0}
-        timeline.outcome = timeline.runner.run_block(block, scratch)
+        timeline.outcome = timeline.runner.run_block(block, scratch, attempts)
         started = set(timeline.started)
         ran = tuple(t for t in block if t.trial_id in started)
         if not ran:
             return
         timeline.expected_end[number] = sim_blocks.snapshot(rig)
-        yield BlockTask(setup, ran, start, prelude, worker)
+        again = tuple((t.trial_id, attempts[t.trial_id]) for t in ran if t.trial_id in attempts)
+        yield BlockTask(setup, ran, start, prelude, worker, again)
         if timeline.outcome is not None:
             return
 

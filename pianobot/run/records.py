@@ -3,7 +3,9 @@
 The runner never writes files or draws bars itself (bluesky's callbacks pattern): it emits a
 `RunStarted`, then per trial `TrialStarted`, zero or more `TrialRetried`, and one of
 `TrialDone` / `TrialFailed` / `TrialStopped`, and finally `RunEnded`. On a rig that works out
-blocks of keystrokes ahead (the simulator), each block ends with a `BlockEnded`.
+blocks of keystrokes ahead (the simulator), each block ends with a `BlockEnded`. A keystroke
+whose note-on was lost is `TrialDone` (failed) then `TrialRetried`; its trial starts again,
+with the next attempt, after the last planned one.
 """
 
 from __future__ import annotations

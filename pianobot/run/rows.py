@@ -54,6 +54,14 @@ class TrialData:
     def status(self) -> str:
         return str(self.row["status"])
 
+    @property
+    def note_on_lost(self) -> bool:
+        """The key sounded but its note-on never arrived: pressing it again is worth it."""
+        return self.row.get("error") == NOTE_ON_LOST
+
+
+NOTE_ON_LOST = "MIDI note-on lost: a note-off of this key came without its note-on"
+
 
 def parameters_of(trial: TrialLike, *, motion: bool = False) -> dict[str, Any]:
     """The parameter columns of a trial, by attribute (NaN where a trial type lacks one).
@@ -114,7 +122,7 @@ def read_keystroke(
         "n_note_on": len(ons),
         "key_speed_at_trigger_mps": float(result.extra.get("key_speed_at_trigger_mps", math.nan)),
         "max_key_travel_m": _max_key_travel(result),
-        "error": "MIDI note-on lost: a note-off of this key came without its note-on" if lost_on else None,
+        "error": NOTE_ON_LOST if lost_on else None,
     }
     wanted = {SAMPLE_STREAMS[s] for s in record if s in SAMPLE_STREAMS}
     if wanted:

@@ -6,12 +6,18 @@ the rig's clock, virtual for the sim), reconnect and try again up to `max_attemp
 exhausted or the target was refused). A protective stop is never retried: the trial is reported
 as `TrialStopped` and the run ends with status `stopped`. A stop request (first Ctrl-C/SIGTERM)
 ends the run after the current trial with status `interrupted`.
+
+A keystroke whose note-on was lost on the way (the piano's note-off came without it) is stored
+as failed, without its samples and MIDI, and `TrialRetried` says it will be pressed again: once
+every trial has run, the session presses those keys again (`redo`), up to `max_attempts` in all.
+Deciding this after the fact, not inside the trial, keeps the keystrokes before it as planned:
+a parallel sweep's timeline, which knows no MIDI, stays the one the workers run.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, replace
 
 from pianobot.plan.trial import SEQUENCE_COLUMNS
 from pianobot.rig import Rig, TrialLike
@@ -85,6 +91,7 @@ class Runner:
         self.record = tuple(record)
         self.control = control or StopControl()
         self.clock_offset_s = clock_offset_s
+        self.redo: list[tuple[TrialLike, int]] = []  # (trial, next attempt): note-ons lost
 
     def now(self) -> float:
         """The run clock: the rig's clock plus the lab time of earlier sessions."""
@@ -108,15 +115,16 @@ class Runner:
         counts = {"executed": 0, "silent": 0, "retries": 0, "done": done}
         status, reason = "completed", None
         try:
-            for block in self._blocks(trials) if blocked else [trials]:
-                if blocked:
-                    self.rig.prepare(block)
-                outcome = self.run_block(block, counts)
-                if blocked:
-                    self.publish(BlockEnded(len(block), self.now()))
+            todo: Sequence[TrialLike] = trials
+            attempts: dict[str, int] = {}
+            while todo:
+                outcome = self._run_pass(todo, counts, attempts)
                 if outcome is not None:
                     status, reason = outcome
                     break
+                # Keys whose note-on was lost are pressed again, in plan order.
+                todo, attempts = [t for t, _ in self.redo], {t.trial_id: a for t, a in self.redo}
+                self.redo = []
         except KeyboardInterrupt as exc:
             status, reason = "interrupted", str(exc) or "interrupted: stopped at once, rig made safe"
         except DeviceUnavailable as exc:
@@ -135,26 +143,42 @@ class Runner:
             lab_time_s=lab_time_s,
         )
 
-    def _blocks(self, trials: Sequence[TrialLike]) -> list[Sequence[TrialLike]]:
-        size = max(1, self.block_trials)
-        return [trials[i : i + size] for i in range(0, len(trials), size)]
-
-    def run_block(self, trials: Sequence[TrialLike], counts: dict[str, int]) -> tuple[str, str] | None:
-        """Run trials one by one, updating `counts`; (status, reason) if the run must end.
-
-        The keys of `counts`: executed, silent, retries, done (see `SessionResult`).
-        """
-        for trial in trials:
-            if self.control.requested is not None:
-                return "interrupted", self.control.requested
-            outcome = self._trial(trial, counts)
+    def _run_pass(
+        self, trials: Sequence[TrialLike], counts: dict[str, int], attempts: Mapping[str, int]
+    ) -> tuple[str, str] | None:
+        blocked = self.rig.batches
+        for block in self._blocks(trials) if blocked else [trials]:
+            if blocked:
+                self.rig.prepare(block)
+            outcome = self.run_block(block, counts, attempts)
+            if blocked:
+                self.publish(BlockEnded(len(block), self.now()))
             if outcome is not None:
                 return outcome
         return None
 
-    def _trial(self, trial: TrialLike, counts: dict[str, int]) -> tuple[str, str] | None:
+    def _blocks(self, trials: Sequence[TrialLike]) -> list[Sequence[TrialLike]]:
+        size = max(1, self.block_trials)
+        return [trials[i : i + size] for i in range(0, len(trials), size)]
+
+    def run_block(
+        self, trials: Sequence[TrialLike], counts: dict[str, int], attempts: Mapping[str, int] | None = None,
+    ) -> tuple[str, str] | None:
+        """Run trials one by one, updating `counts`; (status, reason) if the run must end.
+
+        The keys of `counts`: executed, silent, retries, done (see `SessionResult`). `attempts`
+        gives the first attempt of trials pressed again (1 for the others).
+        """
+        for trial in trials:
+            if self.control.requested is not None:
+                return "interrupted", self.control.requested
+            outcome = self._trial(trial, counts, (attempts or {}).get(trial.trial_id, 1))
+            if outcome is not None:
+                return outcome
+        return None
+
+    def _trial(self, trial: TrialLike, counts: dict[str, int], attempt: int = 1) -> tuple[str, str] | None:
         """Run one trial with retries; returns (status, reason) if the run must end."""
-        attempt = 1
         parameters = read_parameters(trial)
         while True:
             t_start_s = self.now()
@@ -185,7 +209,15 @@ class Runner:
                 trial, attempt, result, clock_offset_s=self.clock_offset_s, record=self.record,
                 motion=self.motion,
             )
+            again = data.note_on_lost and attempt < self.retry.max_attempts
+            if again:  # its samples and MIDI come with the keystroke that replaces it
+                data = replace(data, samples=(), midi=())
             self._done(data, counts)
+            if again:
+                counts["retries"] += 1
+                self.publish(TrialRetried(trial.trial_id, trial.index, attempt,
+                                          str(data.row["error"]), 0.0, self.now()))
+                self.redo.append((trial, attempt + 1))
             return None
 
     def _retry(self, trial: TrialLike, attempt: int, error: str, counts: dict[str, int]) -> int:

@@ -9,6 +9,7 @@ through a JACK MIDI port. Skipped without jackd (CI installs it) or without ur_r
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -29,8 +30,9 @@ pytestmark = pytest.mark.slow  # real-time motion on the emulated arm: ~5-15 s e
 def lab(ur_emulator: EmulatorFactory, jack_server: str, tmp_path: Path) -> Any:
     """Start an emulated lab; return (emulator, spec path, rig path)."""
 
-    def start(*, spec: dict[str, Any] | None = None, **config: Any) -> tuple[EmulatedUR, Path]:
-        keys = piano()
+    def start(*, spec: dict[str, Any] | None = None, lost_note_ons: tuple[int, ...] = (),
+              **config: Any) -> tuple[EmulatedUR, Path]:
+        keys = replace(piano(), lost_note_ons=lost_note_ons)
         ur = ur_emulator(piano=keys, start_pose=HOVER_POSE, **config)
         rig = write_lab(tmp_path, ur.host, keys)
         return ur, write_spec(tmp_path, rig, **(spec or {}))
@@ -85,11 +87,36 @@ def test_a_link_dropped_mid_press_is_recovered_by_retrying_the_trial(
     outcome = sweep(spec, data_dir)
     assert outcome.status == "completed" and outcome.trials == 4, outcome.reason
     run = load_run(outcome.run_id, data_dir)
-    retried = [e for e in run.journal if e.get("event") == "retried"]
+    # (A note-on JACK lost under load would be retried too, and journalled with its own error.)
+    retried = [e for e in run.journal if e.get("event") == "retried"
+               and "note-on lost" not in e["error"]]
     assert len(retried) == 1 and retried[0]["index"] == 1
     assert "connection lost" in retried[0]["error"]
     trials = run.trials.set_index("index")
     assert trials.loc[1, "attempt"] == 2 and (trials["status"] == "ok").all()
+
+
+def test_a_note_on_lost_on_the_way_is_pressed_again_once_the_plan_has_run(
+    lab: Any, data_dir: Path,
+) -> None:
+    ur, spec = lab(lost_note_ons=(1,))  # trial 1's note-on never reaches pianobot
+    records: list[Any] = []
+    outcome = sweep(spec, data_dir, records)
+    assert outcome.status == "completed" and outcome.trials == 4 and outcome.failed == 0
+    run = load_run(outcome.run_id, data_dir)
+    retried = [e for e in run.journal if e.get("event") == "retried"]
+    assert [(e["index"], e["attempt"]) for e in retried] == [(1, 1)]
+    assert "note-on lost" in retried[0]["error"]
+    # Pressed again after trial 3, as attempt 2; the lost attempt left no samples or MIDI.
+    started = [(r.index, r.attempt) for r in records if isinstance(r, TrialStarted)]
+    assert started == [(0, 1), (1, 1), (2, 1), (3, 1), (1, 2)]
+    trials = run.trials.set_index("index")
+    assert (trials["status"] == "ok").all() and trials.loc[1, "attempt"] == 2
+    assert len(ur.piano_events()) == 10  # five keystrokes played, one note-on lost
+    redone = trials.loc[1, "trial_id"]
+    assert (run.midi["trial_id"] == redone).sum() == 2  # its note-on and note-off, once
+    arm = run.samples[(run.samples["source"] == "arm") & (run.samples["trial_id"] == redone)]
+    assert arm["t_s"].is_unique
 
 
 def test_a_protective_stop_is_never_retried_and_named_in_run_json(
